@@ -1,0 +1,276 @@
+//! One tick of the fleet loop (`shared/design/layout.md`): states → targets → neighbours → policies
+//! (batched) → CBF-QP filter → commands.
+
+use crate::neighbours::NeighbourSearch;
+use links::Link;
+use policies::{Observation, PolicyRegistry, observation};
+use roads::{NavMode, NavState, Navigator, Road};
+use safety::barrier::collision_row;
+use safety::{FilterSettings, RoadRule, Row, RowKind, SafetyFilter, activation_radius, road_rows};
+use std::time::Instant;
+use uav::{Params, UavState, Vec2, braking_input};
+
+/// How the collision barrier b_kd of a pair is shared between its two UAVs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum CollisionShare {
+    /// Each UAV k enforces its share δ_k/(δ_k+δ_d) of every pair row (paper eq. 14, 15; cbf.md §2).
+    Split,
+    /// UAVs are filtered one after another within a tick. A UAV enforces the whole relative row
+    /// `−p̂ᵀ(u_k − u_d) ≤ rhs` against every neighbour d already filtered (its u_d is known) and its
+    /// share against the others. Each pair is then enforced exactly by its later UAV, whose row is at
+    /// least as loose as its share because the earlier one met its own share; so every QP is at least
+    /// as feasible as with `Split`, and a platoon can brake together (with `Split` every member may
+    /// only decelerate by about ζb³/2 towards its follower: cbf.md §10.3).
+    #[default]
+    Sequential,
+}
+
+impl CollisionShare {
+    /// The CLI/JSON name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            CollisionShare::Split => "split",
+            CollisionShare::Sequential => "sequential",
+        }
+    }
+}
+
+impl std::str::FromStr for CollisionShare {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "split" => Ok(CollisionShare::Split),
+            "sequential" => Ok(CollisionShare::Sequential),
+            other => Err(format!("unknown collision share `{other}` (expected split or sequential)")),
+        }
+    }
+}
+
+/// How the fleet navigates and filters.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FleetConfig {
+    /// Parameters (dt, δ, r_s, D_s, D_c, ζ, ε).
+    pub params: Params,
+    /// Which walls each UAV enforces.
+    pub road_rule: RoadRule,
+    /// How temporary targets are chosen.
+    pub nav: NavMode,
+    /// QP weights and objective.
+    pub filter: FilterSettings,
+    /// How pair rows are shared.
+    pub share: CollisionShare,
+}
+
+/// What happened to one UAV in the last tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct UavTick {
+    /// Temporary target p^r.
+    pub target: Vec2,
+    /// The policy's nominal input u_r (after saturation; braking if the policy failed).
+    pub u_ref: Vec2,
+    /// The filtered input u sent to the link.
+    pub u: Vec2,
+    /// Number of CBF rows built.
+    pub rows: usize,
+    /// Rows binding at u.
+    pub active_rows: usize,
+    /// Largest slack of the QP (0 when skipped).
+    pub max_slack: f64,
+    /// Smallest barrier value among the rows (∞ when there are none).
+    pub min_barrier: f64,
+    /// A QP was solved.
+    pub solved: bool,
+    /// The QP failed and the UAV braked.
+    pub failed: bool,
+    /// The policy produced no finite action and the UAV braked instead.
+    pub policy_fallback: bool,
+    /// The link had no state this tick; the last known one was used.
+    pub stale: bool,
+    /// Wall time of the filter for this UAV (µs), when a QP was solved.
+    pub solve_us: f64,
+}
+
+/// One UAV of the fleet.
+pub struct Uav {
+    /// Unique id.
+    pub id: String,
+    /// Name of its policy in the registry.
+    pub policy: String,
+    /// Where its commands go and its states come from.
+    pub link: Box<dyn Link>,
+    /// Navigation state (target, goal, arrival, segment).
+    pub nav: NavState,
+    /// The latest known state.
+    pub state: UavState,
+    /// What happened in the last tick.
+    pub last: UavTick,
+}
+
+/// The fleet: road, UAVs, policies and the reusable filter and scratch buffers.
+pub struct Fleet {
+    /// Configuration.
+    pub config: FleetConfig,
+    road: Road,
+    uavs: Vec<Uav>,
+    policies: PolicyRegistry,
+    filter: SafetyFilter,
+    neighbours: NeighbourSearch,
+    positions: Vec<Vec2>,
+    rows: Vec<Row>,
+    observations: Vec<Observation>,
+    batch: Vec<usize>,
+    actions: Vec<Vec2>,
+    tick: u64,
+}
+
+impl Fleet {
+    /// An empty fleet on `road`.
+    pub fn new(config: FleetConfig, road: Road, policies: PolicyRegistry) -> Self {
+        Self {
+            filter: SafetyFilter::new(config.filter),
+            config,
+            road,
+            uavs: Vec::new(),
+            policies,
+            neighbours: NeighbourSearch::default(),
+            positions: Vec::new(),
+            rows: Vec::new(),
+            observations: Vec::new(),
+            batch: Vec::new(),
+            actions: Vec::new(),
+            tick: 0,
+        }
+    }
+
+    /// The road.
+    pub fn road(&self) -> &Road {
+        &self.road
+    }
+
+    /// The UAVs.
+    pub fn uavs(&self) -> &[Uav] {
+        &self.uavs
+    }
+
+    /// Ticks run so far.
+    pub fn ticks(&self) -> u64 {
+        self.tick
+    }
+
+    /// Adds a UAV at `state` flying policy `policy` towards `goal` (None: hover where it is).
+    pub fn add(
+        &mut self,
+        id: String,
+        policy: String,
+        link: Box<dyn Link>,
+        state: UavState,
+        goal: Option<Vec2>,
+    ) {
+        let mut nav = NavState::new(state.p);
+        nav.set_goal(&self.road, goal, state.p);
+        self.uavs.push(Uav { id, policy, link, nav, state, last: UavTick::default() });
+    }
+
+    /// Runs one tick and returns the number of UAVs that have arrived.
+    pub fn tick(&mut self) -> usize {
+        let params = self.config.params;
+        self.read_states();
+        let nav =
+            Navigator { road: &self.road, mode: self.config.nav, r_s: params.r_s, epsilon: params.epsilon };
+        for uav in &mut self.uavs {
+            uav.last.target = nav.target(&mut uav.nav, uav.state.p);
+        }
+        self.run_policies();
+        self.positions.clear();
+        self.positions.extend(self.uavs.iter().map(|u| u.state.p));
+        let v_max = self.uavs.iter().map(|u| u.state.v.norm()).fold(0.0, f64::max);
+        let reach = activation_radius(params.d_c, 2.0 * v_max, 2.0 * params.delta);
+        self.neighbours.update(&self.positions, reach);
+        for k in 0..self.uavs.len() {
+            self.filter_one(k);
+        }
+        for uav in &mut self.uavs {
+            uav.link.send(uav.last.u);
+        }
+        self.tick += 1;
+        self.uavs.iter().filter(|u| u.nav.arrived).count()
+    }
+
+    fn read_states(&mut self) {
+        for uav in &mut self.uavs {
+            match uav.link.state() {
+                Some(s) if s.is_finite() => {
+                    uav.state = s;
+                    uav.last.stale = false;
+                }
+                _ => uav.last.stale = true,
+            }
+        }
+    }
+
+    /// Evaluates each policy once on the batch of UAVs that use it.
+    fn run_policies(&mut self) {
+        let (delta, dt) = (self.config.params.delta, self.config.params.dt);
+        for uav in &mut self.uavs {
+            uav.last.u_ref = braking_input(uav.state.v, delta, dt);
+            uav.last.policy_fallback = true;
+        }
+        let names: Vec<String> = self.policies.names().map(String::from).collect();
+        for name in &names {
+            self.batch.clear();
+            self.observations.clear();
+            for (k, uav) in self.uavs.iter().enumerate().filter(|(_, u)| &u.policy == name) {
+                self.batch.push(k);
+                self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
+            }
+            let Some(policy) = self.policies.get_mut(name) else { continue };
+            if self.batch.is_empty() || policy.act(&self.observations, &mut self.actions).is_err() {
+                continue;
+            }
+            for (&k, u) in self.batch.iter().zip(&self.actions) {
+                if uav::is_finite(u) {
+                    self.uavs[k].last.u_ref = uav::saturate(*u, delta);
+                    self.uavs[k].last.policy_fallback = false;
+                }
+            }
+        }
+    }
+
+    /// Builds the rows of UAV k and filters its nominal input.
+    fn filter_one(&mut self, k: usize) {
+        let p = &self.config.params;
+        let me = self.uavs[k].state;
+        self.rows.clear();
+        let segment = self.uavs[k].nav.tracker.current.unwrap_or(0);
+        road_rows(&self.road, self.config.road_rule, me.p, me.v, segment, p, &mut self.rows);
+        let delta_sum = 2.0 * p.delta;
+        // Sampled-data margin (cbf.md §4.4, §8 d): with inputs held for dt, the curvature of b_kd lets
+        // a pair drift below the continuous-time boundary by up to ½·δΣ·dt² per step; the filter keeps
+        // that much extra distance so the reported margin stays ≥ D_c.
+        let d_c = p.d_c + 0.5 * delta_sum * p.dt * p.dt;
+        for &d in &self.neighbours.lists[k] {
+            let other = self.uavs[d].state;
+            let (p_kd, v_kd) = (me.p - other.p, me.v - other.v);
+            if p_kd.norm() > activation_radius(p.d_c, v_kd.norm(), delta_sum) {
+                continue;
+            }
+            let mut row = collision_row(p_kd, v_kd, p.delta, p.delta, d_c, p.zeta, RowKind::Collision(d));
+            if self.config.share == CollisionShare::Sequential && d < k {
+                // d was filtered earlier this tick: enforce the whole relative row given its u_d.
+                row.c = row.c * delta_sum / p.delta + row.a.dot(&self.uavs[d].last.u);
+            }
+            self.rows.push(row);
+        }
+        let started = Instant::now();
+        let out = self.filter.filter(self.uavs[k].last.u_ref, me.v, &self.rows, p.delta, p.dt);
+        let last = &mut self.uavs[k].last;
+        last.solve_us = if out.solved { started.elapsed().as_secs_f64() * 1e6 } else { 0.0 };
+        last.u = out.u;
+        last.rows = self.rows.len();
+        last.active_rows = out.active_rows;
+        last.max_slack = out.max_slack;
+        last.solved = out.solved;
+        last.failed = out.failed;
+        last.min_barrier = self.rows.iter().map(|r| r.b).fold(f64::INFINITY, f64::min);
+    }
+}

@@ -1,0 +1,19 @@
+//! The fleet loop as plain synchronous code: one [`Fleet::tick`] reads states from the links, picks
+//! targets (navigation), finds neighbours, runs the policies batched, filters every command through
+//! the CBF-QP and sends it. Also the scenario file format, safety metrics and headless runs.
+//!
+//! No async, no I/O beyond what a [`links::Link`] does: the server wraps this in its 20 Hz task.
+
+mod fleet;
+mod margins;
+mod metrics;
+mod neighbours;
+mod run;
+mod scenario;
+pub mod stress;
+
+pub use fleet::{CollisionShare, Fleet, FleetConfig, Uav, UavTick};
+pub use margins::{collision_margin, road_margin};
+pub use metrics::{MetricsRecorder, QpMetrics, RunMetrics};
+pub use run::{RunOptions, RunOutcome, TRAJECTORY_HEADER, run_scenario};
+pub use scenario::{Scenario, ScenarioError, ScenarioUav, UavSpec, ValidScenario};

@@ -1,0 +1,154 @@
+//! Safety metrics of a run, accumulated per tick, and the METRICS.json document.
+
+use crate::fleet::Fleet;
+use crate::margins::{collision_margin, road_margin};
+use serde::Serialize;
+use std::collections::BTreeMap;
+
+/// Solver statistics of a run.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct QpMetrics {
+    /// QPs solved (ticks where the nominal input was already safe need none).
+    pub solves: u64,
+    /// Solves with a slack above 1e-6.
+    pub slack_used: u64,
+    /// Largest slack seen.
+    pub max_slack: f64,
+    /// Solves that failed (the UAV braked).
+    pub failures: u64,
+    /// Median filter time per solved UAV (µs).
+    pub p50_us: f64,
+    /// 99th percentile filter time per solved UAV (µs).
+    pub p99_us: f64,
+}
+
+/// The METRICS.json document of a headless run (exactly these keys).
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct RunMetrics {
+    /// Scenario name.
+    pub scenario: String,
+    /// Ticks run.
+    pub ticks: u64,
+    /// Simulated time (s).
+    pub sim_time_s: f64,
+    /// Every UAV reached its goal.
+    pub all_arrived: bool,
+    /// Arrival time per UAV id (s), null if it never arrived.
+    pub arrival_time_s: BTreeMap<String, Option<f64>>,
+    /// min over time and pairs of S_kd (eq. 2, corrected sign); null with fewer than two UAVs.
+    pub min_collision_margin_m: Option<f64>,
+    /// min over time, UAVs and walls of S_kij (eq. 6) to the finite walls.
+    pub min_road_margin_m: f64,
+    /// Smallest distance between two UAVs; null with fewer than two UAVs.
+    pub min_separation_m: Option<f64>,
+    /// Smallest distance of a UAV to a wall (negative when outside).
+    pub min_wall_distance_m: f64,
+    /// UAV-ticks spent outside the road.
+    pub steps_outside_road: u64,
+    /// Solver statistics.
+    pub qp: QpMetrics,
+    /// Margins ≥ D_c and D_s, no step outside, no failure.
+    pub safe: bool,
+}
+
+/// Accumulates metrics tick by tick.
+#[derive(Debug, Default)]
+pub struct MetricsRecorder {
+    min_collision: Option<f64>,
+    min_separation: Option<f64>,
+    min_road: f64,
+    min_wall: f64,
+    outside: u64,
+    solves: u64,
+    slack_used: u64,
+    max_slack: f64,
+    failures: u64,
+    /// Policy outputs replaced by braking (reported in the summary).
+    pub policy_fallbacks: u64,
+    solve_us: Vec<f64>,
+    arrival: BTreeMap<String, Option<f64>>,
+}
+
+fn min_opt(a: Option<f64>, b: f64) -> Option<f64> {
+    Some(a.map_or(b, |a| a.min(b)))
+}
+
+impl MetricsRecorder {
+    /// A recorder with no observation yet.
+    pub fn new() -> Self {
+        Self { min_road: f64::INFINITY, min_wall: f64::INFINITY, ..Self::default() }
+    }
+
+    /// Records the states the fleet read in its last tick (time `t`) and what the filter did.
+    pub fn record(&mut self, fleet: &Fleet, t: f64) {
+        let p = fleet.config.params;
+        let road = fleet.road();
+        let uavs = fleet.uavs();
+        for (k, u) in uavs.iter().enumerate() {
+            let wall = road.boundary_distance(&u.state.p);
+            self.min_wall = self.min_wall.min(wall);
+            self.outside += u64::from(wall < 0.0);
+            self.min_road = self.min_road.min(road_margin(road, &u.state, p.delta));
+            for d in &uavs[k + 1..] {
+                self.min_collision =
+                    min_opt(self.min_collision, collision_margin(&u.state, &d.state, 2.0 * p.delta));
+                self.min_separation = min_opt(self.min_separation, (u.state.p - d.state.p).norm());
+            }
+            let last = &u.last;
+            if last.solved {
+                self.solves += 1;
+                self.solve_us.push(last.solve_us);
+            }
+            self.slack_used += u64::from(last.max_slack > 1e-6);
+            self.max_slack = self.max_slack.max(last.max_slack);
+            self.failures += u64::from(last.failed);
+            self.policy_fallbacks += u64::from(last.policy_fallback);
+            let arrival = self.arrival.entry(u.id.clone()).or_insert(None);
+            if u.nav.arrived && arrival.is_none() {
+                *arrival = Some(t);
+            }
+        }
+    }
+
+    /// The METRICS.json document.
+    pub fn finish(mut self, fleet: &Fleet, scenario: &str) -> RunMetrics {
+        let p = fleet.config.params;
+        for u in fleet.uavs() {
+            self.arrival.entry(u.id.clone()).or_insert(None);
+        }
+        self.solve_us.sort_by(f64::total_cmp);
+        let pct = |q: f64| {
+            if self.solve_us.is_empty() {
+                0.0
+            } else {
+                self.solve_us[((self.solve_us.len() - 1) as f64 * q).round() as usize]
+            }
+        };
+        let qp = QpMetrics {
+            solves: self.solves,
+            slack_used: self.slack_used,
+            max_slack: self.max_slack,
+            failures: self.failures,
+            p50_us: pct(0.5),
+            p99_us: pct(0.99),
+        };
+        let safe = self.min_collision.is_none_or(|m| m >= p.d_c)
+            && self.min_road >= p.d_s
+            && self.outside == 0
+            && self.failures == 0;
+        RunMetrics {
+            scenario: scenario.to_string(),
+            ticks: fleet.ticks(),
+            sim_time_s: fleet.ticks() as f64 * p.dt,
+            all_arrived: self.arrival.values().all(Option::is_some),
+            arrival_time_s: self.arrival,
+            min_collision_margin_m: self.min_collision,
+            min_road_margin_m: self.min_road,
+            min_separation_m: self.min_separation,
+            min_wall_distance_m: self.min_wall,
+            steps_outside_road: self.outside,
+            qp,
+            safe,
+        }
+    }
+}

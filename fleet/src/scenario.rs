@@ -1,0 +1,153 @@
+//! Scenario files: `{"name", "params"?, "segments", "uavs": [{"id", "start", "goal"}]}`.
+
+use roads::{Road, RoadLayout};
+use serde::{Deserialize, Serialize};
+use uav::{Params, Vec2};
+
+/// A scenario as written in JSON.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scenario {
+    /// Scenario name (reported in the metrics).
+    pub name: String,
+    /// Parameters; missing keys take their defaults, unknown keys are an error.
+    #[serde(default)]
+    pub params: Params,
+    /// Road segments, as in a road layout.
+    pub segments: Vec<[[f64; 2]; 4]>,
+    /// The fleet.
+    pub uavs: Vec<ScenarioUav>,
+}
+
+/// One UAV of a scenario as written in JSON.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioUav {
+    /// Unique id.
+    pub id: String,
+    /// Start position [x, y] (m), at rest.
+    pub start: [f64; 2],
+    /// Goal position [x, y] (m).
+    pub goal: [f64; 2],
+}
+
+/// A UAV of a validated scenario.
+#[derive(Debug, Clone, PartialEq)]
+pub struct UavSpec {
+    /// Unique id.
+    pub id: String,
+    /// Start position (m).
+    pub start: Vec2,
+    /// Goal position (m).
+    pub goal: Vec2,
+}
+
+/// A scenario whose road, parameters and fleet passed validation.
+#[derive(Debug, Clone)]
+pub struct ValidScenario {
+    /// Scenario name.
+    pub name: String,
+    /// Parameters.
+    pub params: Params,
+    /// The validated road.
+    pub road: Road,
+    /// The fleet.
+    pub uavs: Vec<UavSpec>,
+}
+
+/// Why a scenario was rejected: the JSON path of the field and the reason.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ScenarioError {
+    /// The text is not valid scenario JSON (syntax, types, unknown keys).
+    #[error("line {line}, column {column}: {message}")]
+    Parse {
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// serde_json's message (names unknown or missing keys).
+        message: String,
+    },
+    /// A field has an invalid value.
+    #[error("{field}: {reason}")]
+    Invalid {
+        /// JSON path, e.g. `uavs[2].start`.
+        field: String,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+fn invalid(field: impl Into<String>, reason: impl Into<String>) -> ScenarioError {
+    ScenarioError::Invalid { field: field.into(), reason: reason.into() }
+}
+
+impl Scenario {
+    /// Parses scenario JSON text.
+    pub fn from_json(text: &str) -> Result<Self, ScenarioError> {
+        serde_json::from_str(text).map_err(|e| ScenarioError::Parse {
+            line: e.line(),
+            column: e.column(),
+            message: e.to_string().split(" at line ").next().unwrap_or_default().to_string(),
+        })
+    }
+
+    /// Validates parameters, road and fleet (cbf.md §5; the safe-set assumption for starts).
+    pub fn validate(&self) -> Result<ValidScenario, ScenarioError> {
+        self.params
+            .validate()
+            .map_err(|e| invalid(format!("params.{}", e.field), format!("{} (got {})", e.reason, e.value)))?;
+        let road = Road::new(RoadLayout { segments: self.segments.clone() }).map_err(|e| {
+            let field = e.segment.map(|i| format!("segments[{i}]")).unwrap_or_else(|| "segments".into());
+            invalid(field, format!("{} ({})", e.message, e.rule.name()))
+        })?;
+        if self.uavs.is_empty() {
+            return Err(invalid("uavs", "a scenario needs at least one UAV"));
+        }
+        let p = &self.params;
+        let mut uavs: Vec<UavSpec> = Vec::with_capacity(self.uavs.len());
+        for (i, u) in self.uavs.iter().enumerate() {
+            if u.id.is_empty() || u.id.len() > 64 {
+                return Err(invalid(format!("uavs[{i}].id"), "must be 1 to 64 characters"));
+            }
+            if let Some(j) = uavs.iter().position(|o| o.id == u.id) {
+                return Err(invalid(
+                    format!("uavs[{i}].id"),
+                    format!("duplicate id `{}` (also uavs[{j}])", u.id),
+                ));
+            }
+            let start = check_point(&road, &format!("uavs[{i}].start"), u.start, p.d_s)?;
+            let goal = check_point(&road, &format!("uavs[{i}].goal"), u.goal, 0.0)?;
+            if let Some(j) = uavs.iter().position(|o| (o.start - start).norm() < p.d_c) {
+                let reason = format!("closer than D_c = {} m to uavs[{j}].start", p.d_c);
+                return Err(invalid(format!("uavs[{i}].start"), reason));
+            }
+            uavs.push(UavSpec { id: u.id.clone(), start, goal });
+        }
+        Ok(ValidScenario { name: self.name.clone(), params: self.params, road, uavs })
+    }
+}
+
+/// Checks that a point is finite, inside the road and at least `clearance` from every wall.
+pub(crate) fn check_point(
+    road: &Road,
+    field: &str,
+    x: [f64; 2],
+    clearance: f64,
+) -> Result<Vec2, ScenarioError> {
+    if !x[0].is_finite() || !x[1].is_finite() {
+        return Err(invalid(field, "must be two finite numbers"));
+    }
+    let v = Vec2::new(x[0], x[1]);
+    let d = road.boundary_distance(&v);
+    if d < 0.0 {
+        return Err(invalid(field, format!("[{}, {}] is outside the road", x[0], x[1])));
+    }
+    if d < clearance {
+        return Err(invalid(
+            field,
+            format!("[{}, {}] is {d:.3} m from a wall, closer than D_s = {clearance} m", x[0], x[1]),
+        ));
+    }
+    Ok(v)
+}

@@ -1,0 +1,52 @@
+//! Policies by name: the built-in `pd` baseline plus any loaded model.
+
+use crate::{PdPolicy, Policy};
+use std::collections::BTreeMap;
+
+/// A policy name that is not loaded.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("unknown policy `{name}` (available: {available})")]
+pub struct UnknownPolicy {
+    /// The requested name.
+    pub name: String,
+    /// Comma-separated names that exist.
+    pub available: String,
+}
+
+/// The loaded policies, each evaluated once per tick on all UAVs that use it.
+pub struct PolicyRegistry {
+    policies: BTreeMap<String, Box<dyn Policy>>,
+}
+
+impl PolicyRegistry {
+    /// A registry holding the PD baseline as `pd` with saturation δ.
+    pub fn with_pd(delta: f64) -> Self {
+        let mut policies: BTreeMap<String, Box<dyn Policy>> = BTreeMap::new();
+        policies.insert("pd".into(), Box::new(PdPolicy { delta, ..PdPolicy::default() }));
+        Self { policies }
+    }
+
+    /// Adds (or replaces) a policy under `name`.
+    pub fn insert(&mut self, name: impl Into<String>, policy: Box<dyn Policy>) {
+        self.policies.insert(name.into(), policy);
+    }
+
+    /// Checks that `name` is loaded.
+    pub fn check(&self, name: &str) -> Result<(), UnknownPolicy> {
+        if self.policies.contains_key(name) {
+            Ok(())
+        } else {
+            Err(UnknownPolicy { name: name.into(), available: self.names().collect::<Vec<_>>().join(", ") })
+        }
+    }
+
+    /// Names of the loaded policies.
+    pub fn names(&self) -> impl Iterator<Item = &str> {
+        self.policies.keys().map(String::as_str)
+    }
+
+    /// The policy called `name`.
+    pub fn get_mut(&mut self, name: &str) -> Option<&mut (dyn Policy + 'static)> {
+        self.policies.get_mut(name).map(|p| p.as_mut())
+    }
+}

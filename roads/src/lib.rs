@@ -1,0 +1,23 @@
+//! Air-road layouts: the JSON format, validation with precise errors, and the geometry the
+//! safety filter and navigation need (finite walls with end caps, point-in-road, centre line),
+//! plus navigation (Algorithm 1 and its road-aware `route` variant, `shared/design/cbf.md` §5, §7).
+//!
+//! Conventions (paper labels): segment i = `[p1, p2, p3, p4]`; walls (barrier lines) p2→p1 (j = 21)
+//! and p4→p3 (j = 43); passable edges p2–p4 (entry) and p1–p3 (exit); cyclic polygon order
+//! p1, p2, p4, p3; seamless joins `p1(i) = p2(i+1)`, `p3(i) = p4(i+1)`.
+//!
+//! This crate knows nothing of UAV dynamics, barriers or solvers.
+
+mod centerline;
+mod geometry;
+mod layout;
+mod nav;
+mod road;
+mod validate;
+
+pub use centerline::CenterLine;
+pub use geometry::{Quad, Wall, WallKind, nearest_on_segment, segments_intersect};
+pub use layout::RoadLayout;
+pub use nav::{NavMode, NavState, Navigator};
+pub use road::{Road, SegmentTracker};
+pub use validate::{RoadError, RoadRule};

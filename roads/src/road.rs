@@ -1,0 +1,154 @@
+//! A validated road: segments, walls (with end caps), centre line, membership and visibility.
+
+use crate::centerline::CenterLine;
+use crate::geometry::{Quad, Wall, WallKind, segments_intersect};
+use crate::layout::RoadLayout;
+use crate::validate::{RoadError, check_joins, check_overlaps, check_quads};
+use uav::Vec2;
+
+/// Tolerance (m) of the point-in-segment test.
+pub const CONTAINS_TOL_M: f64 = 1e-9;
+
+/// A road that passed validation, with its derived geometry.
+#[derive(Debug, Clone)]
+pub struct Road {
+    layout: RoadLayout,
+    quads: Vec<Quad>,
+    walls: Vec<Wall>,
+    /// Indices of the two side walls (j = 21, 43) of each segment.
+    segment_walls: Vec<[usize; 2]>,
+    /// For each segment i, the walls whose infinite lines rule R3 (`halfplanes`) enforces there.
+    halfplane_walls: Vec<Vec<usize>>,
+    centerline: CenterLine,
+}
+
+impl Road {
+    /// Validates `layout` (cbf.md §5) and derives walls, end caps and the centre line.
+    pub fn new(layout: RoadLayout) -> Result<Self, RoadError> {
+        let quads = check_quads(&layout.segments)?;
+        check_joins(&quads)?;
+        check_overlaps(&quads)?;
+        let mut walls = Vec::with_capacity(2 * quads.len() + 2);
+        let mut segment_walls = Vec::with_capacity(quads.len());
+        for (i, q) in quads.iter().enumerate() {
+            walls.push(Wall::new(q.p[0], q.p[1], q, i, WallKind::Side21));
+            walls.push(Wall::new(q.p[2], q.p[3], q, i, WallKind::Side43));
+            segment_walls.push([walls.len() - 2, walls.len() - 1]);
+        }
+        let (first, last) = (&quads[0], &quads[quads.len() - 1]);
+        walls.push(Wall::new(first.p[1], first.p[3], first, 0, WallKind::EntryCap));
+        walls.push(Wall::new(last.p[0], last.p[2], last, quads.len() - 1, WallKind::ExitCap));
+        let halfplane_walls = (0..quads.len()).map(|i| halfplane_set(&quads, &walls, i)).collect();
+        let centerline = CenterLine::new(&quads);
+        Ok(Self { layout, quads, walls, segment_walls, halfplane_walls, centerline })
+    }
+
+    /// The layout this road was built from.
+    pub fn layout(&self) -> &RoadLayout {
+        &self.layout
+    }
+
+    /// The segments.
+    pub fn quads(&self) -> &[Quad] {
+        &self.quads
+    }
+
+    /// Every wall: the side walls of all segments, then the entry and exit caps.
+    pub fn walls(&self) -> &[Wall] {
+        &self.walls
+    }
+
+    /// The two side walls of segment `i` (rule R1, the paper's).
+    pub fn segment_walls(&self, i: usize) -> [usize; 2] {
+        self.segment_walls[i]
+    }
+
+    /// The walls rule R3 (`halfplanes`) enforces, as infinite lines, while a UAV is in segment `i`.
+    pub fn halfplane_walls(&self, i: usize) -> &[usize] {
+        &self.halfplane_walls[i]
+    }
+
+    /// The centre line.
+    pub fn centerline(&self) -> &CenterLine {
+        &self.centerline
+    }
+
+    /// True when `x` is inside some segment.
+    pub fn contains(&self, x: &Vec2) -> bool {
+        self.quads.iter().any(|q| q.contains(x, CONTAINS_TOL_M))
+    }
+
+    /// The segment `x` is in, preferring `previous` while `x` is still inside it (hysteresis); if `x`
+    /// is in no segment, the one with the largest (least negative) margin.
+    pub fn locate(&self, x: &Vec2, previous: Option<usize>) -> usize {
+        if let Some(i) = previous.filter(|&i| i < self.quads.len())
+            && self.quads[i].contains(x, CONTAINS_TOL_M)
+        {
+            return i;
+        }
+        let mut best = (0, f64::NEG_INFINITY);
+        for (i, q) in self.quads.iter().enumerate() {
+            let m = q.margin(x);
+            if m > best.1 {
+                best = (i, m);
+            }
+        }
+        best.0
+    }
+
+    /// Distance (m) from `x` to the nearest wall, negative when `x` is outside the road.
+    pub fn boundary_distance(&self, x: &Vec2) -> f64 {
+        let d = self.walls.iter().map(|w| (w.nearest(x).0 - x).norm()).fold(f64::INFINITY, f64::min);
+        if self.contains(x) { d } else { -d }
+    }
+
+    /// Index of the wall nearest to `x`.
+    pub fn nearest_wall(&self, x: &Vec2) -> usize {
+        let mut best = (0, f64::INFINITY);
+        for (k, w) in self.walls.iter().enumerate() {
+            let d = (w.nearest(x).0 - x).norm_squared();
+            if d < best.1 {
+                best = (k, d);
+            }
+        }
+        best.0
+    }
+
+    /// True when the straight segment from `x` to `y` touches no wall.
+    pub fn visible(&self, x: &Vec2, y: &Vec2) -> bool {
+        !self.walls.iter().any(|w| segments_intersect(x, y, &w.a, &w.b))
+    }
+}
+
+/// Rule R3 for segment i: its own walls and caps, plus every wall of segments i±1 whose inner
+/// half-plane contains all four vertices of quad i (the neighbour walls meeting it at a convex corner).
+fn halfplane_set(quads: &[Quad], walls: &[Wall], i: usize) -> Vec<usize> {
+    const TOL: f64 = 1e-9;
+    let lo = i.saturating_sub(1);
+    let hi = (i + 1).min(quads.len() - 1);
+    walls
+        .iter()
+        .enumerate()
+        .filter(|(_, w)| {
+            w.segment == i
+                || ((lo..=hi).contains(&w.segment) && quads[i].p.iter().all(|v| w.signed_distance(v) >= -TOL))
+        })
+        .map(|(k, _)| k)
+        .collect()
+}
+
+/// Tracks which segment one UAV is in, with hysteresis (cbf.md §5).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SegmentTracker {
+    /// The segment at the last update.
+    pub current: Option<usize>,
+}
+
+impl SegmentTracker {
+    /// Updates the membership for position `x` and returns the segment.
+    pub fn update(&mut self, road: &Road, x: &Vec2) -> usize {
+        let i = road.locate(x, self.current);
+        self.current = Some(i);
+        i
+    }
+}

@@ -1,0 +1,217 @@
+//! Validation of road layouts: every rule names the segment and what is wrong.
+
+use crate::geometry::Quad;
+use uav::{Vec2, cross};
+
+/// Coordinates beyond this magnitude (m) are rejected as absurd.
+pub const MAX_COORDINATE_M: f64 = 1.0e6;
+/// Edges shorter than this (m) are degenerate.
+pub const MIN_EDGE_M: f64 = 1.0e-3;
+/// Largest number of segments accepted in one layout.
+pub const MAX_SEGMENTS: usize = 2000;
+/// Smallest |sin| of an interior angle of a strictly convex quad.
+const MIN_SIN_ANGLE: f64 = 1.0e-6;
+
+/// The validation rule a layout broke. Its `name()` is stable (used in API error bodies).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RoadRule {
+    /// The layout has no segment.
+    Empty,
+    /// More than [`MAX_SEGMENTS`] segments.
+    TooManySegments,
+    /// A coordinate is NaN or infinite.
+    NonFinite,
+    /// A coordinate exceeds [`MAX_COORDINATE_M`].
+    AbsurdCoordinate,
+    /// Two vertices joined by an edge (almost) coincide.
+    DegenerateEdge,
+    /// The quad (p1, p2, p4, p3) is not strictly convex.
+    NotConvex,
+    /// `p1(i) ≠ p2(i+1)` or `p3(i) ≠ p4(i+1)`.
+    SeamlessJoin,
+    /// Segment i+1 lies on the same side of the shared edge as segment i.
+    FoldsBack,
+    /// Two non-adjacent segments overlap.
+    Overlap,
+}
+
+impl RoadRule {
+    /// Stable snake_case name of the rule.
+    pub fn name(&self) -> &'static str {
+        match self {
+            RoadRule::Empty => "empty",
+            RoadRule::TooManySegments => "too_many_segments",
+            RoadRule::NonFinite => "non_finite",
+            RoadRule::AbsurdCoordinate => "absurd_coordinate",
+            RoadRule::DegenerateEdge => "degenerate_edge",
+            RoadRule::NotConvex => "not_convex",
+            RoadRule::SeamlessJoin => "seamless_join",
+            RoadRule::FoldsBack => "folds_back",
+            RoadRule::Overlap => "overlap",
+        }
+    }
+}
+
+/// A layout that breaks a rule: which segment (if any), which rule, and a readable explanation.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("{}{}: {message}", segment.map(|i| format!("segments[{i}]")).unwrap_or_else(|| "segments".into()), format_args!(" ({})", rule.name()))]
+pub struct RoadError {
+    /// Index of the offending segment (None for layout-wide rules).
+    pub segment: Option<usize>,
+    /// The rule that was broken.
+    pub rule: RoadRule,
+    /// Human-readable detail.
+    pub message: String,
+}
+
+fn err(segment: Option<usize>, rule: RoadRule, message: String) -> RoadError {
+    RoadError { segment, rule, message }
+}
+
+/// Converts raw vertex arrays to quads, checking finiteness, magnitude, edges and convexity.
+pub(crate) fn check_quads(raw: &[[[f64; 2]; 4]]) -> Result<Vec<Quad>, RoadError> {
+    if raw.is_empty() {
+        return Err(err(None, RoadRule::Empty, "a road needs at least one segment".into()));
+    }
+    if raw.len() > MAX_SEGMENTS {
+        let msg = format!("{} segments, at most {MAX_SEGMENTS} are accepted", raw.len());
+        return Err(err(None, RoadRule::TooManySegments, msg));
+    }
+    let mut quads = Vec::with_capacity(raw.len());
+    for (i, seg) in raw.iter().enumerate() {
+        for (k, v) in seg.iter().enumerate() {
+            if !v[0].is_finite() || !v[1].is_finite() {
+                let msg = format!("p{} = [{}, {}] is not a finite number", k + 1, v[0], v[1]);
+                return Err(err(Some(i), RoadRule::NonFinite, msg));
+            }
+            if v[0].abs() > MAX_COORDINATE_M || v[1].abs() > MAX_COORDINATE_M {
+                let msg = format!(
+                    "p{} = [{}, {}] is farther than {MAX_COORDINATE_M} m from the origin",
+                    k + 1,
+                    v[0],
+                    v[1]
+                );
+                return Err(err(Some(i), RoadRule::AbsurdCoordinate, msg));
+            }
+        }
+        let quad = Quad { p: seg.map(|v| Vec2::new(v[0], v[1])) };
+        check_convex(i, &quad)?;
+        quads.push(quad);
+    }
+    Ok(quads)
+}
+
+/// Labels of the cyclic order (p1, p2, p4, p3), for messages.
+const CYCLIC_LABELS: [&str; 4] = ["p1", "p2", "p4", "p3"];
+
+fn check_convex(i: usize, quad: &Quad) -> Result<(), RoadError> {
+    let c = quad.cyclic();
+    for k in 0..4 {
+        let (a, b) = (c[k], c[(k + 1) % 4]);
+        if (b - a).norm() < MIN_EDGE_M {
+            let msg = format!(
+                "edge {}–{} is shorter than {MIN_EDGE_M} m",
+                CYCLIC_LABELS[k],
+                CYCLIC_LABELS[(k + 1) % 4]
+            );
+            return Err(err(Some(i), RoadRule::DegenerateEdge, msg));
+        }
+    }
+    let mut sign = 0.0;
+    for k in 0..4 {
+        let e1 = c[(k + 1) % 4] - c[k];
+        let e2 = c[(k + 2) % 4] - c[(k + 1) % 4];
+        let s = cross(&e1, &e2) / (e1.norm() * e2.norm());
+        let turn_ok = s.abs() > MIN_SIN_ANGLE && (sign == 0.0 || s.signum() == sign);
+        if !turn_ok {
+            let msg = format!(
+                "the quad p1, p2, p4, p3 is not strictly convex at {} (walls p2→p1 and p4→p3 must not cross)",
+                CYCLIC_LABELS[(k + 1) % 4]
+            );
+            return Err(err(Some(i), RoadRule::NotConvex, msg));
+        }
+        sign = s.signum();
+    }
+    Ok(())
+}
+
+/// Checks the seamless joins and that consecutive segments continue forward.
+pub(crate) fn check_joins(quads: &[Quad]) -> Result<(), RoadError> {
+    for i in 0..quads.len().saturating_sub(1) {
+        let (a, b) = (&quads[i], &quads[i + 1]);
+        for (mine, theirs) in [(0usize, 1usize), (2, 3)] {
+            let (x, y) = (a.p[mine], b.p[theirs]);
+            if x != y {
+                let msg = format!(
+                    "seamless join broken: p{} of segment {i} is [{}, {}] but p{} of segment {} is [{}, {}]",
+                    mine + 1,
+                    x.x,
+                    x.y,
+                    theirs + 1,
+                    i + 1,
+                    y.x,
+                    y.y
+                );
+                return Err(err(Some(i + 1), RoadRule::SeamlessJoin, msg));
+            }
+        }
+        // The shared edge p1–p3 of segment i: segment i lies on one side, segment i+1 must lie on the other.
+        let (e0, e1) = (a.p[0], a.p[2]);
+        let side = |x: &Vec2| cross(&(e1 - e0), &(x - e0));
+        let mine = side(&a.centroid());
+        let theirs = side(&b.centroid());
+        if mine.signum() == theirs.signum() {
+            let msg =
+                format!("segment {} lies on the same side of the shared edge p1–p3 as segment {i}", i + 1);
+            return Err(err(Some(i + 1), RoadRule::FoldsBack, msg));
+        }
+    }
+    Ok(())
+}
+
+/// Checks that no two non-adjacent segments overlap (separating-axis test; touching is allowed).
+pub(crate) fn check_overlaps(quads: &[Quad]) -> Result<(), RoadError> {
+    let boxes: Vec<(Vec2, Vec2)> = quads
+        .iter()
+        .map(|q| {
+            let lo = q.p.iter().fold(Vec2::repeat(f64::INFINITY), |m, v| m.inf(v));
+            let hi = q.p.iter().fold(Vec2::repeat(f64::NEG_INFINITY), |m, v| m.sup(v));
+            (lo, hi)
+        })
+        .collect();
+    for j in 0..quads.len() {
+        for i in 0..j.saturating_sub(1) {
+            let ((alo, ahi), (blo, bhi)) = (boxes[i], boxes[j]);
+            let boxes_apart = ahi.x <= blo.x || bhi.x <= alo.x || ahi.y <= blo.y || bhi.y <= alo.y;
+            if !boxes_apart && interiors_overlap(&quads[i], &quads[j]) {
+                let msg = format!("segment {j} overlaps segment {i}, which is not adjacent to it");
+                return Err(err(Some(j), RoadRule::Overlap, msg));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Separating-axis test for two convex quads: true when their interiors intersect.
+fn interiors_overlap(a: &Quad, b: &Quad) -> bool {
+    const TOL: f64 = 1e-9;
+    let (ca, cb) = (a.cyclic(), b.cyclic());
+    for poly in [&ca, &cb] {
+        for k in 0..4 {
+            let e = poly[(k + 1) % 4] - poly[k];
+            let axis = Vec2::new(-e.y, e.x).normalize();
+            let (amin, amax) = project(&ca, &axis);
+            let (bmin, bmax) = project(&cb, &axis);
+            if amax <= bmin + TOL || bmax <= amin + TOL {
+                return false;
+            }
+        }
+    }
+    true
+}
+
+fn project(poly: &[Vec2; 4], axis: &Vec2) -> (f64, f64) {
+    poly.iter()
+        .map(|v| v.dot(axis))
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), d| (lo.min(d), hi.max(d)))
+}

@@ -1,0 +1,83 @@
+//! Barrier functions and their affine CBF rows in normalised form `aᵀu_k ≤ c`, ‖a‖ = 1, with the
+//! numerically safe evaluation of cbf.md §4 (clamp `max(h, h_min)`, never √ of a negative number).
+
+use uav::Vec2;
+
+/// h_min (m/s): lower clamp of h = √(2δΣ(n − D_c)) and g = √(2δ(s − D_s)) in the rows (cbf.md §4.1).
+pub const H_MIN: f64 = 1e-3;
+/// Distances below this (m) are treated as this, to keep p̂ defined after a collision (cbf.md §4.3).
+pub const MIN_DISTANCE_M: f64 = 1e-12;
+
+/// What a row protects against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RowKind {
+    /// A road wall (line or end-point barrier); the index is the wall's index in the road.
+    Road(usize),
+    /// A neighbouring UAV; the index is the neighbour's index in the fleet.
+    Collision(usize),
+}
+
+/// One CBF condition `ḃ ≥ −ζb³` as an affine row `aᵀu_k ≤ c` with ‖a‖ = 1, and the barrier value b.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Row {
+    /// Row direction a (unit vector).
+    pub a: Vec2,
+    /// Right-hand side c (m/s²).
+    pub c: f64,
+    /// The barrier value b (m/s) at the current state.
+    pub b: f64,
+    /// What the row protects against.
+    pub kind: RowKind,
+}
+
+/// `δ ẋ / max(h, h_min)` written so it is exact when h ≥ h_min and only tightens otherwise:
+/// with b = h + ẋ, `δẋ/h = −δ + δb/h`, and the clamp applies to the second form (cbf.md §4.1).
+fn braking_term(delta: f64, rate: f64, h: f64, b: f64) -> f64 {
+    if h >= H_MIN { delta * rate / h } else { -delta + delta * b / H_MIN }
+}
+
+/// Collision row of UAV k against neighbour d (cbf.md §1, §2; paper eq. 4, 11, 14):
+/// b_kd = √(2δΣ(‖p_kd‖ − D_c)) + p̂_kdᵀv_kd, row
+/// `−p̂ᵀu_k ≤ δ_k/δΣ · (δΣ ṅ/h + ‖v_⊥‖²/n + ζ b_kd³)`, with δΣ = δ_k + δ_d.
+pub fn collision_row(
+    p_kd: Vec2,
+    v_kd: Vec2,
+    delta_k: f64,
+    delta_d: f64,
+    d_c: f64,
+    zeta: f64,
+    kind: RowKind,
+) -> Row {
+    let n_raw = p_kd.norm();
+    let n = n_raw.max(MIN_DISTANCE_M);
+    let p_hat = if n_raw >= MIN_DISTANCE_M { p_kd / n_raw } else { Vec2::new(1.0, 0.0) };
+    let n_dot = p_hat.dot(&v_kd);
+    let v_perp2 = (v_kd.norm_squared() - n_dot * n_dot).max(0.0);
+    let delta_sum = delta_k + delta_d;
+    let h = (2.0 * delta_sum * (n - d_c).max(0.0)).sqrt();
+    let b = h + n_dot;
+    let rhs = braking_term(delta_sum, n_dot, h, b) + v_perp2 / n + zeta * b.powi(3);
+    Row { a: -p_hat, c: delta_k / delta_sum * rhs, b, kind }
+}
+
+/// End-point barrier of a finite wall (cbf.md §5 R2): the collision barrier with a static obstacle at
+/// `vertex` (δ_d = 0, D_c → D_s), for a UAV at `p` with velocity `v`.
+pub fn point_row(p: Vec2, v: Vec2, vertex: Vec2, delta: f64, d_s: f64, zeta: f64, kind: RowKind) -> Row {
+    collision_row(p - vertex, v, delta, 0.0, d_s, zeta, kind)
+}
+
+/// Signed line barrier (cbf.md §3, E5): with s = n̂_inᵀ(p − a) and ṡ = n̂_inᵀv,
+/// b_kij = √(2δ(s − D_s)) + ṡ, row `−n̂_inᵀu ≤ δṡ/g + ζb³`. `n_in` must be a unit vector.
+pub fn line_row(s: f64, s_dot: f64, n_in: Vec2, delta: f64, d_s: f64, zeta: f64, kind: RowKind) -> Row {
+    let g = (2.0 * delta * (s - d_s).max(0.0)).sqrt();
+    let b = g + s_dot;
+    let c = braking_term(delta, s_dot, g, b) + zeta * b.powi(3);
+    Row { a: -n_in, c, b, kind }
+}
+
+/// The braking margin of eq. (2)/(6) with the corrected sign (E1): `dist − min(rate, 0)²/(2δ)`, the
+/// closest distance reached if braking at δ starts now.
+pub fn braking_margin(dist: f64, rate: f64, delta: f64) -> f64 {
+    let closing = rate.min(0.0);
+    dist - closing * closing / (2.0 * delta)
+}

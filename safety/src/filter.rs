@@ -1,0 +1,175 @@
+//! The safety filter of one UAV: skip the QP when the nominal input already satisfies every row
+//! (cbf.md §10.2), otherwise solve it; a result that is not `Solved` is never applied: the UAV brakes.
+
+use crate::barrier::{Row, RowKind};
+use crate::qp::{ConstraintRow, QpSolver};
+use clarabel::solver::SolverStatus;
+use uav::{Vec2, braking_input};
+
+/// Which objective the QP minimises.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Objective {
+    /// ½‖u_q‖² + Σ(ρ r + ½P r²): the exact penalty ρ keeps every slack at 0 whenever the hard
+    /// problem is feasible (cbf.md §6, E7).
+    #[default]
+    Exact,
+    /// The paper's (17) with ‖u_q‖ squared so it is a QP: ½‖u_q‖² + Σ ½P r², no linear penalty; its
+    /// slacks are never 0 while a row is active (E7). For comparison only.
+    Paper,
+}
+
+impl Objective {
+    /// The CLI/JSON name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Objective::Exact => "exact",
+            Objective::Paper => "paper",
+        }
+    }
+}
+
+impl std::str::FromStr for Objective {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "exact" => Ok(Objective::Exact),
+            "paper" => Ok(Objective::Paper),
+            other => Err(format!("unknown objective `{other}` (expected exact or paper)")),
+        }
+    }
+}
+
+/// Slack weights and objective (cbf.md §6 reference values).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FilterSettings {
+    /// Exact penalty ρ of a collision row's slack.
+    pub rho_collision: f64,
+    /// Quadratic weight P of a collision row's slack.
+    pub weight_collision: f64,
+    /// Factor applied to ρ and P for road rows (road rows have priority).
+    pub road_priority: f64,
+    /// Urgency weighting: when > 0, each row's ρ and P are also divided by `clamp(b, urgency_floor,
+    /// URGENCY_CEILING)`, so when rows conflict the QP relaxes those with a comfortable barrier value
+    /// first and keeps the ones about to reach b = 0. 0 disables it (the fixed weights of cbf.md §6).
+    pub urgency_floor: f64,
+    /// The objective.
+    pub objective: Objective,
+}
+
+impl Default for FilterSettings {
+    fn default() -> Self {
+        Self {
+            rho_collision: 1e3,
+            weight_collision: 1.0,
+            road_priority: 10.0,
+            urgency_floor: 0.05,
+            objective: Objective::Exact,
+        }
+    }
+}
+
+/// What the filter did for one UAV in one tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FilterOutcome {
+    /// The input to apply, ‖u‖ ≤ δ.
+    pub u: Vec2,
+    /// True when a QP was solved (false when the nominal input was already safe).
+    pub solved: bool,
+    /// True when the solver did not reach `Solved` even after the retry, or the data were not
+    /// finite: `u` is then full braking.
+    pub failed: bool,
+    /// Largest slack of the solve (0 when skipped).
+    pub max_slack: f64,
+    /// Rows that are binding at `u` (aᵀu ≥ c − 10⁻⁶).
+    pub active_rows: usize,
+    /// Clarabel's status (`Solved` when the QP was skipped).
+    pub status: SolverStatus,
+}
+
+/// The per-UAV safety filter with its reusable solver and scratch rows.
+#[derive(Default)]
+pub struct SafetyFilter {
+    /// Weights and objective.
+    pub settings: FilterSettings,
+    solver: QpSolver,
+    scratch: Vec<ConstraintRow>,
+}
+
+/// Barrier value (m/s) above which a row's urgency stops decreasing (see `urgency_floor`).
+pub const URGENCY_CEILING: f64 = 10.0;
+
+/// Rows with c ≥ δ can never bind under ‖u‖ ≤ δ with ‖a‖ = 1; rows with c below this many δ are
+/// clamped (the slack takes over anyway) to keep the problem data well scaled.
+const MIN_RHS_IN_DELTAS: f64 = -100.0;
+
+impl SafetyFilter {
+    /// A filter with the given settings.
+    pub fn new(settings: FilterSettings) -> Self {
+        Self { settings, ..Self::default() }
+    }
+
+    /// Filters nominal input `u_ref` of a UAV with velocity `v` against `rows`, under ‖u‖ ≤ δ.
+    pub fn filter(&mut self, u_ref: Vec2, v: Vec2, rows: &[Row], delta: f64, dt: f64) -> FilterOutcome {
+        let data_ok = uav::is_finite(&u_ref) && rows.iter().all(|r| uav::is_finite(&r.a) && r.c.is_finite());
+        if !data_ok {
+            return self.brake(v, delta, dt);
+        }
+        let safe = |u: &Vec2| rows.iter().all(|r| r.a.dot(u) <= r.c);
+        if u_ref.norm() <= delta && safe(&u_ref) {
+            let active_rows = count_active(rows, &u_ref);
+            return FilterOutcome {
+                u: u_ref,
+                solved: false,
+                failed: false,
+                max_slack: 0.0,
+                active_rows,
+                status: SolverStatus::Solved,
+            };
+        }
+        self.scratch.clear();
+        let s = &self.settings;
+        let rho_scale = if s.objective == Objective::Exact { 1.0 } else { 0.0 };
+        self.scratch.extend(rows.iter().filter(|r| r.c < delta).map(|r| {
+            let kind = if matches!(r.kind, RowKind::Road(_)) { s.road_priority } else { 1.0 };
+            let urgency =
+                if s.urgency_floor > 0.0 { 1.0 / r.b.clamp(s.urgency_floor, URGENCY_CEILING) } else { 1.0 };
+            let priority = kind * urgency;
+            ConstraintRow {
+                a: r.a,
+                c: r.c.max(MIN_RHS_IN_DELTAS * delta),
+                rho: s.rho_collision * priority * rho_scale,
+                weight: s.weight_collision * priority,
+            }
+        }));
+        // Road rows first: the cached solver's equilibration then fits the next instance better.
+        self.scratch.sort_unstable_by(|x, y| y.weight.total_cmp(&x.weight));
+        let sol = self.solver.solve(u_ref, &self.scratch, delta);
+        if sol.status != SolverStatus::Solved {
+            return FilterOutcome { status: sol.status, ..self.brake(v, delta, dt) };
+        }
+        FilterOutcome {
+            u: sol.u,
+            solved: true,
+            failed: false,
+            max_slack: sol.max_slack,
+            active_rows: count_active(rows, &sol.u),
+            status: sol.status,
+        }
+    }
+
+    fn brake(&self, v: Vec2, delta: f64, dt: f64) -> FilterOutcome {
+        let u = braking_input(v, delta, dt);
+        FilterOutcome {
+            u,
+            solved: false,
+            failed: true,
+            max_slack: 0.0,
+            active_rows: 0,
+            status: SolverStatus::NumericalError,
+        }
+    }
+}
+
+fn count_active(rows: &[Row], u: &Vec2) -> usize {
+    rows.iter().filter(|r| r.a.dot(u) >= r.c - 1e-6).count()
+}

@@ -1,0 +1,18 @@
+//! The safety filter of airroads (`shared/design/cbf.md` §1–§6, §10): control barrier functions for
+//! road walls (b_kij, signed, finite walls with end-point barriers) and neighbours (b_kd, decentralised
+//! share δ_k/(δ_k+δ_d)), turned into affine rows `aᵀu ≤ c`, and the per-UAV QP
+//! `min ½‖u_q‖² + Σ(ρ r + ½P r²)` with one slack per row and ‖u‖ ≤ δ as a second-order cone, solved
+//! with Clarabel.
+//!
+//! Synchronous and allocation-free in steady state; knows nothing of fleets, policies or I/O.
+
+pub mod barrier;
+mod filter;
+pub mod paper;
+mod qp;
+mod road_rows;
+
+pub use barrier::{Row, RowKind};
+pub use filter::{FilterOutcome, FilterSettings, Objective, SafetyFilter};
+pub use qp::{ConstraintRow, QpSolution, QpSolver};
+pub use road_rows::{ACTIVATION_BARRIER, RoadRule, activation_radius, road_rows};

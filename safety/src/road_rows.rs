@@ -1,0 +1,140 @@
+//! Which walls a UAV enforces, and their rows: rule R2 `walls` (default), R3 `halfplanes`, R1 `paper`
+//! (cbf.md §5, amended by §10.1).
+
+use crate::barrier::{Row, RowKind, line_row, point_row};
+use roads::Road;
+use uav::{Params, Vec2};
+
+/// Barrier value B (m/s) below which every row is present: walls and neighbours are searched within
+/// R = D + (‖v‖ + B)²/(2δ), since b ≤ B implies √(2δ(dist − D)) ≤ B + ‖v‖.
+///
+/// cbf.md §5 suggests R = D_s + ‖v‖²/(2δ) + 1 m. That keeps new rows inside the safe set (b > 0) but
+/// lets a fast neighbour appear with b ≈ 1, when its row already demands near-full braking: a jump that
+/// made the QP infeasible in crowded runs. With B = 5 m/s a row appears while ζb³ ≥ 6 m/s² keeps it
+/// mild, and since |ḃ| ≤ ~20 m/s² unconstrained, b ≥ 4 when it first counts (dt = 0.05 s).
+pub const ACTIVATION_BARRIER: f64 = 5.0;
+
+/// The activation radius (m) of a barrier with safe distance `d` for closing speed bound `speed` and
+/// braking capability `delta` (see [`ACTIVATION_BARRIER`]).
+pub fn activation_radius(d: f64, speed: f64, delta: f64) -> f64 {
+    d + (speed + ACTIVATION_BARRIER).powi(2) / (2.0 * delta)
+}
+
+/// Rule choosing the road barriers of a UAV.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RoadRule {
+    /// R2 (recommended): every finite wall and end cap within the activation radius; line barrier in the
+    /// wall's slab from its road side, end-point barrier beyond its ends.
+    #[default]
+    Walls,
+    /// R3: the infinite lines of the current segment plus the neighbours' lines that bound it.
+    Halfplanes,
+    /// R1, the paper's: the two infinite lines of the current segment, unsigned distance. Leaves the
+    /// road at convex corners (E5, E6): for comparison only.
+    Paper,
+}
+
+impl RoadRule {
+    /// The CLI/JSON name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            RoadRule::Walls => "walls",
+            RoadRule::Halfplanes => "halfplanes",
+            RoadRule::Paper => "paper",
+        }
+    }
+}
+
+impl std::str::FromStr for RoadRule {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "walls" => Ok(RoadRule::Walls),
+            "halfplanes" => Ok(RoadRule::Halfplanes),
+            "paper" => Ok(RoadRule::Paper),
+            other => Err(format!("unknown road rule `{other}` (expected walls, halfplanes or paper)")),
+        }
+    }
+}
+
+/// Appends the road rows of a UAV at `p`, `v` in segment `segment` (from its [`roads::SegmentTracker`]).
+pub fn road_rows(
+    road: &Road,
+    rule: RoadRule,
+    p: Vec2,
+    v: Vec2,
+    segment: usize,
+    params: &Params,
+    out: &mut Vec<Row>,
+) {
+    let (delta, d_s, zeta) = (params.delta, params.d_s, params.zeta);
+    let radius = activation_radius(d_s, v.norm(), delta);
+    let walls = road.walls();
+    let line = |k: usize, n: Vec2, s: f64| line_row(s, n.dot(&v), n, delta, d_s, zeta, RowKind::Road(k));
+    match rule {
+        RoadRule::Walls => walls_rows(road, p, v, radius, params, out),
+        RoadRule::Halfplanes => {
+            for &k in road.halfplane_walls(segment) {
+                let s = walls[k].signed_distance(&p);
+                if s <= radius {
+                    out.push(line(k, walls[k].n_in, s));
+                }
+            }
+        }
+        RoadRule::Paper => {
+            for k in road.segment_walls(segment) {
+                let s = walls[k].signed_distance(&p);
+                // Unsigned distance ‖O_kij‖ and Ô_kij = ±n̂_in (paper eq. 8, before erratum E5).
+                let n = if s >= 0.0 { walls[k].n_in } else { -walls[k].n_in };
+                if s.abs() <= radius {
+                    out.push(line(k, n, s.abs()));
+                }
+            }
+        }
+    }
+}
+
+/// Rule R2 with §10.1: line barriers only from a wall's road side, end-point barriers beyond its ends,
+/// and, for a UAV outside the road, the signed line barriers of the nearest walls to bring it back.
+fn walls_rows(road: &Road, p: Vec2, v: Vec2, radius: f64, params: &Params, out: &mut Vec<Row>) {
+    let (delta, d_s, zeta) = (params.delta, params.d_s, params.zeta);
+    let walls = road.walls();
+    if !road.contains(&p) {
+        let nearest = (walls[road.nearest_wall(&p)].nearest(&p).0 - p).norm();
+        for (k, w) in walls.iter().enumerate() {
+            if (w.nearest(&p).0 - p).norm() <= nearest + 0.5 {
+                out.push(line_row(
+                    w.signed_distance(&p),
+                    w.n_in.dot(&v),
+                    w.n_in,
+                    delta,
+                    d_s,
+                    zeta,
+                    RowKind::Road(k),
+                ));
+            }
+        }
+        return;
+    }
+    let mut seen = [Vec2::zeros(); 16];
+    let mut n_seen = 0;
+    for (k, w) in walls.iter().enumerate() {
+        let (c, t) = w.nearest(&p);
+        if (c - p).norm() > radius {
+            continue;
+        }
+        if t > 0.0 && t < 1.0 {
+            let s = w.signed_distance(&p);
+            if s >= 0.0 {
+                out.push(line_row(s, w.n_in.dot(&v), w.n_in, delta, d_s, zeta, RowKind::Road(k)));
+            }
+        } else if !seen[..n_seen].contains(&c) {
+            // A vertex shared by two walls gets one end-point barrier, not two.
+            if n_seen < seen.len() {
+                seen[n_seen] = c;
+                n_seen += 1;
+            }
+            out.push(point_row(p, v, c, delta, d_s, zeta, RowKind::Road(k)));
+        }
+    }
+}

@@ -1,0 +1,58 @@
+#!/usr/bin/env python3
+"""Writes the shipped scenarios (mitre-joint roads from a centre polyline, as roads::RoadLayout::from_centerline).
+
+Run from the repository root: python3 scenarios/make_scenarios.py
+"""
+import json
+import math
+import os
+
+
+def road(points, width):
+    """Segments [p1, p2, p3, p4] along the polyline, p1/p2 on the right wall, p3/p4 on the left."""
+    def left_normal(k):
+        dx, dy = points[k + 1][0] - points[k][0], points[k + 1][1] - points[k][1]
+        n = math.hypot(dx, dy)
+        return (-dy / n, dx / n)
+
+    half = width / 2
+    offsets = []
+    for k in range(len(points)):
+        if 0 < k < len(points) - 1:
+            a, b = left_normal(k - 1), left_normal(k)
+            bis = (a[0] + b[0], a[1] + b[1])
+            n = math.hypot(*bis)
+            bis = (bis[0] / n, bis[1] / n)
+            s = half / (bis[0] * b[0] + bis[1] * b[1])
+            offsets.append((bis[0] * s, bis[1] * s))
+        else:
+            n = left_normal(min(k, len(points) - 2))
+            offsets.append((n[0] * half, n[1] * half))
+    r = [[round(p[0] - o[0], 6), round(p[1] - o[1], 6)] for p, o in zip(points, offsets)]
+    l = [[round(p[0] + o[0], 6), round(p[1] + o[1], 6)] for p, o in zip(points, offsets)]
+    return [[r[i + 1], r[i], l[i + 1], l[i]] for i in range(len(points) - 1)]
+
+
+def write(name, params, segments, uavs):
+    doc = {"name": name, "params": params, "segments": segments,
+           "uavs": [{"id": i, "start": s, "goal": g} for i, s, g in uavs]}
+    path = os.path.join(os.path.dirname(__file__), name + ".json")
+    with open(path, "w") as f:
+        json.dump(doc, f, indent=1)
+        f.write("\n")
+
+
+# Lab scale (the paper flew three Crazyflies): an L-shaped road 1.4 m wide in a 6 m x 5 m room.
+write("lab3", {"delta": 2.0, "r_s": 1.0, "t_max": 60},
+      road([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0], [4.0, 2.0], [4.0, 4.0]], 1.4),
+      [("cf1", [0.4, -0.3], [4.3, 3.6]), ("cf2", [0.4, 0.3], [3.7, 3.6]), ("cf3", [1.2, 0.0], [4.0, 3.0])])
+
+# The paper's kind of run: a winding one-way road (10 segments, 3 m wide, bends of 37-90 degrees and
+# a hairpin) with 10 UAVs starting in two rows at its entry and spreading over its far end.
+snake = [[0, 0], [8, 0], [14, 3], [18, 9], [16, 15], [10, 17], [4, 15], [2, 21], [6, 27], [13, 28], [20, 27]]
+starts = [[1.0 + 1.2 * (i // 2), -0.7 if i % 2 == 0 else 0.7] for i in range(10)]
+goals = [[19.0, 26.4], [19.0, 27.8], [17.0, 26.6], [17.0, 28.0], [15.0, 26.8],
+         [15.0, 28.2], [13.0, 27.0], [13.0, 28.4], [11.0, 27.0], [11.0, 28.4]]
+write("snake10", {"t_max": 120},
+      road([[float(x), float(y)] for x, y in snake], 3.0),
+      [(f"u{i}", s, g) for i, (s, g) in enumerate(zip(starts, goals))])

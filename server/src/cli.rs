@@ -1,0 +1,120 @@
+//! Command-line interface (a public contract: flags and exit codes are relied on by scripts).
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::PathBuf;
+
+/// airroads: real-time ground control for UAV fleets flying inside air roads.
+#[derive(Debug, Parser)]
+#[command(name = "airroads", version, about)]
+pub struct Cli {
+    /// What to do.
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+/// Subcommands.
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Run a scenario headless until every UAV arrived or t_max; exit 0 when safe and all arrived,
+    /// 1 otherwise, 2 for invalid input.
+    Run(RunArgs),
+    /// Generate and run random valid scenarios; report every safety violation with its seed.
+    Stress(StressArgs),
+    /// Measure the filter and print a table.
+    Bench(BenchArgs),
+}
+
+/// Options shared by `run` and `stress`.
+#[derive(Debug, Clone, Args)]
+pub struct FlightArgs {
+    /// Which walls each UAV enforces.
+    #[arg(long, default_value = "walls", value_parser = ["walls", "halfplanes", "paper"])]
+    pub road_rule: String,
+    /// How temporary targets are chosen.
+    #[arg(long, default_value = "route", value_parser = ["route", "lanes", "alg1"])]
+    pub nav: String,
+    /// Policy flown by every UAV.
+    #[arg(long, default_value = "pd")]
+    pub policy: String,
+    /// QP objective: `exact` (exact slack penalty, default) or `paper` (quadratic slack only).
+    #[arg(long, default_value = "exact", value_parser = ["exact", "paper"])]
+    pub objective: String,
+    /// How pair rows are shared: `sequential` (default) or `split` (the paper's δ_k/(δ_k+δ_d) split).
+    #[arg(long, default_value = "sequential", value_parser = ["sequential", "split"])]
+    pub share: String,
+    /// Slack weights: `urgency` (divided by the row's barrier value, default) or `fixed` (cbf.md §6).
+    #[arg(long, default_value = "urgency", value_parser = ["urgency", "fixed"])]
+    pub slack_weights: String,
+}
+
+/// `airroads run`.
+#[derive(Debug, Args)]
+pub struct RunArgs {
+    /// Scenario file (JSON).
+    pub scenario: PathBuf,
+    /// Write the metrics JSON here.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Write the trajectory (CSV, one row per UAV and tick) here.
+    #[arg(long)]
+    pub trajectory: Option<PathBuf>,
+    /// Flight options.
+    #[command(flatten)]
+    pub flight: FlightArgs,
+}
+
+/// `airroads stress`.
+#[derive(Debug, Args)]
+pub struct StressArgs {
+    /// Number of random scenarios.
+    #[arg(long, default_value_t = 100)]
+    pub scenarios: u64,
+    /// Seed of the first scenario (case i uses seed + i).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Save the scenario file of every violating case into this directory.
+    #[arg(long)]
+    pub save_failing: Option<PathBuf>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Flight options.
+    #[command(flatten)]
+    pub flight: FlightArgs,
+}
+
+/// `airroads bench`.
+#[derive(Debug, Args)]
+pub struct BenchArgs {
+    /// What to measure.
+    #[arg(value_enum)]
+    pub target: BenchTarget,
+    /// Filter calls per row count.
+    #[arg(long, default_value_t = 20000)]
+    pub iterations: usize,
+}
+
+/// Benchmarks.
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum BenchTarget {
+    /// µs per filtered UAV for 2, 6 and 12 active rows.
+    Filter,
+}
+
+impl FlightArgs {
+    /// The fleet configuration these flags select (params come from the scenario).
+    pub fn fleet_config(&self) -> fleet::FleetConfig {
+        // The value parsers above only admit valid names.
+        let mut config = fleet::FleetConfig {
+            road_rule: self.road_rule.parse().unwrap_or_default(),
+            nav: self.nav.parse().unwrap_or_default(),
+            share: self.share.parse().unwrap_or_default(),
+            ..fleet::FleetConfig::default()
+        };
+        config.filter.objective = self.objective.parse().unwrap_or_default();
+        if self.slack_weights == "fixed" {
+            config.filter.urgency_floor = 0.0;
+        }
+        config
+    }
+}

@@ -1,0 +1,93 @@
+//! `airroads run SCENARIO.json`: headless run, human summary, METRICS.json, exit status.
+
+use crate::cli::RunArgs;
+use anyhow::Context;
+use fleet::{RunMetrics, RunOptions, Scenario, ScenarioError, ValidScenario, run_scenario};
+use policies::PolicyRegistry;
+use std::path::Path;
+use std::process::ExitCode;
+
+/// Exit status for invalid input.
+pub const EXIT_INVALID: u8 = 2;
+
+/// Reads and validates a scenario file; the error names the file, the field (or line) and the reason.
+pub fn load_scenario(path: &Path) -> Result<ValidScenario, String> {
+    let text = std::fs::read_to_string(path).map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
+    let located = |e: ScenarioError| match e {
+        ScenarioError::Parse { line, column, message } => {
+            format!("{}:{line}:{column}: {message}", path.display())
+        }
+        ScenarioError::Invalid { field, reason } => format!("{}: {field}: {reason}", path.display()),
+    };
+    Scenario::from_json(&text).and_then(|s| s.validate()).map_err(located)
+}
+
+/// Prints the short human summary of a run.
+pub fn print_summary(m: &RunMetrics, policy_fallbacks: u64) {
+    let arrived = m.arrival_time_s.values().filter(|t| t.is_some()).count();
+    let fmt = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.3} m"));
+    println!("scenario {}: {} ticks, {:.2} s simulated", m.scenario, m.ticks, m.sim_time_s);
+    println!("  arrived          {arrived}/{}", m.arrival_time_s.len());
+    println!(
+        "  collision margin {} (min S_kd), separation {}",
+        fmt(m.min_collision_margin_m),
+        fmt(m.min_separation_m)
+    );
+    println!(
+        "  road margin      {:.3} m (min S_kij), wall distance {:.3} m",
+        m.min_road_margin_m, m.min_wall_distance_m
+    );
+    println!("  outside road     {} UAV-ticks", m.steps_outside_road);
+    println!(
+        "  qp               {} solves, {} with slack, max slack {:.3e}, {} failures, p50 {:.1} µs, p99 {:.1} µs",
+        m.qp.solves, m.qp.slack_used, m.qp.max_slack, m.qp.failures, m.qp.p50_us, m.qp.p99_us
+    );
+    if policy_fallbacks > 0 {
+        println!("  policy fallbacks {policy_fallbacks} UAV-ticks braked on a non-finite policy output");
+    }
+    println!("  {}", if m.safe { "SAFE" } else { "UNSAFE" });
+}
+
+/// Runs the subcommand.
+pub fn main(args: RunArgs) -> ExitCode {
+    let scenario = match load_scenario(&args.scenario) {
+        Ok(s) => s,
+        Err(msg) => {
+            eprintln!("error: {msg}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    let policies = PolicyRegistry::with_pd(scenario.params.delta);
+    if let Err(e) = policies.check(&args.flight.policy) {
+        eprintln!("error: --policy: {e}");
+        return ExitCode::from(EXIT_INVALID);
+    }
+    match execute(&args, &scenario, policies) {
+        Ok(m) if m.safe && m.all_arrived => ExitCode::SUCCESS,
+        Ok(_) => ExitCode::from(1),
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn execute(args: &RunArgs, scenario: &ValidScenario, policies: PolicyRegistry) -> anyhow::Result<RunMetrics> {
+    let trajectory: Option<Box<dyn std::io::Write>> = match &args.trajectory {
+        Some(path) => {
+            let file =
+                std::fs::File::create(path).with_context(|| format!("{}: cannot create", path.display()))?;
+            Some(Box::new(std::io::BufWriter::new(file)))
+        }
+        None => None,
+    };
+    let options =
+        RunOptions { config: args.flight.fleet_config(), policy: args.flight.policy.clone(), trajectory };
+    let outcome = run_scenario(scenario, options, policies).context("writing the trajectory")?;
+    print_summary(&outcome.metrics, outcome.policy_fallbacks);
+    if let Some(path) = &args.out {
+        let json = serde_json::to_string_pretty(&outcome.metrics)?;
+        std::fs::write(path, json + "\n").with_context(|| format!("{}: cannot write", path.display()))?;
+    }
+    Ok(outcome.metrics)
+}

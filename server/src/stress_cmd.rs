@@ -1,0 +1,128 @@
+//! `airroads stress`: random valid scenarios, run in parallel, violations reported with their seeds.
+
+use crate::cli::StressArgs;
+use fleet::stress::random_scenario;
+use fleet::{RunMetrics, RunOptions, run_scenario};
+use policies::PolicyRegistry;
+use std::process::ExitCode;
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// One finished case.
+struct CaseResult {
+    seed: u64,
+    uavs: usize,
+    segments: usize,
+    metrics: RunMetrics,
+}
+
+/// Runs the subcommand.
+pub fn main(args: StressArgs) -> ExitCode {
+    if PolicyRegistry::with_pd(5.0).check(&args.flight.policy).is_err() {
+        eprintln!("error: --policy: unknown policy `{}`", args.flight.policy);
+        return ExitCode::from(2);
+    }
+    let jobs =
+        args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).max(1);
+    let next = AtomicU64::new(0);
+    let results = Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..jobs {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    if i >= args.scenarios {
+                        break;
+                    }
+                    let seed = args.seed.wrapping_add(i);
+                    let result = run_case(&args, seed);
+                    // A poisoned lock means another worker panicked; the scope re-raises that panic.
+                    if let Ok(mut r) = results.lock() {
+                        r.push(result);
+                    }
+                }
+            });
+        }
+    });
+    let mut results = results.into_inner().unwrap_or_default();
+    results.sort_by_key(|r| r.seed);
+    report(&args, &results)
+}
+
+fn run_case(args: &StressArgs, seed: u64) -> CaseResult {
+    let scenario = random_scenario(seed);
+    let (uavs, segments) = (scenario.uavs.len(), scenario.segments.len());
+    // random_scenario only returns validated scenarios.
+    let valid = scenario.validate().expect("stress scenarios are valid by construction");
+    let policies = PolicyRegistry::with_pd(valid.params.delta);
+    let options = RunOptions {
+        config: args.flight.fleet_config(),
+        policy: args.flight.policy.clone(),
+        trajectory: None,
+    };
+    // Without a trajectory writer the run does no I/O and cannot fail.
+    let outcome = run_scenario(&valid, options, policies).expect("no I/O without a trajectory");
+    if !outcome.metrics.safe
+        && let Some(dir) = &args.save_failing
+    {
+        let path = dir.join(format!("stress-{seed}.json"));
+        let written = std::fs::create_dir_all(dir).and_then(|()| {
+            std::fs::write(&path, serde_json::to_string_pretty(&scenario).unwrap_or_default())
+        });
+        if let Err(e) = written {
+            eprintln!("warning: {}: {e}", path.display());
+        }
+    }
+    CaseResult { seed, uavs, segments, metrics: outcome.metrics }
+}
+
+fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
+    let violations: Vec<&CaseResult> = results.iter().filter(|r| !r.metrics.safe).collect();
+    let arrived = results.iter().filter(|r| r.metrics.all_arrived).count();
+    let min = |f: fn(&RunMetrics) -> f64| results.iter().map(|r| f(&r.metrics)).fold(f64::INFINITY, f64::min);
+    println!(
+        "stress: {} scenarios (seeds {}..{}), road rule {}, nav {}, policy {}, share {}, slack weights {}",
+        results.len(),
+        args.seed,
+        args.seed.wrapping_add(args.scenarios),
+        args.flight.road_rule,
+        args.flight.nav,
+        args.flight.policy,
+        args.flight.share,
+        args.flight.slack_weights
+    );
+    println!("  all arrived in   {arrived}/{}", results.len());
+    println!(
+        "  min collision margin {:.3} m, min road margin {:.3} m",
+        min(|m| m.min_collision_margin_m.unwrap_or(f64::INFINITY)),
+        min(|m| m.min_road_margin_m)
+    );
+    println!(
+        "  qp failures {}, max slack {:.3e}",
+        results.iter().map(|r| r.metrics.qp.failures).sum::<u64>(),
+        results.iter().map(|r| r.metrics.qp.max_slack).fold(0.0, f64::max)
+    );
+    if violations.is_empty() {
+        println!("  violations 0");
+        return ExitCode::SUCCESS;
+    }
+    println!("  violations {} (replay with: airroads stress --scenarios 1 --seed SEED)", violations.len());
+    println!(
+        "  {:>20} {:>5} {:>5} {:>12} {:>12} {:>8} {:>8}",
+        "seed", "uavs", "segs", "coll_m", "road_m", "outside", "failed"
+    );
+    for r in violations {
+        let m = &r.metrics;
+        println!(
+            "  {:>20} {:>5} {:>5} {:>12.4} {:>12.4} {:>8} {:>8}",
+            r.seed,
+            r.uavs,
+            r.segments,
+            m.min_collision_margin_m.unwrap_or(f64::NAN),
+            m.min_road_margin_m,
+            m.steps_outside_road,
+            m.qp.failures
+        );
+    }
+    ExitCode::from(1)
+}

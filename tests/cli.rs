@@ -1,0 +1,136 @@
+//! End-to-end tests of the `airroads` command line: exit codes, METRICS.json keys, error messages.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn airroads(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_airroads")).args(args).output().expect("the airroads binary runs")
+}
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("airroads-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    dir.join(name)
+}
+
+fn write_scenario(name: &str, json: &serde_json::Value) -> PathBuf {
+    let path = scratch(name);
+    std::fs::write(&path, serde_json::to_string_pretty(json).unwrap()).unwrap();
+    path
+}
+
+fn lab3() -> serde_json::Value {
+    let text = std::fs::read_to_string(repo().join("scenarios/lab3.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+#[test]
+fn shipped_lab_scenario_is_safe_and_writes_exactly_the_metrics_keys() {
+    let out = scratch("lab3-metrics.json");
+    let traj = scratch("lab3-trajectory.csv");
+    let scenario = repo().join("scenarios/lab3.json");
+    let run = airroads(&[
+        "run",
+        scenario.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--trajectory",
+        traj.to_str().unwrap(),
+    ]);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert_eq!(run.status.code(), Some(0), "{stdout}{}", String::from_utf8_lossy(&run.stderr));
+    assert!(stdout.contains("SAFE"));
+    let metrics: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let mut keys: Vec<&str> = metrics.as_object().unwrap().keys().map(String::as_str).collect();
+    keys.sort();
+    assert_eq!(
+        keys,
+        [
+            "all_arrived",
+            "arrival_time_s",
+            "min_collision_margin_m",
+            "min_road_margin_m",
+            "min_separation_m",
+            "min_wall_distance_m",
+            "qp",
+            "safe",
+            "scenario",
+            "sim_time_s",
+            "steps_outside_road",
+            "ticks"
+        ]
+    );
+    let mut qp: Vec<&str> = metrics["qp"].as_object().unwrap().keys().map(String::as_str).collect();
+    qp.sort();
+    assert_eq!(qp, ["failures", "max_slack", "p50_us", "p99_us", "slack_used", "solves"]);
+    assert_eq!(metrics["scenario"], "lab3");
+    assert_eq!(metrics["safe"], true);
+    assert_eq!(metrics["all_arrived"], true);
+    assert!(metrics["min_collision_margin_m"].as_f64().unwrap() >= 0.3);
+    assert!(metrics["min_road_margin_m"].as_f64().unwrap() >= 0.1);
+    assert_eq!(metrics["arrival_time_s"].as_object().unwrap().len(), 3);
+    let csv = std::fs::read_to_string(&traj).unwrap();
+    assert!(csv.starts_with("t,id,x,y,vx,vy,"));
+    assert_eq!(csv.lines().count(), 1 + 3 * metrics["ticks"].as_u64().unwrap() as usize);
+}
+
+#[test]
+fn a_run_that_does_not_arrive_exits_1() {
+    let mut s = lab3();
+    s["params"]["t_max"] = serde_json::json!(1.0);
+    let path = write_scenario("short.json", &s);
+    let run = airroads(&["run", path.to_str().unwrap()]);
+    assert_eq!(run.status.code(), Some(1));
+}
+
+#[test]
+fn unknown_param_key_exits_2_naming_file_and_key() {
+    let mut s = lab3();
+    s["params"]["Dc"] = serde_json::json!(0.5);
+    let path = write_scenario("unknown-key.json", &s);
+    let run = airroads(&["run", path.to_str().unwrap()]);
+    let err = String::from_utf8_lossy(&run.stderr);
+    assert_eq!(run.status.code(), Some(2), "{err}");
+    assert!(err.contains("unknown-key.json") && err.contains("`Dc`"), "{err}");
+}
+
+#[test]
+fn invalid_road_and_fleet_exit_2_naming_the_field() {
+    let mut s = lab3();
+    s["segments"][2][1][0] = serde_json::json!(3.9);
+    let path = write_scenario("broken-join.json", &s);
+    let err = String::from_utf8_lossy(&airroads(&["run", path.to_str().unwrap()]).stderr).to_string();
+    assert!(err.contains("broken-join.json: segments[2]:") && err.contains("seamless_join"), "{err}");
+
+    let cases = [
+        ("start-outside.json", "start", serde_json::json!([0.4, 5.0]), "uavs[0].start", "outside the road"),
+        ("start-wall.json", "start", serde_json::json!([0.4, -0.65]), "uavs[0].start", "from a wall"),
+        ("goal-nan.json", "goal", serde_json::json!([1.0, null]), "goal-nan.json:", "invalid type"),
+        ("close.json", "start", serde_json::json!([0.4, 0.1]), "uavs[1].start", "closer than D_c"),
+    ];
+    for (file, key, value, field, reason) in cases {
+        let mut s = lab3();
+        let index = if field == "uavs[1].start" { 1 } else { 0 };
+        if field == "uavs[1].start" {
+            s["uavs"][0]["start"] = serde_json::json!([0.4, -0.1]);
+        }
+        s["uavs"][index][key] = value;
+        let path = write_scenario(file, &s);
+        let run = airroads(&["run", path.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{file}: {err}");
+        assert!(err.contains(file) && err.contains(field) && err.contains(reason), "{file}: {err}");
+    }
+}
+
+#[test]
+fn missing_file_and_bad_flags_exit_2() {
+    assert_eq!(airroads(&["run", "/nonexistent/scenario.json"]).status.code(), Some(2));
+    let scenario = repo().join("scenarios/lab3.json");
+    assert_eq!(airroads(&["run", scenario.to_str().unwrap(), "--road-rule", "bogus"]).status.code(), Some(2));
+    assert_eq!(airroads(&["run", scenario.to_str().unwrap(), "--policy", "nope"]).status.code(), Some(2));
+}

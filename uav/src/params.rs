@@ -1,0 +1,107 @@
+//! Scenario parameters with the paper's symbols and the documented defaults.
+
+use serde::{Deserialize, Serialize};
+
+/// Parameters shared by the filter, navigation and simulator. JSON keys are the paper's symbols;
+/// unknown keys are rejected.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Params {
+    /// Control period dt (s). Default 0.05 (20 Hz).
+    pub dt: f64,
+    /// Input bound δ: ‖u‖ ≤ δ (m/s²). Default 5.
+    pub delta: f64,
+    /// Radius r_s of the temporary target around the UAV (m), Algorithm 1. Default 5.
+    pub r_s: f64,
+    /// Safe distance D_s to a road wall (m). Default 0.1.
+    #[serde(rename = "D_s")]
+    pub d_s: f64,
+    /// Safe distance D_c between two UAVs (m). Default 0.3.
+    #[serde(rename = "D_c")]
+    pub d_c: f64,
+    /// Class-K gain ζ of α(b) = ζ b³ (s/m²). Default 0.05.
+    pub zeta: f64,
+    /// Arrival tolerance ε: a UAV has arrived when ‖p − p_g‖ ≤ ε (m). Default 0.1.
+    pub epsilon: f64,
+    /// Simulated time limit of a headless run (s). Default 120.
+    pub t_max: f64,
+}
+
+impl Default for Params {
+    fn default() -> Self {
+        Self { dt: 0.05, delta: 5.0, r_s: 5.0, d_s: 0.1, d_c: 0.3, zeta: 0.05, epsilon: 0.1, t_max: 120.0 }
+    }
+}
+
+/// A parameter outside its valid range.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("params.{field}: {reason} (got {value})")]
+pub struct ParamError {
+    /// JSON key of the offending parameter.
+    pub field: &'static str,
+    /// What is wrong with it.
+    pub reason: &'static str,
+    /// The rejected value.
+    pub value: f64,
+}
+
+impl Params {
+    /// Checks that every parameter is finite and within a physically meaningful range.
+    pub fn validate(&self) -> Result<(), ParamError> {
+        let checks: [(&'static str, f64, f64, f64); 8] = [
+            ("dt", self.dt, 1e-4, 1.0),
+            ("delta", self.delta, 1e-3, 100.0),
+            ("r_s", self.r_s, 1e-2, 1e3),
+            ("D_s", self.d_s, 0.0, 100.0),
+            ("D_c", self.d_c, 1e-3, 100.0),
+            ("zeta", self.zeta, 0.0, 1e3),
+            ("epsilon", self.epsilon, 1e-4, 100.0),
+            ("t_max", self.t_max, 1e-3, 1e6),
+        ];
+        for (field, value, lo, hi) in checks {
+            if !value.is_finite() {
+                return Err(ParamError { field, reason: "must be a finite number", value });
+            }
+            if value < lo || value > hi {
+                return Err(ParamError { field, reason: "is outside its valid range", value });
+            }
+        }
+        if self.d_s == 0.0 {
+            return Err(ParamError { field: "D_s", reason: "must be positive", value: self.d_s });
+        }
+        Ok(())
+    }
+
+    /// Number of control ticks in `t_max`.
+    pub fn max_ticks(&self) -> u64 {
+        (self.t_max / self.dt).ceil() as u64
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn defaults_and_partial_json() {
+        let p: Params = serde_json::from_str(r#"{"D_c": 0.5, "t_max": 30}"#).unwrap();
+        assert_eq!(p.d_c, 0.5);
+        assert_eq!(p.t_max, 30.0);
+        assert_eq!(p.delta, 5.0);
+        assert!(p.validate().is_ok());
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let err = serde_json::from_str::<Params>(r#"{"Dc": 0.5}"#).unwrap_err().to_string();
+        assert!(err.contains("unknown field `Dc`"), "{err}");
+    }
+
+    #[test]
+    fn out_of_range_is_named() {
+        let p = Params { delta: -1.0, ..Params::default() };
+        assert_eq!(p.validate().unwrap_err().field, "delta");
+        let p = Params { zeta: f64::NAN, ..Params::default() };
+        assert_eq!(p.validate().unwrap_err().field, "zeta");
+    }
+}
