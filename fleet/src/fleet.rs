@@ -244,10 +244,10 @@ impl Fleet {
         let segment = self.uavs[k].nav.tracker.current.unwrap_or(0);
         road_rows(&self.road, self.config.road_rule, me.p, me.v, segment, p, &mut self.rows);
         let delta_sum = 2.0 * p.delta;
-        // Sampled-data margin (cbf.md §4.4, §8 d): with inputs held for dt, the curvature of b_kd lets
-        // a pair drift below the continuous-time boundary by up to ½·δΣ·dt² per step; the filter keeps
-        // that much extra distance so the reported margin stays ≥ D_c.
-        let d_c = p.d_c + 0.5 * delta_sum * p.dt * p.dt;
+        // Sampled-data margin (cbf.md §4.4, §8 d): with inputs held for dt, the curvature of b_kd lets a
+        // pair drift below the continuous-time boundary by up to ½·δΣ·dt² per step, and in dense jams
+        // the filtered inputs alternate from tick to tick; the filter keeps twice that, δΣ·dt², beyond D_c.
+        let d_c = p.d_c + delta_sum * p.dt * p.dt;
         for &d in &self.neighbours.lists[k] {
             let other = self.uavs[d].state;
             let (p_kd, v_kd) = (me.p - other.p, me.v - other.v);

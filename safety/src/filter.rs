@@ -42,15 +42,17 @@ impl std::str::FromStr for Objective {
 /// Slack weights and objective (cbf.md §6 reference values).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FilterSettings {
-    /// Exact penalty ρ of a collision row's slack.
+    /// Exact penalty ρ of a collision row's slack. 10⁴ rather than cbf.md §6's 10³: the multipliers of
+    /// thin feasible slivers (a UAV squeezed between two neighbours) exceed 2·10³.
     pub rho_collision: f64,
     /// Quadratic weight P of a collision row's slack.
     pub weight_collision: f64,
     /// Factor applied to ρ and P for road rows (road rows have priority).
     pub road_priority: f64,
-    /// Urgency weighting: when > 0, each row's ρ and P are also divided by `clamp(b, urgency_floor,
-    /// URGENCY_CEILING)`, so when rows conflict the QP relaxes those with a comfortable barrier value
-    /// first and keeps the ones about to reach b = 0. 0 disables it (the fixed weights of cbf.md §6).
+    /// Urgency weighting: when > 0, each row's ρ and P are also divided by `clamp(b, urgency_floor, 1)`
+    /// (b in m/s), so when rows conflict the QP relaxes those with a comfortable barrier value first and
+    /// keeps the ones about to reach b = 0. Rows with b ≥ 1 keep the reference weights, so the weights
+    /// are never below them. 0 disables it (the fixed weights of cbf.md §6).
     pub urgency_floor: f64,
     /// The objective.
     pub objective: Objective,
@@ -59,12 +61,25 @@ pub struct FilterSettings {
 impl Default for FilterSettings {
     fn default() -> Self {
         Self {
-            rho_collision: 1e3,
+            rho_collision: 1e4,
             weight_collision: 1.0,
             road_priority: 10.0,
             urgency_floor: 0.05,
             objective: Objective::Exact,
         }
+    }
+}
+
+impl FilterSettings {
+    /// The slack penalty (ρ, P) of a row: the collision reference, ×`road_priority` for road rows,
+    /// ×1/clamp(b, `urgency_floor`, 1) when urgency weighting is on; ρ = 0 with the paper's objective.
+    pub fn slack_weights(&self, row: &Row) -> (f64, f64) {
+        let kind = if matches!(row.kind, RowKind::Road(_)) { self.road_priority } else { 1.0 };
+        let urgency =
+            if self.urgency_floor > 0.0 { 1.0 / row.b.max(self.urgency_floor).min(1.0) } else { 1.0 };
+        let priority = kind * urgency;
+        let rho = if self.objective == Objective::Exact { self.rho_collision * priority } else { 0.0 };
+        (rho, self.weight_collision * priority)
     }
 }
 
@@ -95,12 +110,12 @@ pub struct SafetyFilter {
     scratch: Vec<ConstraintRow>,
 }
 
-/// Barrier value (m/s) above which a row's urgency stops decreasing (see `urgency_floor`).
-pub const URGENCY_CEILING: f64 = 10.0;
-
 /// Rows with c ≥ δ can never bind under ‖u‖ ≤ δ with ‖a‖ = 1; rows with c below this many δ are
-/// clamped (the slack takes over anyway) to keep the problem data well scaled.
-const MIN_RHS_IN_DELTAS: f64 = -100.0;
+/// clamped. Such a row (b < 0, cbf.md §4.1) already asks for more than full braking, so its slack is
+/// positive either way and the exact penalty makes the QP brake as hard as the other rows allow; the
+/// clamp keeps one violated row's quadratic penalty from swamping every other row (in jams that made
+/// the inputs chatter between opposite full-braking directions).
+const MIN_RHS_IN_DELTAS: f64 = -2.0;
 
 impl SafetyFilter {
     /// A filter with the given settings.
@@ -128,21 +143,10 @@ impl SafetyFilter {
         }
         self.scratch.clear();
         let s = &self.settings;
-        let rho_scale = if s.objective == Objective::Exact { 1.0 } else { 0.0 };
         self.scratch.extend(rows.iter().filter(|r| r.c < delta).map(|r| {
-            let kind = if matches!(r.kind, RowKind::Road(_)) { s.road_priority } else { 1.0 };
-            let urgency =
-                if s.urgency_floor > 0.0 { 1.0 / r.b.clamp(s.urgency_floor, URGENCY_CEILING) } else { 1.0 };
-            let priority = kind * urgency;
-            ConstraintRow {
-                a: r.a,
-                c: r.c.max(MIN_RHS_IN_DELTAS * delta),
-                rho: s.rho_collision * priority * rho_scale,
-                weight: s.weight_collision * priority,
-            }
+            let (rho, weight) = s.slack_weights(r);
+            ConstraintRow { a: r.a, c: r.c.max(MIN_RHS_IN_DELTAS * delta), rho, weight }
         }));
-        // Road rows first: the cached solver's equilibration then fits the next instance better.
-        self.scratch.sort_unstable_by(|x, y| y.weight.total_cmp(&x.weight));
         let sol = self.solver.solve(u_ref, &self.scratch, delta);
         if sol.status != SolverStatus::Solved {
             return FilterOutcome { status: sol.status, ..self.brake(v, delta, dt) };

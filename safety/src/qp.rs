@@ -38,7 +38,7 @@ pub struct QpSolution {
     pub objective: f64,
     /// Clarabel's final status (after the retry, if one was needed).
     pub status: SolverStatus,
-    /// True when the first attempt did not reach `Solved` and the robust settings were tried.
+    /// True when the cached solver did not reach `Solved` and fresh solvers were tried.
     pub retried: bool,
 }
 
@@ -59,7 +59,19 @@ impl Default for QpSolver {
     }
 }
 
-fn settings(robust: bool) -> DefaultSettings<f64> {
+/// Which Clarabel settings an attempt uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Attempt {
+    /// The cached solver: equilibration on, iterative refinement off (fastest, see BENCHMARKS.md).
+    Fast,
+    /// A freshly built solver with Clarabel's defaults (equilibration computed for this instance,
+    /// iterative refinement on): cached solvers reuse the scaling of the instance they were built for.
+    Fresh,
+    /// A fresh solver without equilibration and with a shorter maximum step (cbf.md §10.2).
+    Robust,
+}
+
+fn settings(attempt: Attempt) -> DefaultSettings<f64> {
     DefaultSettings {
         verbose: false,
         presolve_enable: false,
@@ -67,14 +79,12 @@ fn settings(robust: bool) -> DefaultSettings<f64> {
         tol_gap_abs: 1e-9,
         tol_gap_rel: 1e-9,
         tol_feas: 1e-9,
-        // The slack penalties (ρ up to 10⁴ next to unit weights) make the data badly scaled:
-        // equilibration halves the iterations (`airroads bench filter`), and iterative refinement
-        // costs a third of the time without changing the result at these tolerances. cbf.md §10.2:
-        // equilibration can stall Clarabel on some mixed-weight instances; the retry then runs
-        // without it, with refinement and a shorter maximum step.
-        equilibrate_enable: !robust,
-        iterative_refinement_enable: robust,
-        max_step_fraction: if robust { 0.9 } else { 0.99 },
+        // The slack penalties (ρ from 10³ to 10⁵ next to unit weights) make the data badly scaled:
+        // equilibration halves the iterations, and iterative refinement costs a third of the time
+        // without changing the result at these tolerances (`airroads bench filter`).
+        equilibrate_enable: attempt != Attempt::Robust,
+        iterative_refinement_enable: attempt != Attempt::Fast,
+        max_step_fraction: if attempt == Attempt::Robust { 0.9 } else { 0.99 },
         ..DefaultSettings::default()
     }
 }
@@ -133,10 +143,22 @@ impl QpSolver {
         self.b.extend([delta, u_r.x, u_r.y]);
     }
 
-    fn build(&self, m: usize, robust: bool) -> Option<DefaultSolver<f64>> {
+    fn build(&self, m: usize, attempt: Attempt) -> Option<DefaultSolver<f64>> {
         let (p, a) = pattern(m, &self.p_vals, &self.a_vals);
         let cones = [NonnegativeConeT(2 * m), SecondOrderConeT(3)];
-        DefaultSolver::new(&p, &self.q, &a, &self.b, &cones, settings(robust)).ok()
+        DefaultSolver::new(&p, &self.q, &a, &self.b, &cones, settings(attempt)).ok()
+    }
+
+    /// Builds a fresh solver for the filled data, solves and reads the result.
+    fn solve_fresh(&mut self, m: usize, attempt: Attempt) -> SolverStatus {
+        match self.build(m, attempt) {
+            Some(mut solver) => {
+                solver.solve();
+                self.read(&solver, m);
+                solver.solution.status
+            }
+            None => SolverStatus::NumericalError,
+        }
     }
 
     /// Solves with the cached solver for m rows (built on first use), returning its status.
@@ -159,7 +181,7 @@ impl QpSolver {
                 }
                 solver
             }
-            None => match self.build(m, false) {
+            None => match self.build(m, Attempt::Fast) {
                 Some(solver) => solver,
                 None => return SolverStatus::Unsolved,
             },
@@ -185,17 +207,12 @@ impl QpSolver {
         let m = rows.len();
         self.fill(u_r, rows, delta);
         let mut status = self.solve_cached(m);
-        let mut retried = false;
-        if status != SolverStatus::Solved {
-            retried = true;
-            status = match self.build(m, true) {
-                Some(mut solver) => {
-                    solver.solve();
-                    self.read(&solver, m);
-                    solver.solution.status
-                }
-                None => SolverStatus::NumericalError,
-            };
+        let retried = status != SolverStatus::Solved;
+        for attempt in [Attempt::Fresh, Attempt::Robust] {
+            if status == SolverStatus::Solved {
+                break;
+            }
+            status = self.solve_fresh(m, attempt);
         }
         let x_u = self.x_u;
         let u = uav::saturate(u_r + x_u, delta);
