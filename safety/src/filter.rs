@@ -90,6 +90,8 @@ pub struct FilterOutcome {
     pub u: Vec2,
     /// True when a QP was solved (false when the nominal input was already safe).
     pub solved: bool,
+    /// True when that QP was solved in closed form (one binding constraint), without Clarabel.
+    pub closed_form: bool,
     /// True when the solver did not reach `Solved` even after the retry, or the data were not
     /// finite: `u` is then full braking.
     pub failed: bool,
@@ -135,6 +137,7 @@ impl SafetyFilter {
             return FilterOutcome {
                 u: u_ref,
                 solved: false,
+                closed_form: false,
                 failed: false,
                 max_slack: 0.0,
                 active_rows,
@@ -147,6 +150,18 @@ impl SafetyFilter {
             let (rho, weight) = s.slack_weights(r);
             ConstraintRow { a: r.a, c: r.c.max(MIN_RHS_IN_DELTAS * delta), rho, weight }
         }));
+        if let Some(u) = closed_form(u_ref, &self.scratch, delta) {
+            let active_rows = count_active(rows, &u);
+            return FilterOutcome {
+                u,
+                solved: true,
+                closed_form: true,
+                failed: false,
+                max_slack: 0.0,
+                active_rows,
+                status: SolverStatus::Solved,
+            };
+        }
         let sol = self.solver.solve(u_ref, &self.scratch, delta);
         if sol.status != SolverStatus::Solved {
             return FilterOutcome { status: sol.status, ..self.brake(v, delta, dt) };
@@ -154,6 +169,7 @@ impl SafetyFilter {
         FilterOutcome {
             u: sol.u,
             solved: true,
+            closed_form: false,
             failed: false,
             max_slack: sol.max_slack,
             active_rows: count_active(rows, &sol.u),
@@ -166,12 +182,36 @@ impl SafetyFilter {
         FilterOutcome {
             u,
             solved: false,
+            closed_form: false,
             failed: true,
             max_slack: 0.0,
             active_rows: 0,
             status: SolverStatus::NumericalError,
         }
     }
+}
+
+/// Feasibility tolerance of the closed-form shortcut, as Clarabel's (1e-9).
+const CLOSED_FORM_TOL: f64 = 1e-9;
+
+/// The exact optimum when only one constraint binds, without a solver: the projection of `u_ref` onto
+/// the δ-ball, or onto one row's half-plane, if it satisfies every row and the bound. For a row, its
+/// multiplier a·u_ref − c must also be within ρ, so the exact-penalty optimum has zero slack there.
+/// (KKT: the other rows and the bound are inactive, so the projection is the optimum.)
+fn closed_form(u_ref: Vec2, rows: &[ConstraintRow], delta: f64) -> Option<Vec2> {
+    let feasible = |u: &Vec2| {
+        u.norm() <= delta * (1.0 + CLOSED_FORM_TOL)
+            && rows.iter().all(|r| r.a.dot(u) <= r.c + CLOSED_FORM_TOL)
+    };
+    let norm = u_ref.norm();
+    if norm > delta && feasible(&(u_ref * (delta / norm))) {
+        return Some(u_ref * (delta / norm));
+    }
+    rows.iter().find_map(|r| {
+        let lambda = r.a.dot(&u_ref) - r.c;
+        let u = u_ref - r.a * lambda;
+        (lambda > 0.0 && lambda <= r.rho && feasible(&u)).then_some(u)
+    })
 }
 
 fn count_active(rows: &[Row], u: &Vec2) -> usize {

@@ -1,9 +1,10 @@
-//! `airroads bench filter`: µs per filtered UAV for 2, 6 and 12 active rows.
+//! `airroads bench filter`: µs per filtered UAV for 2, 6 and 12 rows, through the whole filter (as
+//! flown: the closed form when one constraint binds) and through Clarabel alone.
 
 use crate::cli::{BenchArgs, BenchTarget};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-use safety::{Row, RowKind, SafetyFilter};
+use safety::{ConstraintRow, FilterSettings, QpSolver, Row, RowKind, SafetyFilter};
 use std::process::ExitCode;
 use std::time::Instant;
 use uav::Vec2;
@@ -16,44 +17,74 @@ pub fn main(args: BenchArgs) -> ExitCode {
     ExitCode::SUCCESS
 }
 
-/// Random instances whose nominal input violates every row, so every call solves a QP.
+/// A random instance whose nominal input violates every row (rows facing it within ±60°, each cut
+/// 0.1–1 m/s² below it), so no call can return the nominal input unchanged.
 fn instance(rng: &mut StdRng, rows: usize, out: &mut Vec<Row>) -> Vec2 {
     let angle = rng.random_range(0.0..std::f64::consts::TAU);
     let u_ref = Vec2::new(angle.cos(), angle.sin()) * rng.random_range(1.0..5.0);
     out.clear();
     for k in 0..rows {
-        // Rows facing the nominal input within ±60°, each cut 0.1–1 m/s² below it.
         let phi = angle + rng.random_range(-1.0..1.0);
         let a = Vec2::new(phi.cos(), phi.sin());
         let c = a.dot(&u_ref) - rng.random_range(0.1..1.0);
         let kind = if k % 2 == 0 { RowKind::Road(k) } else { RowKind::Collision(k) };
-        out.push(Row { a, c, b: 1.0, kind });
+        out.push(Row { a, c, b: rng.random_range(0.05..5.0), kind });
     }
     u_ref
 }
 
+/// p50, p99 and mean of a sample (sorted in place).
+fn stats(times: &mut [f64]) -> (f64, f64, f64) {
+    times.sort_by(f64::total_cmp);
+    let pct = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
+    (pct(0.5), pct(0.99), times.iter().sum::<f64>() / times.len() as f64)
+}
+
 fn bench_filter(iterations: usize) {
-    println!("airroads bench filter: {iterations} filter calls per row count, every call solves a QP");
-    println!("{:>6} {:>10} {:>10} {:>10} {:>9}", "rows", "p50_us", "p99_us", "mean_us", "failed");
-    let mut filter = SafetyFilter::default();
+    let iterations = iterations.max(1);
+    println!(
+        "airroads bench filter: {iterations} random instances per row count, nominal input violating every row"
+    );
+    println!(
+        "  filter   = SafetyFilter::filter as flown (closed form when one constraint binds, else Clarabel)"
+    );
+    println!("  clarabel = QpSolver::solve on the same rows (cached solver, data updated in place)");
+    println!(
+        "{:>6} {:>12} {:>12} {:>14} {:>14} {:>12} {:>7}",
+        "rows", "filter_p50", "filter_p99", "clarabel_p50", "clarabel_p99", "closed_form", "failed"
+    );
+    let settings = FilterSettings::default();
+    let mut filter = SafetyFilter::new(settings);
+    let mut solver = QpSolver::new();
     let mut rng = StdRng::seed_from_u64(7);
-    let mut rows = Vec::new();
+    let (mut rows, mut constraints) = (Vec::new(), Vec::new());
     for count in [2, 6, 12] {
-        let mut times = Vec::with_capacity(iterations);
-        let mut failed = 0;
-        for i in 0..iterations + iterations / 10 {
+        let (mut filtered, mut direct) = (Vec::with_capacity(iterations), Vec::with_capacity(iterations));
+        let (mut closed, mut failed) = (0, 0);
+        let warmup = iterations / 10;
+        for i in 0..iterations + warmup {
             let u_ref = instance(&mut rng, count, &mut rows);
+            constraints.clear();
+            constraints.extend(rows.iter().map(|r| {
+                let (rho, weight) = settings.slack_weights(r);
+                ConstraintRow { a: r.a, c: r.c, rho, weight }
+            }));
             let start = Instant::now();
             let out = filter.filter(u_ref, Vec2::zeros(), &rows, 5.0, 0.05);
-            let us = start.elapsed().as_secs_f64() * 1e6;
-            if i >= iterations / 10 {
-                times.push(us);
-                failed += usize::from(out.failed);
+            let filter_us = start.elapsed().as_secs_f64() * 1e6;
+            let start = Instant::now();
+            let sol = solver.solve(u_ref, &constraints, 5.0);
+            let clarabel_us = start.elapsed().as_secs_f64() * 1e6;
+            if i >= warmup {
+                filtered.push(filter_us);
+                direct.push(clarabel_us);
+                failed += usize::from(out.failed || sol.status != clarabel::solver::SolverStatus::Solved);
+                closed += usize::from(out.closed_form);
             }
         }
-        times.sort_by(f64::total_cmp);
-        let pct = |q: f64| times[((times.len() - 1) as f64 * q).round() as usize];
-        let mean = times.iter().sum::<f64>() / times.len() as f64;
-        println!("{count:>6} {:>10.1} {:>10.1} {mean:>10.1} {failed:>9}", pct(0.5), pct(0.99));
+        let (f50, f99, _) = stats(&mut filtered);
+        let (c50, c99, _) = stats(&mut direct);
+        let share = format!("{:.0}%", 100.0 * closed as f64 / iterations as f64);
+        println!("{count:>6} {f50:>12.1} {f99:>12.1} {c50:>14.1} {c99:>14.1} {share:>12} {failed:>7}");
     }
 }
