@@ -42,16 +42,20 @@ fn stats(times: &mut [f64]) -> (f64, f64, f64) {
 
 fn bench_filter(iterations: usize) {
     let iterations = iterations.max(1);
-    println!(
+    say!(
         "airroads bench filter: {iterations} random instances per row count, nominal input violating every row"
     );
-    println!(
-        "  filter   = SafetyFilter::filter as flown (closed form when one constraint binds, else Clarabel)"
-    );
-    println!("  clarabel = QpSolver::solve on the same rows (cached solver, data updated in place)");
-    println!(
+    say!("  filter   = SafetyFilter::filter as flown (closed form when one constraint binds, else Clarabel)");
+    say!("  clarabel = QpSolver::solve on the same rows (cached solver, data updated in place)");
+    say!(
         "{:>6} {:>12} {:>12} {:>14} {:>14} {:>12} {:>7}",
-        "rows", "filter_p50", "filter_p99", "clarabel_p50", "clarabel_p99", "closed_form", "failed"
+        "rows",
+        "filter_p50",
+        "filter_p99",
+        "clarabel_p50",
+        "clarabel_p99",
+        "closed_form",
+        "failed"
     );
     let settings = FilterSettings::default();
     let mut filter = SafetyFilter::new(settings);
@@ -85,6 +89,6 @@ fn bench_filter(iterations: usize) {
         let (f50, f99, _) = stats(&mut filtered);
         let (c50, c99, _) = stats(&mut direct);
         let share = format!("{:.0}%", 100.0 * closed as f64 / iterations as f64);
-        println!("{count:>6} {f50:>12.1} {f99:>12.1} {c50:>14.1} {c99:>14.1} {share:>12} {failed:>7}");
+        say!("{count:>6} {f50:>12.1} {f99:>12.1} {c50:>14.1} {c99:>14.1} {share:>12} {failed:>7}");
     }
 }

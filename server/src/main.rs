@@ -1,6 +1,15 @@
 //! `airroads`: ground control for UAV fleets in air roads. Subcommands: `run` (a scenario, headless),
 //! `stress` (random scenarios), `bench` (filter timing).
 
+/// Prints a line to stdout, ignoring write errors: a closed pipe (`airroads run … | head`) must not
+/// panic the program, and the exit status and any `--out` file do not depend on stdout.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
 mod bench;
 mod cli;
 mod run_cmd;

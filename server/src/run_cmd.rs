@@ -26,26 +26,32 @@ pub fn load_scenario(path: &Path) -> Result<ValidScenario, String> {
 pub fn print_summary(m: &RunMetrics, policy_fallbacks: u64) {
     let arrived = m.arrival_time_s.values().filter(|t| t.is_some()).count();
     let fmt = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.3} m"));
-    println!("scenario {}: {} ticks, {:.2} s simulated", m.scenario, m.ticks, m.sim_time_s);
-    println!("  arrived          {arrived}/{}", m.arrival_time_s.len());
-    println!(
+    say!("scenario {}: {} ticks, {:.2} s simulated", m.scenario, m.ticks, m.sim_time_s);
+    say!("  arrived          {arrived}/{}", m.arrival_time_s.len());
+    say!(
         "  collision margin {} (min S_kd), separation {}",
         fmt(m.min_collision_margin_m),
         fmt(m.min_separation_m)
     );
-    println!(
+    say!(
         "  road margin      {:.3} m (min S_kij), wall distance {:.3} m",
-        m.min_road_margin_m, m.min_wall_distance_m
+        m.min_road_margin_m,
+        m.min_wall_distance_m
     );
-    println!("  outside road     {} UAV-ticks", m.steps_outside_road);
-    println!(
+    say!("  outside road     {} UAV-ticks", m.steps_outside_road);
+    say!(
         "  qp               {} solves, {} with slack, max slack {:.3e}, {} failures, p50 {:.1} µs, p99 {:.1} µs",
-        m.qp.solves, m.qp.slack_used, m.qp.max_slack, m.qp.failures, m.qp.p50_us, m.qp.p99_us
+        m.qp.solves,
+        m.qp.slack_used,
+        m.qp.max_slack,
+        m.qp.failures,
+        m.qp.p50_us,
+        m.qp.p99_us
     );
     if policy_fallbacks > 0 {
-        println!("  policy fallbacks {policy_fallbacks} UAV-ticks braked on a non-finite policy output");
+        say!("  policy fallbacks {policy_fallbacks} UAV-ticks braked on a non-finite policy output");
     }
-    println!("  {}", if m.safe { "SAFE" } else { "UNSAFE" });
+    say!("  {}", if m.safe { "SAFE" } else { "UNSAFE" });
 }
 
 /// Runs the subcommand.

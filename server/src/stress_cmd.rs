@@ -80,7 +80,7 @@ fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
     let violations: Vec<&CaseResult> = results.iter().filter(|r| !r.metrics.safe).collect();
     let arrived = results.iter().filter(|r| r.metrics.all_arrived).count();
     let min = |f: fn(&RunMetrics) -> f64| results.iter().map(|r| f(&r.metrics)).fold(f64::INFINITY, f64::min);
-    println!(
+    say!(
         "stress: {} scenarios (seeds {}..{}), road rule {}, nav {}, policy {}, share {}, slack weights {}",
         results.len(),
         args.seed,
@@ -91,29 +91,35 @@ fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
         args.flight.share,
         args.flight.slack_weights
     );
-    println!("  all arrived in   {arrived}/{}", results.len());
-    println!(
+    say!("  all arrived in   {arrived}/{}", results.len());
+    say!(
         "  min collision margin {:.3} m, min road margin {:.3} m",
         min(|m| m.min_collision_margin_m.unwrap_or(f64::INFINITY)),
         min(|m| m.min_road_margin_m)
     );
-    println!(
+    say!(
         "  qp failures {}, max slack {:.3e}",
         results.iter().map(|r| r.metrics.qp.failures).sum::<u64>(),
         results.iter().map(|r| r.metrics.qp.max_slack).fold(0.0, f64::max)
     );
     if violations.is_empty() {
-        println!("  violations 0");
+        say!("  violations 0");
         return ExitCode::SUCCESS;
     }
-    println!("  violations {} (replay with: airroads stress --scenarios 1 --seed SEED)", violations.len());
-    println!(
+    say!("  violations {} (replay with: airroads stress --scenarios 1 --seed SEED)", violations.len());
+    say!(
         "  {:>20} {:>5} {:>5} {:>12} {:>12} {:>8} {:>8}",
-        "seed", "uavs", "segs", "coll_m", "road_m", "outside", "failed"
+        "seed",
+        "uavs",
+        "segs",
+        "coll_m",
+        "road_m",
+        "outside",
+        "failed"
     );
     for r in violations {
         let m = &r.metrics;
-        println!(
+        say!(
             "  {:>20} {:>5} {:>5} {:>12.4} {:>12.4} {:>8} {:>8}",
             r.seed,
             r.uavs,
