@@ -1,15 +1,31 @@
 //! Policy runtime: the observation `[p − p_r, v − v_r, v]` of the paper, the [`Policy`] trait for
-//! batched inference (one call per model per tick), the saturated PD baseline, and a registry that
-//! gives any UAV any loaded policy by name.
+//! batched inference (one call per model per tick), the saturated PD baseline, ONNX models run with
+//! tract (the shipped RL model is embedded), and a registry that gives any UAV any policy by name.
 //!
 //! Knows nothing of roads, barriers or fleets: a policy maps observations to nominal accelerations.
 
+mod onnx;
 mod pd;
 mod registry;
+mod reward;
 
+pub use onnx::{LoadError, OnnxPolicy};
 pub use pd::PdPolicy;
 pub use registry::{PolicyRegistry, UnknownPolicy};
+pub use reward::{RewardWeights, tracking_reward};
 use uav::{UavState, Vec2};
+
+/// Registry name of the shipped RL tracking policy.
+pub const SHIPPED_MODEL: &str = "rl";
+
+/// The shipped model (`policies/models/tracker.onnx`, trained by `policies/train`), embedded in the
+/// binary so that nothing is read or downloaded at run time.
+pub const SHIPPED_MODEL_ONNX: &[u8] = include_bytes!("../models/tracker.onnx");
+
+/// Loads the shipped RL model.
+pub fn shipped_model() -> Result<OnnxPolicy, LoadError> {
+    OnnxPolicy::from_bytes(SHIPPED_MODEL, "policies/models/tracker.onnx (embedded)", SHIPPED_MODEL_ONNX)
+}
 
 /// The observation s = [p − p_r, v − v_r, v] (6 numbers, SI units).
 pub type Observation = [f64; 6];

@@ -1,6 +1,6 @@
-//! Policies by name: the built-in `pd` baseline plus any loaded model.
+//! Policies by name: the built-in `pd` baseline, the shipped RL model `rl`, and any loaded model.
 
-use crate::{PdPolicy, Policy};
+use crate::{LoadError, OnnxPolicy, PdPolicy, Policy};
 use std::collections::BTreeMap;
 
 /// A policy name that is not loaded.
@@ -24,6 +24,20 @@ impl PolicyRegistry {
         let mut policies: BTreeMap<String, Box<dyn Policy>> = BTreeMap::new();
         policies.insert("pd".into(), Box::new(PdPolicy { delta, ..PdPolicy::default() }));
         Self { policies }
+    }
+
+    /// The standard set: `pd` and the shipped RL model as `rl` (embedded in the binary).
+    pub fn standard(delta: f64) -> Result<Self, LoadError> {
+        let mut registry = Self::with_pd(delta);
+        registry.insert(crate::SHIPPED_MODEL, Box::new(crate::shipped_model()?));
+        Ok(registry)
+    }
+
+    /// Adds the ONNX model at `path` under `name` (checked against the contract first).
+    pub fn load(&mut self, name: &str, path: &std::path::Path) -> Result<(), LoadError> {
+        let policy = OnnxPolicy::load(name, path)?;
+        self.insert(name, Box::new(policy));
+        Ok(())
     }
 
     /// Adds (or replaces) a policy under `name`.

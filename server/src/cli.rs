@@ -33,9 +33,13 @@ pub struct FlightArgs {
     /// How temporary targets are chosen.
     #[arg(long, default_value = "route", value_parser = ["route", "lanes", "alg1"])]
     pub nav: String,
-    /// Policy flown by every UAV.
+    /// Policy flown by every UAV: `pd` (the PD baseline), `rl` (the shipped RL model), or a name given
+    /// with `--model NAME=FILE.onnx`.
     #[arg(long, default_value = "pd")]
     pub policy: String,
+    /// Load an extra ONNX policy under a name (repeatable), e.g. `--model mine=policies/models/x.onnx`.
+    #[arg(long = "model", value_name = "NAME=FILE")]
+    pub models: Vec<String>,
     /// QP objective: `exact` (exact slack penalty, default) or `paper` (quadratic slack only).
     #[arg(long, default_value = "exact", value_parser = ["exact", "paper"])]
     pub objective: String,
@@ -102,6 +106,21 @@ pub enum BenchTarget {
 }
 
 impl FlightArgs {
+    /// The policies these flags make available (`pd`, `rl` and every `--model`), checked to contain
+    /// `--policy`; the error names the flag and the reason.
+    pub fn policies(&self, delta: f64) -> Result<policies::PolicyRegistry, String> {
+        let mut registry =
+            policies::PolicyRegistry::standard(delta).map_err(|e| format!("shipped model: {e}"))?;
+        for spec in &self.models {
+            let Some((name, path)) = spec.split_once('=') else {
+                return Err(format!("--model {spec}: expected NAME=FILE.onnx"));
+            };
+            registry.load(name, std::path::Path::new(path)).map_err(|e| format!("--model {name}: {e}"))?;
+        }
+        registry.check(&self.policy).map_err(|e| format!("--policy: {e}"))?;
+        Ok(registry)
+    }
+
     /// The fleet configuration these flags select (params come from the scenario).
     pub fn fleet_config(&self) -> fleet::FleetConfig {
         // The value parsers above only admit valid names.

@@ -63,11 +63,13 @@ pub fn main(args: RunArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
-    let policies = PolicyRegistry::with_pd(scenario.params.delta);
-    if let Err(e) = policies.check(&args.flight.policy) {
-        eprintln!("error: --policy: {e}");
-        return ExitCode::from(EXIT_INVALID);
-    }
+    let policies = match args.flight.policies(scenario.params.delta) {
+        Ok(p) => p,
+        Err(msg) => {
+            eprintln!("error: {msg}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
     match execute(&args, &scenario, policies) {
         Ok(m) if m.safe && m.all_arrived => ExitCode::SUCCESS,
         Ok(_) => ExitCode::from(1),

@@ -3,7 +3,6 @@
 use crate::cli::StressArgs;
 use fleet::stress::random_scenario;
 use fleet::{RunMetrics, RunOptions, run_scenario};
-use policies::PolicyRegistry;
 use std::process::ExitCode;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -18,8 +17,8 @@ struct CaseResult {
 
 /// Runs the subcommand.
 pub fn main(args: StressArgs) -> ExitCode {
-    if PolicyRegistry::with_pd(5.0).check(&args.flight.policy).is_err() {
-        eprintln!("error: --policy: unknown policy `{}`", args.flight.policy);
+    if let Err(msg) = args.flight.policies(5.0) {
+        eprintln!("error: {msg}");
         return ExitCode::from(2);
     }
     let jobs =
@@ -54,7 +53,8 @@ fn run_case(args: &StressArgs, seed: u64) -> CaseResult {
     let (uavs, segments) = (scenario.uavs.len(), scenario.segments.len());
     // random_scenario only returns validated scenarios.
     let valid = scenario.validate().expect("stress scenarios are valid by construction");
-    let policies = PolicyRegistry::with_pd(valid.params.delta);
+    // Checked in `main` before any case runs.
+    let policies = args.flight.policies(valid.params.delta).expect("policies were checked at start");
     let options = RunOptions {
         config: args.flight.fleet_config(),
         policy: args.flight.policy.clone(),

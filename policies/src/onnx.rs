@@ -1,0 +1,117 @@
+//! ONNX policies run with tract: loaded and optimised once, checked against the contract
+//! (input `[N, 6]` f32 observations, output `[N, 2]` f32 accelerations), evaluated in batches.
+
+use crate::{Observation, Policy, PolicyError};
+use std::path::Path;
+use std::sync::Arc;
+use tract_onnx::prelude::*;
+use tract_onnx::tract_hir::infer::Factoid;
+use uav::Vec2;
+
+/// Why an ONNX file was refused.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    /// The file could not be read.
+    #[error("{path}: cannot read: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The I/O error.
+        source: std::io::Error,
+    },
+    /// The bytes are not an ONNX model tract can load and optimise.
+    #[error("{path}: not a loadable ONNX model: {reason}")]
+    Model {
+        /// The file.
+        path: String,
+        /// tract's explanation.
+        reason: String,
+    },
+    /// The model loads but does not map `[N, 6]` f32 observations to `[N, 2]` f32 accelerations.
+    #[error("{path}: breaks the policy contract: {reason}")]
+    Contract {
+        /// The file.
+        path: String,
+        /// What differs.
+        reason: String,
+    },
+}
+
+type Plan = Arc<TypedRunnableModel>;
+
+/// A tracking policy from an ONNX file, evaluated by tract on whole batches.
+pub struct OnnxPolicy {
+    name: String,
+    plan: Plan,
+    input: Vec<f32>,
+}
+
+impl std::fmt::Debug for OnnxPolicy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("OnnxPolicy").field("name", &self.name).finish_non_exhaustive()
+    }
+}
+
+impl OnnxPolicy {
+    /// Loads, checks and optimises the model at `path`; `name` labels errors at run time.
+    pub fn load(name: &str, path: &Path) -> Result<Self, LoadError> {
+        let shown = path.display().to_string();
+        let bytes = std::fs::read(path).map_err(|source| LoadError::Io { path: shown.clone(), source })?;
+        Self::from_bytes(name, &shown, &bytes)
+    }
+
+    /// Loads, checks and optimises a model held in memory; `origin` names it in errors.
+    pub fn from_bytes(name: &str, origin: &str, bytes: &[u8]) -> Result<Self, LoadError> {
+        let model_err =
+            |e: TractError| LoadError::Model { path: origin.to_string(), reason: format!("{e:#}") };
+        let contract = |reason: String| LoadError::Contract { path: origin.to_string(), reason };
+        let model = tract_onnx::onnx().model_for_read(&mut &bytes[..]).map_err(model_err)?;
+        if model.inputs.len() != 1 || model.outputs.len() != 1 {
+            let (i, o) = (model.inputs.len(), model.outputs.len());
+            return Err(contract(format!("{i} inputs and {o} outputs, expected 1 and 1")));
+        }
+        let batch = model.sym("N");
+        let fact = InferenceFact::dt_shape(f32::datum_type(), tvec![batch.to_dim(), 6.to_dim()]);
+        let declared = model.input_fact(0).map_err(model_err)?.clone();
+        if declared.unify(&fact).is_err() {
+            return Err(contract(format!("input is {declared:?}, expected f32 [N, 6] observations")));
+        }
+        let typed = model
+            .with_input_fact(0, fact)
+            .and_then(|m| m.into_optimized())
+            .map_err(|e| contract(format!("cannot be typed for a [N, 6] f32 input: {e:#}")))?;
+        let out = typed.output_fact(0).map_err(model_err)?;
+        let out_ok = out.datum_type == f32::datum_type()
+            && out.rank() == 2
+            && out.shape[0] == batch.to_dim()
+            && out.shape[1] == 2.to_dim();
+        if !out_ok {
+            return Err(contract(format!("output is {out:?}, expected f32 [N, 2] accelerations")));
+        }
+        let plan = typed.into_runnable().map_err(model_err)?;
+        Ok(Self { name: name.to_string(), plan, input: Vec::new() })
+    }
+
+    /// Evaluates the network on a batch and returns its raw outputs, `2 × batch` f32 values.
+    pub fn infer(&mut self, observations: &[Observation]) -> TractResult<Vec<f32>> {
+        self.input.clear();
+        self.input.extend(observations.iter().flat_map(|o| o.iter().map(|&x| x as f32)));
+        let input = Tensor::from_shape(&[observations.len(), 6], &self.input)?;
+        let outputs = self.plan.run(tvec![input.into()])?;
+        Ok(outputs[0].try_as_plain_ram()?.as_slice::<f32>()?.to_vec())
+    }
+}
+
+impl Policy for OnnxPolicy {
+    fn act(&mut self, observations: &[Observation], actions: &mut Vec<Vec2>) -> Result<(), PolicyError> {
+        actions.clear();
+        if observations.is_empty() {
+            return Ok(());
+        }
+        let raw = self
+            .infer(observations)
+            .map_err(|e| PolicyError { policy: self.name.clone(), reason: format!("{e:#}") })?;
+        actions.extend(raw.chunks_exact(2).map(|u| Vec2::new(f64::from(u[0]), f64::from(u[1]))));
+        Ok(())
+    }
+}
