@@ -134,3 +134,37 @@ fn missing_file_and_bad_flags_exit_2() {
     assert_eq!(airroads(&["run", scenario.to_str().unwrap(), "--road-rule", "bogus"]).status.code(), Some(2));
     assert_eq!(airroads(&["run", scenario.to_str().unwrap(), "--policy", "nope"]).status.code(), Some(2));
 }
+
+#[test]
+fn track_benchmark_rows_and_rl_regression_guard() {
+    let run = airroads(&["track", "all", "--json"]);
+    assert_eq!(run.status.code(), Some(0), "{}", String::from_utf8_lossy(&run.stderr));
+    let rows: serde_json::Value = serde_json::from_slice(&run.stdout).unwrap();
+    let rows = rows.as_array().unwrap();
+    assert_eq!(rows.len(), 3 * 5);
+    let keys = [
+        "trajectory",
+        "policy",
+        "rmse_m",
+        "rmse_x_m",
+        "rmse_y_m",
+        "infer_us_batch1",
+        "infer_us_per_uav_batch1000",
+    ];
+    for row in rows {
+        let mut got: Vec<&str> = row.as_object().unwrap().keys().map(String::as_str).collect();
+        got.sort();
+        let mut want = keys.to_vec();
+        want.sort();
+        assert_eq!(got, want);
+    }
+    // Regression guard of the shipped model (its manifest: 0.0090 / 0.0162 / 0.0322 m; BENCHMARKS.md).
+    for (trajectory, limit) in [("ellipse", 0.012), ("figure8", 0.020), ("rectangle", 0.040)] {
+        let rl = rows.iter().find(|r| r["trajectory"] == trajectory && r["policy"] == "rl").unwrap();
+        let rmse = rl["rmse_m"].as_f64().unwrap();
+        assert!(rmse <= limit, "{trajectory}: rl RMSE {rmse} m > {limit} m");
+        // The fleet's PD (kp 1.5, kd 2) tracks far worse; the comparison must show it.
+        let pd = rows.iter().find(|r| r["trajectory"] == trajectory && r["policy"] == "pd").unwrap();
+        assert!(pd["rmse_m"].as_f64().unwrap() > rmse);
+    }
+}

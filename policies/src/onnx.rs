@@ -37,12 +37,11 @@ pub enum LoadError {
     },
 }
 
-type Plan = Arc<TypedRunnableModel>;
-
 /// A tracking policy from an ONNX file, evaluated by tract on whole batches.
 pub struct OnnxPolicy {
     name: String,
-    plan: Plan,
+    /// The optimised plan's run state, kept between calls (no per-call set-up).
+    state: TypedSimpleState,
     input: Vec<f32>,
 }
 
@@ -88,8 +87,9 @@ impl OnnxPolicy {
         if !out_ok {
             return Err(contract(format!("output is {out:?}, expected f32 [N, 2] accelerations")));
         }
-        let plan = typed.into_runnable().map_err(model_err)?;
-        Ok(Self { name: name.to_string(), plan, input: Vec::new() })
+        let plan: Arc<TypedRunnableModel> = typed.into_runnable().map_err(model_err)?;
+        let state = plan.spawn().map_err(model_err)?;
+        Ok(Self { name: name.to_string(), state, input: Vec::new() })
     }
 
     /// Evaluates the network on a batch and returns its raw outputs, `2 × batch` f32 values.
@@ -97,7 +97,7 @@ impl OnnxPolicy {
         self.input.clear();
         self.input.extend(observations.iter().flat_map(|o| o.iter().map(|&x| x as f32)));
         let input = Tensor::from_shape(&[observations.len(), 6], &self.input)?;
-        let outputs = self.plan.run(tvec![input.into()])?;
+        let outputs = self.state.run(tvec![input.into()])?;
         Ok(outputs[0].try_as_plain_ram()?.as_slice::<f32>()?.to_vec())
     }
 }

@@ -22,6 +22,33 @@ pub enum Command {
     Stress(StressArgs),
     /// Measure the filter and print a table.
     Bench(BenchArgs),
+    /// Fly the paper's reference trajectories with a tracking policy and the PD baselines; print
+    /// tracking RMSE and inference time.
+    Track(TrackArgs),
+}
+
+/// `airroads track`.
+#[derive(Debug, Args)]
+pub struct TrackArgs {
+    /// Which reference: ellipse, figure8, rectangle or all.
+    #[arg(default_value = "all", value_parser = ["ellipse", "figure8", "rectangle", "all"])]
+    pub trajectory: String,
+    /// The learned policy to measure (`rl`, or a name given with --model).
+    #[arg(long, default_value = "rl")]
+    pub policy: String,
+    /// Load an extra ONNX policy under a name (repeatable).
+    #[arg(long = "model", value_name = "NAME=FILE")]
+    pub models: Vec<String>,
+    /// Print a JSON list of rows instead of the table.
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl TrackArgs {
+    /// The policies available to `track` (checked to contain `--policy`).
+    pub fn policies(&self) -> Result<policies::PolicyRegistry, String> {
+        load_policies(&self.policy, &self.models, 5.0)
+    }
 }
 
 /// Options shared by `run` and `stress`.
@@ -136,4 +163,18 @@ impl FlightArgs {
         }
         config
     }
+}
+
+/// `pd`, `rl` and every `--model NAME=FILE.onnx`, checked to contain `policy`; errors name the flag.
+fn load_policies(policy: &str, models: &[String], delta: f64) -> Result<policies::PolicyRegistry, String> {
+    let mut registry =
+        policies::PolicyRegistry::standard(delta).map_err(|e| format!("shipped model: {e}"))?;
+    for spec in models {
+        let Some((name, path)) = spec.split_once('=') else {
+            return Err(format!("--model {spec}: expected NAME=FILE.onnx"));
+        };
+        registry.load(name, std::path::Path::new(path)).map_err(|e| format!("--model {name}: {e}"))?;
+    }
+    registry.check(policy).map_err(|e| format!("--policy: {e}"))?;
+    Ok(registry)
 }

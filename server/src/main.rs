@@ -1,5 +1,5 @@
 //! `airroads`: ground control for UAV fleets in air roads. Subcommands: `run` (a scenario, headless),
-//! `stress` (random scenarios), `bench` (filter timing).
+//! `stress` (random scenarios), `bench` (filter timing), `track` (tracking benchmark of a policy).
 
 /// Prints a line to stdout, ignoring write errors: a closed pipe (`airroads run … | head`) must not
 /// panic the program, and the exit status and any `--out` file do not depend on stdout.
@@ -14,6 +14,7 @@ mod bench;
 mod cli;
 mod run_cmd;
 mod stress_cmd;
+mod track;
 
 use clap::Parser;
 use std::process::ExitCode;
@@ -24,5 +25,6 @@ fn main() -> ExitCode {
         cli::Command::Run(args) => run_cmd::main(args),
         cli::Command::Stress(args) => stress_cmd::main(args),
         cli::Command::Bench(args) => bench::main(args),
+        cli::Command::Track(args) => track::main(args),
     }
 }
