@@ -215,15 +215,13 @@ impl Fleet {
             uav.last.u_ref = braking_input(uav.state.v, delta, dt);
             uav.last.policy_fallback = true;
         }
-        let names: Vec<String> = self.policies.names().map(String::from).collect();
-        for name in &names {
+        for (name, policy) in self.policies.iter_mut() {
             self.batch.clear();
             self.observations.clear();
-            for (k, uav) in self.uavs.iter().enumerate().filter(|(_, u)| &u.policy == name) {
+            for (k, uav) in self.uavs.iter().enumerate().filter(|(_, u)| u.policy == name) {
                 self.batch.push(k);
                 self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
             }
-            let Some(policy) = self.policies.get_mut(name) else { continue };
             if self.batch.is_empty() || policy.act(&self.observations, &mut self.actions).is_err() {
                 continue;
             }

@@ -59,6 +59,11 @@ impl PolicyRegistry {
         self.policies.keys().map(String::as_str)
     }
 
+    /// Every policy with its name, for evaluating each once per tick.
+    pub fn iter_mut(&mut self) -> impl Iterator<Item = (&str, &mut (dyn Policy + 'static))> {
+        self.policies.iter_mut().map(|(name, p)| (name.as_str(), p.as_mut()))
+    }
+
     /// The policy called `name`.
     pub fn get_mut(&mut self, name: &str) -> Option<&mut (dyn Policy + 'static)> {
         self.policies.get_mut(name).map(|p| p.as_mut())
