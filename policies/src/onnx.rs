@@ -94,11 +94,19 @@ impl OnnxPolicy {
 
     /// Evaluates the network on a batch and returns its raw outputs, `2 × batch` f32 values.
     pub fn infer(&mut self, observations: &[Observation]) -> TractResult<Vec<f32>> {
+        let mut raw = Vec::with_capacity(2 * observations.len());
+        self.run(observations, |out| raw.extend_from_slice(out))?;
+        Ok(raw)
+    }
+
+    /// Runs the network on a batch and hands its `2 × batch` outputs to `read` (no copy).
+    fn run(&mut self, observations: &[Observation], read: impl FnOnce(&[f32])) -> TractResult<()> {
         self.input.clear();
         self.input.extend(observations.iter().flat_map(|o| o.iter().map(|&x| x as f32)));
         let input = Tensor::from_shape(&[observations.len(), 6], &self.input)?;
         let outputs = self.state.run(tvec![input.into()])?;
-        Ok(outputs[0].try_as_plain_ram()?.as_slice::<f32>()?.to_vec())
+        read(outputs[0].try_as_plain_ram()?.as_slice::<f32>()?);
+        Ok(())
     }
 }
 

@@ -71,6 +71,19 @@ impl Default for FilterSettings {
 }
 
 impl FilterSettings {
+    /// The QP rows the filter solves for CBF `rows` under ‖u‖ ≤ δ: rows that cannot bind (c ≥ δ)
+    /// dropped, right-hand sides clamped at −2δ, slack weights from [`Self::slack_weights`].
+    pub fn constraint_rows<'a>(
+        &'a self,
+        rows: &'a [Row],
+        delta: f64,
+    ) -> impl Iterator<Item = ConstraintRow> + 'a {
+        rows.iter().filter(move |r| r.c < delta).map(move |r| {
+            let (rho, weight) = self.slack_weights(r);
+            ConstraintRow { a: r.a, c: r.c.max(MIN_RHS_IN_DELTAS * delta), rho, weight }
+        })
+    }
+
     /// The slack penalty (ρ, P) of a row: the collision reference, ×`road_priority` for road rows,
     /// ×1/clamp(b, `urgency_floor`, 1) when urgency weighting is on; ρ = 0 with the paper's objective.
     pub fn slack_weights(&self, row: &Row) -> (f64, f64) {
@@ -145,11 +158,7 @@ impl SafetyFilter {
             };
         }
         self.scratch.clear();
-        let s = &self.settings;
-        self.scratch.extend(rows.iter().filter(|r| r.c < delta).map(|r| {
-            let (rho, weight) = s.slack_weights(r);
-            ConstraintRow { a: r.a, c: r.c.max(MIN_RHS_IN_DELTAS * delta), rho, weight }
-        }));
+        self.scratch.extend(self.settings.constraint_rows(rows, delta));
         if let Some(u) = closed_form(u_ref, &self.scratch, delta) {
             let active_rows = count_active(rows, &u);
             return FilterOutcome {

@@ -24,14 +24,7 @@ proptest! {
             .collect();
         let settings = FilterSettings::default();
         let out = SafetyFilter::new(settings).filter(u_ref, Vec2::zeros(), &rows, delta, 0.05);
-        let constraints: Vec<ConstraintRow> = rows
-            .iter()
-            .filter(|r| r.c < delta)
-            .map(|r| {
-                let (rho, weight) = settings.slack_weights(r);
-                ConstraintRow { a: r.a, c: r.c.max(-2.0 * delta), rho, weight }
-            })
-            .collect();
+        let constraints: Vec<ConstraintRow> = settings.constraint_rows(&rows, delta).collect();
         let reference = QpSolver::new().solve(u_ref, &constraints, delta);
         prop_assume!(reference.status == clarabel::solver::SolverStatus::Solved && !out.failed);
         // Clarabel meets its 1e-9 tolerances in the objective; on the ball's boundary that leaves the

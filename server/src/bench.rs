@@ -4,7 +4,7 @@
 use crate::cli::{BenchArgs, BenchTarget};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-use safety::{ConstraintRow, FilterSettings, QpSolver, Row, RowKind, SafetyFilter};
+use safety::{FilterSettings, QpSolver, Row, RowKind, SafetyFilter};
 use std::process::ExitCode;
 use std::time::Instant;
 use uav::Vec2;
@@ -69,10 +69,7 @@ fn bench_filter(iterations: usize) {
         for i in 0..iterations + warmup {
             let u_ref = instance(&mut rng, count, &mut rows);
             constraints.clear();
-            constraints.extend(rows.iter().map(|r| {
-                let (rho, weight) = settings.slack_weights(r);
-                ConstraintRow { a: r.a, c: r.c, rho, weight }
-            }));
+            constraints.extend(settings.constraint_rows(&rows, 5.0));
             let start = Instant::now();
             let out = filter.filter(u_ref, Vec2::zeros(), &rows, 5.0, 0.05);
             let filter_us = start.elapsed().as_secs_f64() * 1e6;
