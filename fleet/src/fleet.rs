@@ -2,6 +2,7 @@
 //! (batched) → CBF-QP filter → commands.
 
 use crate::neighbours::NeighbourSearch;
+use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::Link;
 use policies::{Observation, PolicyRegistry, observation};
 use roads::{NavMode, NavState, Navigator, Road};
@@ -110,11 +111,13 @@ pub struct Uav {
 pub struct Fleet {
     /// Configuration.
     pub config: FleetConfig,
-    road: Road,
-    uavs: Vec<Uav>,
-    policies: PolicyRegistry,
+    pub(crate) road: Road,
+    pub(crate) uavs: Vec<Uav>,
+    pub(crate) policies: PolicyRegistry,
+    /// Hold: every UAV brakes to a hover instead of flying its policy (the filter still runs).
+    pub(crate) hold: bool,
     filter: SafetyFilter,
-    neighbours: NeighbourSearch,
+    pub(crate) neighbours: NeighbourSearch,
     positions: Vec<Vec2>,
     rows: Vec<Row>,
     observations: Vec<Observation>,
@@ -132,6 +135,7 @@ impl Fleet {
             road,
             uavs: Vec::new(),
             policies,
+            hold: false,
             neighbours: NeighbourSearch::default(),
             positions: Vec::new(),
             rows: Vec::new(),
@@ -180,12 +184,14 @@ impl Fleet {
         for uav in &mut self.uavs {
             uav.last.target = nav.target(&mut uav.nav, uav.state.p);
         }
-        self.run_policies();
         self.positions.clear();
         self.positions.extend(self.uavs.iter().map(|u| u.state.p));
         let v_max = self.uavs.iter().map(|u| u.state.v.norm()).fold(0.0, f64::max);
-        let reach = activation_radius(params.d_c, 2.0 * v_max, 2.0 * params.delta);
+        let reach = activation_radius(params.d_c, 2.0 * v_max, 2.0 * params.delta)
+            .max(YIELD_RADIUS_IN_DC * params.d_c);
         self.neighbours.update(&self.positions, reach);
+        self.make_way();
+        self.run_policies();
         for k in 0..self.uavs.len() {
             self.filter_one(k);
         }
@@ -194,6 +200,20 @@ impl Fleet {
         }
         self.tick += 1;
         self.uavs.iter().filter(|u| u.nav.arrived).count()
+    }
+
+    /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::yielding`]).
+    fn make_way(&mut self) {
+        let d_c = self.config.params.d_c;
+        for k in 0..self.uavs.len() {
+            let me = &self.uavs[k];
+            let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { continue };
+            let flying = self.neighbours.lists[k].iter().map(|&d| &self.uavs[d]).filter_map(|u| {
+                let goal = u.nav.goal().filter(|_| !u.nav.arrived)?;
+                Some(Flying { p: u.state.p, goal })
+            });
+            self.uavs[k].last.target = make_way(me.state.p, goal, flying, d_c);
+        }
     }
 
     fn read_states(&mut self) {
@@ -213,7 +233,10 @@ impl Fleet {
         let (delta, dt) = (self.config.params.delta, self.config.params.dt);
         for uav in &mut self.uavs {
             uav.last.u_ref = braking_input(uav.state.v, delta, dt);
-            uav.last.policy_fallback = true;
+            uav.last.policy_fallback = !self.hold;
+        }
+        if self.hold {
+            return;
         }
         for (name, policy) in self.policies.iter_mut() {
             self.batch.clear();

@@ -4,6 +4,7 @@
 //!
 //! No async, no I/O beyond what a [`links::Link`] does: the server wraps this in its 20 Hz task.
 
+mod edit;
 mod fleet;
 mod margins;
 mod metrics;
@@ -11,7 +12,9 @@ mod neighbours;
 mod run;
 mod scenario;
 pub mod stress;
+mod yielding;
 
+pub use edit::EditError;
 pub use fleet::{CollisionShare, Fleet, FleetConfig, Uav, UavTick};
 pub use margins::{collision_margin, road_margin};
 pub use metrics::{MetricsRecorder, QpMetrics, RunMetrics};

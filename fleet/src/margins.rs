@@ -13,8 +13,8 @@ pub fn collision_margin(k: &UavState, d: &UavState, delta_sum: f64) -> f64 {
 }
 
 /// min over the finite walls of `dist − min(ḋist, 0)²/(2δ)`: the closest the UAV gets to the road
-/// boundary if it brakes now. Walls are measured as the filter enforces them (cbf.md §10.1): a wall's
-/// line distance only from its road side, its end points as points. Negative distance when outside.
+/// boundary if it brakes now. Walls are measured as the filter enforces them (rule R2): a wall's
+/// line distance in its slab from either side, its end points as points. Negative distance when outside.
 pub fn road_margin(road: &Road, s: &UavState, delta: f64) -> f64 {
     if !road.contains(&s.p) {
         return road.boundary_distance(&s.p);
@@ -24,10 +24,7 @@ pub fn road_margin(road: &Road, s: &UavState, delta: f64) -> f64 {
         let (c, t) = w.nearest(&s.p);
         let (dist, rate) = if t > 0.0 && t < 1.0 {
             let d = w.signed_distance(&s.p);
-            if d < 0.0 {
-                continue;
-            }
-            (d, w.n_in.dot(&s.v))
+            (d.abs(), d.signum() * w.n_in.dot(&s.v))
         } else {
             let e: Vec2 = s.p - c;
             let n = e.norm();

@@ -20,4 +20,4 @@ pub use geometry::{Quad, Wall, WallKind, nearest_on_segment, segments_intersect}
 pub use layout::RoadLayout;
 pub use nav::{NavMode, NavState, Navigator};
 pub use road::{Road, SegmentTracker};
-pub use validate::{RoadError, RoadRule};
+pub use validate::{MAX_COORDINATE_M, RoadError, RoadRule};

@@ -24,7 +24,7 @@ pub fn activation_radius(d: f64, speed: f64, delta: f64) -> f64 {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum RoadRule {
     /// R2 (recommended): every finite wall and end cap within the activation radius; line barrier in the
-    /// wall's slab from its road side, end-point barrier beyond its ends.
+    /// wall's slab (from whichever side the UAV is on), end-point barrier beyond its ends.
     #[default]
     Walls,
     /// R3: the infinite lines of the current segment plus the neighbours' lines that bound it.
@@ -94,8 +94,17 @@ pub fn road_rows(
     }
 }
 
-/// Rule R2 with §10.1: line barriers only from a wall's road side, end-point barriers beyond its ends,
-/// and, for a UAV outside the road, the signed line barriers of the nearest walls to bring it back.
+/// Rule R2: for a UAV inside the road, the barrier of each finite wall on the distance to that wall
+/// (a line barrier in its slab, an end-point barrier beyond its ends); for a UAV outside the road, the
+/// signed line barriers of the nearest walls to bring it back.
+///
+/// In the slab the distance is taken from whichever side the UAV is on. Past the inner vertex V of a
+/// bend sharper than 90°, a UAV still in the road can stand behind the next wall's line with its foot
+/// inside that wall. §10.1 of cbf.md dropped the wall there (its *signed* barrier is negative), which
+/// left V unguarded: a UAV sliding along the first wall towards V met V's end-point barrier only when
+/// its foot left the slab, already at b ≈ 0 (stress seed 225, rl: S = 0.088 m < D_s). The unsigned
+/// distance is the true distance to that wall, so it is positive and C¹-continuous with V's end-point
+/// barrier where the foot reaches V.
 fn walls_rows(road: &Road, p: Vec2, v: Vec2, radius: f64, params: &Params, out: &mut Vec<Row>) {
     let (delta, d_s, zeta) = (params.delta, params.d_s, params.zeta);
     let walls = road.walls();
@@ -124,10 +133,10 @@ fn walls_rows(road: &Road, p: Vec2, v: Vec2, radius: f64, params: &Params, out: 
             continue;
         }
         if t > 0.0 && t < 1.0 {
+            // The distance to the finite wall, from whichever side the UAV is on (see the doc above).
             let s = w.signed_distance(&p);
-            if s >= 0.0 {
-                out.push(line_row(s, w.n_in.dot(&v), w.n_in, delta, d_s, zeta, RowKind::Road(k)));
-            }
+            let n = if s >= 0.0 { w.n_in } else { -w.n_in };
+            out.push(line_row(s.abs(), n.dot(&v), n, delta, d_s, zeta, RowKind::Road(k)));
         } else if !seen[..n_seen].contains(&c) {
             // A vertex shared by two walls gets one end-point barrier, not two.
             if n_seen < seen.len() {

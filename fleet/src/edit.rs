@@ -1,0 +1,196 @@
+//! Changes to a fleet between ticks (the server's commands): UAVs in and out, goals, the road, the
+//! policy of a UAV, hold. Each either applies completely or returns why it cannot and changes nothing.
+
+use crate::fleet::{Fleet, Uav};
+use crate::margins::{collision_margin, road_margin};
+use links::Link;
+use roads::{NavState, Road};
+use uav::{UavState, Vec2};
+
+/// Why a change to the fleet was refused; `field` names the offending request field.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum EditError {
+    /// No UAV has this id.
+    #[error("no UAV with id `{0}`")]
+    UnknownUav(String),
+    /// A UAV with this id exists already.
+    #[error("a UAV with id `{0}` exists already")]
+    DuplicateId(String),
+    /// The change would put a UAV (or a goal) where it may not be.
+    #[error("{field}: {reason}")]
+    Unsafe {
+        /// The request field at fault (e.g. `position`, `goal`, `segments`).
+        field: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// The policy name is not loaded.
+    #[error("policy: {0}")]
+    UnknownPolicy(String),
+}
+
+/// `x < min`, and true for a NaN `x` (a margin computed from absurd coordinates is refused too).
+fn below(x: f64, min: f64) -> bool {
+    x.is_nan() || x < min
+}
+
+fn unsafe_at(field: &str, reason: String) -> EditError {
+    EditError::Unsafe { field: field.to_string(), reason }
+}
+
+impl Fleet {
+    /// The UAV with this id.
+    pub fn uav(&self, id: &str) -> Option<&Uav> {
+        self.uavs.iter().find(|u| u.id == id)
+    }
+
+    fn index(&self, id: &str) -> Result<usize, EditError> {
+        self.uavs.iter().position(|u| u.id == id).ok_or_else(|| EditError::UnknownUav(id.to_string()))
+    }
+
+    /// The neighbour lists of the last tick (`[k]`: indices of UAVs near UAV k).
+    pub fn neighbour_lists(&self) -> &[Vec<usize>] {
+        &self.neighbours.lists
+    }
+
+    /// Hold (every UAV brakes to a hover; the filter still runs) or fly the policies again.
+    pub fn set_hold(&mut self, hold: bool) {
+        self.hold = hold;
+    }
+
+    /// True while the fleet holds.
+    pub fn holding(&self) -> bool {
+        self.hold
+    }
+
+    /// The names of the loaded policies.
+    pub fn policy_names(&self) -> impl Iterator<Item = &str> {
+        self.policies.names()
+    }
+
+    /// Checks that a UAV in `state` would start safely: inside the road at least D_s from every wall
+    /// (braking margin, eq. 6) and at least D_c from every other UAV (braking margin, eq. 2).
+    pub fn check_start(&self, state: &UavState, field: &str) -> Result<(), EditError> {
+        let p = self.config.params;
+        if !state.is_finite() {
+            return Err(unsafe_at(field, "must be finite numbers".into()));
+        }
+        let margin = road_margin(&self.road, state, p.delta);
+        if below(margin, p.d_s) {
+            let (x, y) = (state.p.x, state.p.y);
+            let reason = if self.road.contains(&state.p) {
+                format!("[{x}, {y}] is {margin:.3} m from the road's boundary, closer than D_s = {} m", p.d_s)
+            } else {
+                format!("[{x}, {y}] is outside the road")
+            };
+            return Err(unsafe_at(field, reason));
+        }
+        for other in &self.uavs {
+            let m = collision_margin(state, &other.state, 2.0 * p.delta);
+            if below(m, p.d_c) {
+                let reason = format!("{m:.3} m from UAV `{}`, closer than D_c = {} m", other.id, p.d_c);
+                return Err(unsafe_at(field, reason));
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks that `goal` is a finite point inside the road.
+    pub fn check_goal(&self, goal: Vec2, field: &str) -> Result<(), EditError> {
+        check_goal_on(&self.road, goal, field)
+    }
+
+    /// Adds a UAV after checking its id, policy, start and goal.
+    pub fn try_add(
+        &mut self,
+        id: String,
+        policy: String,
+        link: Box<dyn Link>,
+        state: UavState,
+        goal: Option<Vec2>,
+    ) -> Result<(), EditError> {
+        if self.uav(&id).is_some() {
+            return Err(EditError::DuplicateId(id));
+        }
+        self.policies.check(&policy).map_err(|e| EditError::UnknownPolicy(e.to_string()))?;
+        self.check_start(&state, "position")?;
+        if let Some(g) = goal {
+            self.check_goal(g, "goal")?;
+        }
+        self.add(id, policy, link, state, goal);
+        Ok(())
+    }
+
+    /// Removes a UAV and returns it (its link is dropped by the caller).
+    pub fn remove(&mut self, id: &str) -> Result<Uav, EditError> {
+        let k = self.index(id)?;
+        Ok(self.uavs.remove(k))
+    }
+
+    /// Sets (Some) or clears (None: the UAV hovers where it is) the goal of a UAV.
+    pub fn set_goal(&mut self, id: &str, goal: Option<Vec2>) -> Result<(), EditError> {
+        let k = self.index(id)?;
+        if let Some(g) = goal {
+            self.check_goal(g, "goal")?;
+        }
+        let uav = &mut self.uavs[k];
+        uav.nav.set_goal(&self.road, goal, uav.state.p);
+        Ok(())
+    }
+
+    /// Gives a UAV another loaded policy.
+    pub fn set_policy(&mut self, id: &str, policy: &str) -> Result<(), EditError> {
+        let k = self.index(id)?;
+        self.policies.check(policy).map_err(|e| EditError::UnknownPolicy(e.to_string()))?;
+        self.uavs[k].policy = policy.to_string();
+        Ok(())
+    }
+
+    /// Starts over on `road` with `params` and no UAVs (a scenario load); policies and ticks stay.
+    pub fn reset(&mut self, params: uav::Params, road: Road) {
+        self.config.params = params;
+        self.road = road;
+        self.uavs.clear();
+    }
+
+    /// Replaces the road if every UAV would be safe on it (the same test as [`Fleet::check_start`]
+    /// against the walls, with its current velocity). Goals outside the new road are cleared (those
+    /// UAVs hover); their ids are returned.
+    pub fn replace_road(&mut self, road: Road) -> Result<Vec<String>, EditError> {
+        let p = self.config.params;
+        for uav in &self.uavs {
+            let margin = road_margin(&road, &uav.state, p.delta);
+            if below(margin, p.d_s) {
+                let reason = format!(
+                    "UAV `{}` at [{:.3}, {:.3}] would be {margin:.3} m from the new road's boundary \
+                     (braking margin), less than D_s = {} m",
+                    uav.id, uav.state.p.x, uav.state.p.y, p.d_s
+                );
+                return Err(unsafe_at("segments", reason));
+            }
+        }
+        let mut cleared = Vec::new();
+        for uav in &mut self.uavs {
+            let goal = uav.nav.goal().filter(|g| check_goal_on(&road, *g, "goal").is_ok());
+            if goal.is_none() && uav.nav.goal().is_some() {
+                cleared.push(uav.id.clone());
+            }
+            let arrived = uav.nav.arrived && goal.is_some();
+            uav.nav = NavState::new(uav.state.p);
+            uav.nav.set_goal(&road, goal, uav.state.p);
+            uav.nav.arrived = arrived;
+        }
+        self.road = road;
+        Ok(cleared)
+    }
+}
+
+fn check_goal_on(road: &Road, goal: Vec2, field: &str) -> Result<(), EditError> {
+    if !uav::is_finite(&goal) {
+        return Err(unsafe_at(field, "must be two finite numbers".into()));
+    }
+    if !road.contains(&goal) {
+        return Err(unsafe_at(field, format!("[{}, {}] is outside the road", goal.x, goal.y)));
+    }
+    Ok(())
+}
