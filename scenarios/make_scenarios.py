@@ -56,3 +56,8 @@ goals = [[19.0, 26.4], [19.0, 27.8], [17.0, 26.6], [17.0, 28.0], [15.0, 26.8],
 write("snake10", {"t_max": 120},
       road([[float(x), float(y)] for x, y in snake], 3.0),
       [(f"u{i}", s, g) for i, (s, g) in enumerate(zip(starts, goals))])
+
+# The embedded default of `airroads serve`: six UAVs on the snake road, from its entry to its far end.
+write("demo", {"t_max": 120},
+      road([[float(x), float(y)] for x, y in snake], 3.0),
+      [(f"uav{i + 1}", s, g) for i, (s, g) in enumerate(zip(starts[:6], goals[:6]))])

@@ -78,6 +78,33 @@ fn shipped_lab_scenario_is_safe_and_writes_exactly_the_metrics_keys() {
     assert_eq!(csv.lines().count(), 1 + 3 * metrics["ticks"].as_u64().unwrap() as usize);
 }
 
+/// The trajectory CSV of a run of a shipped scenario with extra flags (exit status checked to be 0).
+fn shipped_run_trajectory(name: &str, extra: &[&str]) -> String {
+    let traj = scratch(&format!("{name}-{}.csv", extra.join("-")));
+    let scenario = repo().join(format!("scenarios/{name}.json"));
+    let mut args = vec!["run", scenario.to_str().unwrap(), "--trajectory", traj.to_str().unwrap()];
+    args.extend_from_slice(extra);
+    let run = airroads(&args);
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert_eq!(
+        run.status.code(),
+        Some(0),
+        "{name} {extra:?}: {stdout}{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(stdout.contains("SAFE") && !stdout.contains("UNSAFE"), "{name} {extra:?}: {stdout}");
+    std::fs::read_to_string(&traj).unwrap()
+}
+
+#[test]
+fn rl_is_the_default_policy_and_pd_keeps_the_baseline_both_safe_on_the_shipped_scenarios() {
+    for name in ["lab3", "snake10"] {
+        let default = shipped_run_trajectory(name, &[]);
+        assert_eq!(default, shipped_run_trajectory(name, &["--policy", "rl"]), "{name}: default is not rl");
+        assert_ne!(default, shipped_run_trajectory(name, &["--policy", "pd"]), "{name}: pd flies like rl");
+    }
+}
+
 #[test]
 fn a_run_that_does_not_arrive_exits_1() {
     let mut s = lab3();

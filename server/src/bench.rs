@@ -13,6 +13,7 @@ use uav::Vec2;
 pub fn main(args: BenchArgs) -> ExitCode {
     match args.target {
         BenchTarget::Filter => bench_filter(args.iterations),
+        BenchTarget::Server => return crate::bench_server::main(&args),
     }
     ExitCode::SUCCESS
 }

@@ -22,6 +22,11 @@ pub enum Command {
     Stress(StressArgs),
     /// Measure the filter and print a table.
     Bench(BenchArgs),
+    /// Run the ground-control server: the 20 Hz fleet loop, the REST API, the WebSocket stream.
+    /// With no arguments it resumes the saved fleet or flies the embedded demo.
+    Serve(ServeArgs),
+    /// Ask a running server for `/healthz`; exit 0 when it answers 200 (for container health checks).
+    Health(HealthArgs),
     /// Fly the paper's reference trajectories with a tracking policy and the PD baselines; print
     /// tracking RMSE and inference time.
     Track(TrackArgs),
@@ -60,9 +65,9 @@ pub struct FlightArgs {
     /// How temporary targets are chosen.
     #[arg(long, default_value = "route", value_parser = ["route", "lanes", "alg1"])]
     pub nav: String,
-    /// Policy flown by every UAV: `pd` (the PD baseline), `rl` (the shipped RL model), or a name given
-    /// with `--model NAME=FILE.onnx`.
-    #[arg(long, default_value = "pd")]
+    /// Policy flown by every UAV: `rl` (the shipped RL model, default), `pd` (the PD baseline), or a
+    /// name given with `--model NAME=FILE.onnx`.
+    #[arg(long, default_value = "rl")]
     pub policy: String,
     /// Load an extra ONNX policy under a name (repeatable), e.g. `--model mine=policies/models/x.onnx`.
     #[arg(long = "model", value_name = "NAME=FILE")]
@@ -76,6 +81,42 @@ pub struct FlightArgs {
     /// Slack weights: `urgency` (divided by the row's barrier value, default) or `fixed` (cbf.md §6).
     #[arg(long, default_value = "urgency", value_parser = ["urgency", "fixed"])]
     pub slack_weights: String,
+}
+
+/// `airroads serve`.
+#[derive(Debug, Args)]
+pub struct ServeArgs {
+    /// Address to listen on. A non-loopback address needs a token.
+    #[arg(long, default_value = "127.0.0.1:8080")]
+    pub addr: std::net::SocketAddr,
+    /// Bearer token required for changes (default: $AIRROADS_TOKEN; none: changes are open).
+    #[arg(long)]
+    pub token: Option<String>,
+    /// Where the road, fleet and goals are saved and resumed from
+    /// (default: $XDG_DATA_HOME/airroads or ~/.local/share/airroads).
+    #[arg(long)]
+    pub data_dir: Option<PathBuf>,
+    /// Save nothing and resume nothing.
+    #[arg(long, conflicts_with = "data_dir")]
+    pub ephemeral: bool,
+    /// Start from this scenario file instead of the saved state or the embedded demo.
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
+    /// Log to Rerun (0.36.x viewer): `off`, `connect` (the local viewer), `connect=ADDR` (host:port or
+    /// rerun+http://host:port/proxy), `save=FILE.rrd`, or `serve` (a gRPC server on 127.0.0.1:9876).
+    #[arg(long, default_value = "off", value_name = "MODE")]
+    pub rerun: airroads::serve::rerun_sink::RerunMode,
+    /// Flight options (`--policy` is the policy of UAVs added without one).
+    #[command(flatten)]
+    pub flight: FlightArgs,
+}
+
+/// `airroads health`.
+#[derive(Debug, Args)]
+pub struct HealthArgs {
+    /// The health URL (plain http).
+    #[arg(long, default_value = "http://127.0.0.1:8080/healthz")]
+    pub url: String,
 }
 
 /// `airroads run`.
@@ -120,9 +161,18 @@ pub struct BenchArgs {
     /// What to measure.
     #[arg(value_enum)]
     pub target: BenchTarget,
-    /// Filter calls per row count.
+    /// Filter calls per row count (`filter`).
     #[arg(long, default_value_t = 20000)]
     pub iterations: usize,
+    /// Seconds per phase (`server`).
+    #[arg(long, default_value_t = 10.0)]
+    pub seconds: f64,
+    /// WebSocket clients of the loaded phases (`server`); a tenth of them never read.
+    #[arg(long, default_value_t = 200)]
+    pub clients: usize,
+    /// Scenario the server flies (`server`; default: the embedded demo).
+    #[arg(long)]
+    pub scenario: Option<PathBuf>,
 }
 
 /// Benchmarks.
@@ -130,6 +180,8 @@ pub struct BenchArgs {
 pub enum BenchTarget {
     /// µs per filtered UAV for 2, 6 and 12 active rows.
     Filter,
+    /// The server under load: tick p99 with 0 and with 200 WebSocket clients (20 stalled), REST p99.
+    Server,
 }
 
 impl FlightArgs {

@@ -1,4 +1,4 @@
-//! `airroads`: ground control for UAV fleets in air roads. Subcommands: `run` (a scenario, headless),
+//! `airroads`: ground control for UAV fleets in air roads. Subcommands: `serve` (the server), `run` (a scenario, headless),
 //! `stress` (random scenarios), `bench` (filter timing), `track` (tracking benchmark of a policy).
 
 /// Prints a line to stdout, ignoring write errors: a closed pipe (`airroads run … | head`) must not
@@ -11,8 +11,10 @@ macro_rules! say {
 }
 
 mod bench;
+mod bench_server;
 mod cli;
 mod run_cmd;
+mod serve_cmd;
 mod stress_cmd;
 mod track;
 
@@ -26,5 +28,7 @@ fn main() -> ExitCode {
         cli::Command::Stress(args) => stress_cmd::main(args),
         cli::Command::Bench(args) => bench::main(args),
         cli::Command::Track(args) => track::main(args),
+        cli::Command::Serve(args) => serve_cmd::main(args),
+        cli::Command::Health(args) => serve_cmd::health(&args.url),
     }
 }

@@ -1,0 +1,20 @@
+# airroads server image: `docker build -t airroads .` then
+#   docker run --rm -p 8080:8080 -e AIRROADS_TOKEN=change-me -v airroads-data:/var/lib/airroads airroads
+# The server listens on 0.0.0.0 inside the container, which it only does with a token.
+
+# Build stage: the workspace's toolchain (rust-version 1.95) and its locked dependencies.
+FROM rust:1.95-slim-bookworm AS build
+WORKDIR /src
+COPY . .
+RUN cargo build --release --locked -p airroads \
+    && strip target/release/airroads
+
+# Runtime stage: the binary alone (the policy model and the demo are embedded in it).
+FROM debian:bookworm-slim
+RUN useradd --system --create-home --home-dir /var/lib/airroads airroads
+COPY --from=build /src/target/release/airroads /usr/local/bin/airroads
+USER airroads
+VOLUME /var/lib/airroads
+EXPOSE 8080
+HEALTHCHECK --interval=10s --timeout=3s CMD ["airroads", "health", "--url", "http://127.0.0.1:8080/healthz"]
+ENTRYPOINT ["airroads", "serve", "--addr", "0.0.0.0:8080", "--data-dir", "/var/lib/airroads"]

@@ -1,0 +1,4 @@
+//! The airroads server library: `airroads serve` (fleet loop, REST API, WebSocket stream,
+//! persistence). The binary adds the command line and the headless subcommands.
+
+pub mod serve;

@@ -1,0 +1,230 @@
+//! REST handlers (`README.md`, `GET /api/openapi.json`). Reads answer from the latest published
+//! snapshot; changes go to the fleet loop as commands and are answered once it applied them.
+
+use super::command::{Command, Outcome};
+use super::error::{ApiError, ApiJson};
+use super::snapshot::UavSnapshot;
+use super::state::AppState;
+use axum::extract::{Path, State};
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use axum::{Json, Router, routing};
+use fleet::Scenario;
+use roads::{Road, RoadLayout};
+use serde::Deserialize;
+use serde_json::{Value, json};
+use uav::Vec2;
+
+/// The `/api` routes and `/healthz`.
+pub fn router() -> Router<AppState> {
+    Router::new()
+        .route("/healthz", routing::get(healthz))
+        .route("/api/openapi.json", routing::get(openapi))
+        .route("/api/road", routing::get(get_road).put(put_road))
+        .route("/api/road/geometry", routing::get(get_road_geometry))
+        .route("/api/uavs", routing::get(list_uavs).post(add_uav))
+        .route("/api/uavs/{id}", routing::get(get_uav).delete(remove_uav))
+        .route("/api/uavs/{id}/goal", routing::put(set_goal).delete(clear_goal))
+        .route("/api/uavs/{id}/policy", routing::put(set_policy))
+        .route("/api/policies", routing::get(list_policies))
+        .route("/api/scenario", routing::post(load_scenario))
+        .route("/api/fleet/pause", routing::post(pause))
+        .route("/api/fleet/resume", routing::post(resume))
+        .route("/api/state", routing::get(get_state))
+        .route("/api/metrics", routing::get(get_metrics))
+}
+
+async fn healthz(State(app): State<AppState>) -> Response {
+    let tick = app.snapshots.borrow().tick;
+    if app.commands.is_closed() {
+        let body = json!({"status": "loop_stopped", "tick": tick});
+        return (StatusCode::SERVICE_UNAVAILABLE, Json(body)).into_response();
+    }
+    Json(json!({"status": "ok", "tick": tick})).into_response()
+}
+
+async fn openapi() -> Response {
+    ([(header::CONTENT_TYPE, "application/json")], super::openapi::DOCUMENT).into_response()
+}
+
+async fn get_road(State(app): State<AppState>) -> Json<RoadLayout> {
+    Json(app.road.borrow().layout.clone())
+}
+
+async fn get_road_geometry(State(app): State<AppState>) -> Response {
+    Json(app.road.borrow().clone()).into_response()
+}
+
+async fn put_road(
+    State(app): State<AppState>,
+    ApiJson(layout): ApiJson<RoadLayout>,
+) -> Result<Response, ApiError> {
+    let road = Road::new(layout).map_err(|e| {
+        let field = e.segment.map_or_else(|| "segments".to_string(), |i| format!("segments[{i}]"));
+        let mut err =
+            ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_road", e.message.clone()).field(field);
+        let mut extra = serde_json::Map::new();
+        extra.insert("segment".into(), json!(e.segment));
+        extra.insert("rule".into(), json!(e.rule.name()));
+        err.extra = Some(extra);
+        err
+    })?;
+    match app.apply(Command::SetRoad(road)).await {
+        Ok(Outcome::RoadReplaced { cleared_goals }) => {
+            let version = app.road.borrow().version;
+            Ok(Json(json!({"version": version, "cleared_goals": cleared_goals})).into_response())
+        }
+        Ok(_) => Ok(StatusCode::OK.into_response()),
+        // A UAV would be outside or too close to a wall of the new road: a conflict with the fleet.
+        Err(mut e) if e.code == "unsafe" => {
+            e.status = StatusCode::CONFLICT;
+            e.code = "unsafe_road";
+            Err(e)
+        }
+        Err(e) => Err(e),
+    }
+}
+
+async fn list_uavs(State(app): State<AppState>) -> Json<Vec<UavSnapshot>> {
+    Json(app.snapshots.borrow().uavs.clone())
+}
+
+async fn get_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<Json<UavSnapshot>, ApiError> {
+    let snapshot = app.snapshots.borrow().clone();
+    snapshot.uavs.iter().find(|u| u.id == id).cloned().map(Json).ok_or_else(|| ApiError::unknown_uav(&id))
+}
+
+/// `POST /api/uavs` body.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct NewUav {
+    id: String,
+    position: [f64; 2],
+    #[serde(default)]
+    policy: Option<String>,
+    #[serde(default)]
+    goal: Option<[f64; 2]>,
+}
+
+/// Ids appear in URL paths: 1 to 64 characters from `A-Z a-z 0-9 _ - .`.
+fn check_id(id: &str) -> Result<(), ApiError> {
+    let ok = (1..=64).contains(&id.len())
+        && id.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.'));
+    if ok {
+        Ok(())
+    } else {
+        Err(ApiError::invalid("id", "must be 1 to 64 characters from A-Z, a-z, 0-9, _, - and ."))
+    }
+}
+
+/// A point of a request: two finite coordinates within the range roads may have.
+fn point(field: &str, x: [f64; 2]) -> Result<Vec2, ApiError> {
+    let limit = roads::MAX_COORDINATE_M;
+    if x.iter().all(|c| c.is_finite() && c.abs() <= limit) {
+        Ok(Vec2::new(x[0], x[1]))
+    } else {
+        Err(ApiError::invalid(field, format!("must be two finite numbers within ±{limit} m")))
+    }
+}
+
+async fn add_uav(State(app): State<AppState>, ApiJson(new): ApiJson<NewUav>) -> Result<Response, ApiError> {
+    check_id(&new.id)?;
+    let position = point("position", new.position)?;
+    let goal = new.goal.map(|g| point("goal", g)).transpose()?;
+    let id = new.id.clone();
+    app.apply(Command::AddUav { id: new.id, position, policy: new.policy, goal }).await?;
+    let body = json!({"id": id, "position": new.position, "goal": new.goal});
+    Ok((StatusCode::CREATED, [(header::LOCATION, format!("/api/uavs/{id}"))], Json(body)).into_response())
+}
+
+async fn remove_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+    app.apply(Command::RemoveUav(id)).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// `PUT /api/uavs/{id}/goal` body.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GoalBody {
+    goal: [f64; 2],
+}
+
+async fn set_goal(
+    State(app): State<AppState>,
+    Path(id): Path<String>,
+    ApiJson(body): ApiJson<GoalBody>,
+) -> Result<Json<Value>, ApiError> {
+    let goal = point("goal", body.goal)?;
+    app.apply(Command::SetGoal(id.clone(), Some(goal))).await?;
+    Ok(Json(json!({"id": id, "goal": body.goal})))
+}
+
+async fn clear_goal(State(app): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+    app.apply(Command::SetGoal(id, None)).await?;
+    Ok(StatusCode::NO_CONTENT)
+}
+
+/// `PUT /api/uavs/{id}/policy` body.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct PolicyBody {
+    policy: String,
+}
+
+async fn set_policy(
+    State(app): State<AppState>,
+    Path(id): Path<String>,
+    ApiJson(body): ApiJson<PolicyBody>,
+) -> Result<Json<Value>, ApiError> {
+    app.apply(Command::SetPolicy(id.clone(), body.policy.clone())).await?;
+    Ok(Json(json!({"id": id, "policy": body.policy})))
+}
+
+async fn list_policies(State(app): State<AppState>) -> Json<Value> {
+    Json(json!({"policies": &*app.policies, "default": &*app.default_policy}))
+}
+
+async fn load_scenario(
+    State(app): State<AppState>,
+    ApiJson(scenario): ApiJson<Scenario>,
+) -> Result<Json<Value>, ApiError> {
+    let valid = scenario.validate().map_err(|e| match e {
+        fleet::ScenarioError::Invalid { field, reason } => ApiError::invalid(field, reason),
+        other => ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", other.to_string()),
+    })?;
+    let (name, count) = (valid.name.clone(), valid.uavs.len());
+    let tick = match app.apply(Command::LoadScenario(Box::new(valid))).await? {
+        Outcome::ScenarioLoaded { tick } => tick,
+        _ => app.snapshots.borrow().tick,
+    };
+    Ok(Json(json!({"name": name, "uavs": count, "loaded_after_tick": tick})))
+}
+
+async fn pause(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+    app.apply(Command::Hold(true)).await?;
+    Ok(Json(json!({"paused": true})))
+}
+
+async fn resume(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+    app.apply(Command::Hold(false)).await?;
+    Ok(Json(json!({"paused": false})))
+}
+
+async fn get_state(State(app): State<AppState>) -> Response {
+    let frame = app.frames.borrow().clone();
+    ([(header::CONTENT_TYPE, "application/json")], frame.text.as_str().to_owned()).into_response()
+}
+
+async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
+    use std::sync::atomic::Ordering::Relaxed;
+    let metrics = app.metrics.borrow().clone();
+    let mut doc = serde_json::to_value(&*metrics).unwrap_or_else(|_| json!({}));
+    let s = &app.stream;
+    doc["stream"] = json!({
+        "clients": s.clients.load(Relaxed),
+        "frames_sent": s.frames_sent.load(Relaxed),
+        "frames_skipped": s.frames_skipped.load(Relaxed),
+        "clients_dropped": s.clients_dropped.load(Relaxed),
+    });
+    Json(doc)
+}

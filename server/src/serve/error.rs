@@ -1,0 +1,165 @@
+//! The API's errors: `{"error": {"code", "message", "field"?}}` with a 4xx status (5xx only when
+//! the fleet loop is gone), and a JSON body extractor whose rejections use the same shape.
+
+use axum::extract::{FromRequest, Request};
+use axum::http::{StatusCode, header};
+use axum::response::{IntoResponse, Response};
+use fleet::EditError;
+use serde::de::DeserializeOwned;
+use serde_json::json;
+
+/// An error answered to a client.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ApiError {
+    /// HTTP status.
+    pub status: StatusCode,
+    /// Stable machine-readable code, e.g. `invalid_body`, `unknown_uav`.
+    pub code: &'static str,
+    /// What is wrong, for people.
+    pub message: String,
+    /// The request field at fault (JSON path), when one is.
+    pub field: Option<String>,
+    /// Extra members of the error object (e.g. `segment`, `rule` of a road error).
+    pub extra: Option<serde_json::Map<String, serde_json::Value>>,
+}
+
+impl ApiError {
+    /// An error with a status, code and message.
+    pub fn new(status: StatusCode, code: &'static str, message: impl Into<String>) -> Self {
+        Self { status, code, message: message.into(), field: None, extra: None }
+    }
+
+    /// The same error naming the request field at fault.
+    pub fn field(mut self, field: impl Into<String>) -> Self {
+        self.field = Some(field.into());
+        self
+    }
+
+    /// 422 for a field with an invalid value.
+    pub fn invalid(field: impl Into<String>, message: impl Into<String>) -> Self {
+        Self::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_value", message).field(field)
+    }
+
+    /// 404 for an unknown UAV.
+    pub fn unknown_uav(id: &str) -> Self {
+        Self::new(StatusCode::NOT_FOUND, "unknown_uav", format!("no UAV with id `{id}`")).field("id")
+    }
+
+    /// 503 when the fleet loop does not answer.
+    pub fn loop_unavailable() -> Self {
+        Self::new(StatusCode::SERVICE_UNAVAILABLE, "loop_unavailable", "the fleet loop is not running")
+    }
+}
+
+impl From<EditError> for ApiError {
+    fn from(e: EditError) -> Self {
+        match e {
+            EditError::UnknownUav(id) => Self::unknown_uav(&id),
+            EditError::DuplicateId(id) => Self::new(
+                StatusCode::CONFLICT,
+                "duplicate_id",
+                format!("a UAV with id `{id}` exists already"),
+            )
+            .field("id"),
+            EditError::Unsafe { field, reason } => {
+                Self::new(StatusCode::UNPROCESSABLE_ENTITY, "unsafe", reason).field(field)
+            }
+            EditError::UnknownPolicy(reason) => {
+                Self::new(StatusCode::UNPROCESSABLE_ENTITY, "unknown_policy", reason).field("policy")
+            }
+        }
+    }
+}
+
+impl IntoResponse for ApiError {
+    fn into_response(self) -> Response {
+        let mut error = self.extra.unwrap_or_default();
+        error.insert("code".into(), json!(self.code));
+        error.insert("message".into(), json!(self.message));
+        if let Some(field) = self.field {
+            error.insert("field".into(), json!(field));
+        }
+        (self.status, axum::Json(json!({ "error": error }))).into_response()
+    }
+}
+
+/// Largest request body accepted (bytes): a road of 2,000 segments is about 300 kB.
+pub const MAX_BODY_BYTES: usize = 4 << 20;
+
+/// A JSON request body. Malformed JSON is a 400, a wrong type, missing or unknown key a 422 naming
+/// the field by its JSON path, a missing or wrong content type a 415.
+pub struct ApiJson<T>(pub T);
+
+impl<S: Send + Sync, T: DeserializeOwned> FromRequest<S> for ApiJson<T> {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, ApiError> {
+        let json_type = req
+            .headers()
+            .get(header::CONTENT_TYPE)
+            .and_then(|v| v.to_str().ok())
+            .and_then(|v| v.split(';').next())
+            .is_some_and(|m| {
+                let m = m.trim().to_ascii_lowercase();
+                m == "application/json" || (m.starts_with("application/") && m.ends_with("+json"))
+            });
+        if !json_type {
+            return Err(ApiError::new(
+                StatusCode::UNSUPPORTED_MEDIA_TYPE,
+                "unsupported_media_type",
+                "the body must be JSON with `Content-Type: application/json`",
+            ));
+        }
+        let bytes = axum::body::Bytes::from_request(req, state)
+            .await
+            .map_err(|e| ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, "body_too_large", e.body_text()))?;
+        parse(&bytes).map(ApiJson)
+    }
+}
+
+/// Parses a JSON body, naming the field at fault on error.
+pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
+    let de = &mut serde_json::Deserializer::from_slice(bytes);
+    match serde_path_to_error::deserialize(de) {
+        Ok(value) => Ok(value),
+        Err(e) => {
+            let path = e.path().to_string();
+            let inner = e.into_inner();
+            let message = inner.to_string();
+            if inner.is_syntax() || inner.is_eof() {
+                Err(ApiError::new(StatusCode::BAD_REQUEST, "malformed_json", message))
+            } else {
+                let field = if path == "." { None } else { Some(path) };
+                let mut err = ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", message);
+                err.field = field;
+                Err(err)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code)]
+    struct Body {
+        goal: [f64; 2],
+    }
+
+    #[test]
+    fn parse_errors_name_the_field_and_pick_the_status() {
+        let e = parse::<Body>(b"{\"goal\": [1, \"x\"]}").unwrap_err();
+        assert_eq!((e.status, e.field.as_deref()), (StatusCode::UNPROCESSABLE_ENTITY, Some("goal[1]")));
+        let e = parse::<Body>(b"{\"goal\": [1, 2]").unwrap_err();
+        assert_eq!((e.status, e.code), (StatusCode::BAD_REQUEST, "malformed_json"));
+        let e = parse::<Body>(b"{\"goal\": [1, 2], \"x\": 1}").unwrap_err();
+        assert_eq!(e.status, StatusCode::UNPROCESSABLE_ENTITY);
+        assert!(e.message.contains("unknown field `x`"), "{}", e.message);
+        // JSON has no NaN: a non-finite number is a syntax error, not a panic.
+        let e = parse::<Body>(b"{\"goal\": [NaN, 1]}").unwrap_err();
+        assert_eq!(e.status, StatusCode::BAD_REQUEST);
+    }
+}

@@ -1,0 +1,570 @@
+//! Rerun logging of the live fleet (`airroads serve --rerun …`).
+//!
+//! A dedicated thread reads the snapshot, road and metrics watch channels at its own pace: when it
+//! falls behind it takes the latest snapshot and counts the ones it skipped, so the fleet loop never
+//! waits for it. Everything is logged on the `tick` sequence timeline (and `time`, in seconds):
+//! - `world/road/walls`, `world/road/centerline`: line strips, logged again when the road changes;
+//! - `world/uavs/{id}`: the position (labelled with the id, coloured by status, radius D_c/2), with
+//!   `trail`, `velocity`, `target` and `goal` below it; cleared when the UAV is removed;
+//! - scalar series `barrier/{id}` (smallest barrier value), `slack/{id}`, `margins/collision`,
+//!   `margins/road` (fleet minima, m) and `tick_us/p50`, `tick_us/p99` (fleet loop timing).
+
+use super::engine::RoadView;
+use super::snapshot::{Snapshot, UavSnapshot, UavStatus};
+use super::state::AppState;
+use super::stats::LoopMetrics;
+use anyhow::Context as _;
+use rerun::external::re_uri::RedapUri;
+use rerun::sink::{FileSink, FileSinkOptions, GrpcSink, GrpcSinkConnectionState, LogSink, SinkFlushError};
+use rerun::{
+    Arrows2D, Clear, Color, EntityPath, EntityPathPart, LineStrip2D, LineStrips2D, Points2D, Radius,
+    RecordingStream, RecordingStreamBuilder, RecordingStreamResult, Scalars, Transform3D,
+};
+use std::collections::{HashMap, VecDeque};
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::sync::{oneshot, watch};
+
+/// The Rerun application id of the recordings.
+pub const APPLICATION_ID: &str = "airroads";
+/// The sequence timeline of fleet-loop ticks.
+pub const TICK_TIMELINE: &str = "tick";
+/// The duration timeline of simulated time (s).
+pub const TIME_TIMELINE: &str = "time";
+/// Points kept in each UAV's trail.
+pub const TRAIL_POINTS: usize = 50;
+/// Ticks between two trail points (the trail covers TRAIL_POINTS × this many ticks: 10 s at 20 Hz).
+pub const TRAIL_EVERY_TICKS: u64 = 4;
+/// Memory the `serve` mode's gRPC server keeps for late viewers before dropping the oldest data.
+pub const SERVE_MEMORY_BYTES: u64 = 512 * 1024 * 1024;
+/// How long [`RerunSink::finish`] waits for the sink to flush before leaving it behind.
+pub const FINISH_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// Where `--rerun` sends the log.
+#[derive(Debug, Clone, PartialEq, Eq, Default)]
+pub enum RerunMode {
+    /// No logging.
+    #[default]
+    Off,
+    /// Stream to a running viewer at this `rerun+http://…/proxy` URL (None: the default local viewer).
+    Connect(Option<String>),
+    /// Write an `.rrd` file.
+    Save(PathBuf),
+    /// Host a gRPC server on 127.0.0.1:9876 that viewers connect to.
+    Serve,
+}
+
+/// Why a `--rerun` value was refused.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum RerunModeError {
+    /// Not one of the forms.
+    #[error("`{0}`: expected off, connect, connect=ADDR, save=FILE.rrd or serve")]
+    Unknown(String),
+    /// `connect=` with an address that is not `host:port` or a `rerun+http://host:port/proxy` URL.
+    #[error("`{0}`: expected host:port or rerun+http://host:port/proxy after connect=")]
+    BadAddress(String),
+    /// `save=` without a file name ending in `.rrd`.
+    #[error("`{0}`: expected a file name ending in .rrd after save=")]
+    NotRrd(String),
+}
+
+impl std::str::FromStr for RerunMode {
+    type Err = RerunModeError;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "off" => return Ok(Self::Off),
+            "connect" => return Ok(Self::Connect(None)),
+            "serve" => return Ok(Self::Serve),
+            _ => {}
+        }
+        if let Some(addr) = s.strip_prefix("connect=") {
+            return connect_url(addr).map(|url| Self::Connect(Some(url)));
+        }
+        if let Some(file) = s.strip_prefix("save=") {
+            let path = PathBuf::from(file);
+            let rrd = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("rrd"));
+            let named = path.file_stem().is_some_and(|stem| !stem.is_empty());
+            return if rrd && named { Ok(Self::Save(path)) } else { Err(RerunModeError::NotRrd(s.into())) };
+        }
+        Err(RerunModeError::Unknown(s.into()))
+    }
+}
+
+impl std::fmt::Display for RerunMode {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Off => write!(f, "off"),
+            Self::Connect(url) => {
+                write!(f, "connect={}", url.as_deref().unwrap_or(rerun::DEFAULT_CONNECT_URL))
+            }
+            Self::Save(path) => write!(f, "save={}", path.display()),
+            Self::Serve => write!(f, "serve (rerun+http://127.0.0.1:{}/proxy)", rerun::DEFAULT_SERVER_PORT),
+        }
+    }
+}
+
+/// `host:port` or a full proxy URL, as the proxy URL; refused unless Rerun parses it as one.
+fn connect_url(addr: &str) -> Result<String, RerunModeError> {
+    let url = if addr.contains("://") { addr.to_string() } else { format!("rerun+http://{addr}/proxy") };
+    match url.parse::<RedapUri>() {
+        Ok(RedapUri::Proxy(_)) if !addr.trim().is_empty() => Ok(url),
+        _ => Err(RerunModeError::BadAddress(format!("connect={addr}"))),
+    }
+}
+
+/// What the sink did, returned by [`RerunSink::finish`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SinkStats {
+    /// Snapshots logged.
+    pub logged: u64,
+    /// Snapshots skipped because the sink was behind the loop or no viewer was connected.
+    pub skipped: u64,
+    /// Log calls that failed (the first one is printed).
+    pub errors: u64,
+}
+
+/// The running sink thread.
+pub struct RerunSink {
+    stop: Option<oneshot::Sender<()>>,
+    done: std::sync::mpsc::Receiver<SinkStats>,
+}
+
+impl RerunSink {
+    /// Stops logging, flushes (an `.rrd` file is complete afterwards) and returns the counts; None if
+    /// the sink did not finish within [`FINISH_TIMEOUT`] (it is left behind, never blocking shutdown).
+    /// Blocking: call it from a plain thread or `spawn_blocking`.
+    pub fn finish(mut self) -> Option<SinkStats> {
+        if let Some(stop) = self.stop.take() {
+            // The thread may already have ended with the fleet loop; then there is nothing to stop.
+            let _ = stop.send(());
+        }
+        self.done.recv_timeout(FINISH_TIMEOUT).ok()
+    }
+}
+
+/// Starts logging `state`'s channels as `mode` says (None for `off`). Errors (a file that cannot be
+/// created, a port in use) are returned; a missing viewer for `connect` is not an error: the sink
+/// warns, keeps retrying and skips snapshots until one listens.
+pub fn start(mode: &RerunMode, state: &AppState) -> anyhow::Result<Option<RerunSink>> {
+    let output = match mode {
+        RerunMode::Off => return Ok(None),
+        RerunMode::Connect(url) => {
+            let url = url.clone().unwrap_or_else(|| rerun::DEFAULT_CONNECT_URL.to_string());
+            Output::Viewer(Viewer::open(url)?)
+        }
+        RerunMode::Save(path) => {
+            // No footer: its chunk index grows without bound over a long run (`rerun rrd optimize` adds one).
+            let sink = FileSink::with_options(path, FileSinkOptions { write_footer: false })
+                .with_context(|| format!("creating {}", path.display()))?;
+            Output::Stream(builder().set_sinks(vec![Box::new(sink) as Box<dyn LogSink>])?)
+        }
+        RerunMode::Serve => {
+            let port = rerun::DEFAULT_SERVER_PORT;
+            // The gRPC server binds on its own thread and only logs a failure: check the port first.
+            drop(std::net::TcpListener::bind(("127.0.0.1", port)).with_context(|| format!("port {port}"))?);
+            let options = rerun::ServerOptions {
+                memory_limit: rerun::MemoryLimit::from_bytes(SERVE_MEMORY_BYTES),
+                ..Default::default()
+            };
+            Output::Stream(builder().serve_grpc_opts("127.0.0.1", port, options)?)
+        }
+    };
+    let channels = (state.snapshots.clone(), state.road.clone(), state.metrics.clone());
+    let (stop, stopped) = oneshot::channel();
+    let (done_tx, done) = std::sync::mpsc::channel();
+    std::thread::Builder::new().name("rerun-sink".into()).spawn(move || {
+        let stats = run(output, channels, stopped);
+        // `finish` may have given up waiting; the counts are then of no use to anyone.
+        let _ = done_tx.send(stats);
+    })?;
+    Ok(Some(RerunSink { stop: Some(stop), done }))
+}
+
+fn builder() -> RecordingStreamBuilder {
+    RecordingStreamBuilder::new(APPLICATION_ID).recording_name("airroads serve")
+}
+
+type Channels =
+    (watch::Receiver<Arc<Snapshot>>, watch::Receiver<Arc<RoadView>>, watch::Receiver<Arc<LoopMetrics>>);
+
+/// The sink thread: logs every snapshot it gets to until `stopped` fires or the fleet loop ends.
+fn run(
+    mut output: Output,
+    (mut snapshots, road, metrics): Channels,
+    mut stopped: oneshot::Receiver<()>,
+) -> SinkStats {
+    let mut logger = Logger::default();
+    let runtime = match tokio::runtime::Builder::new_current_thread().build() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("warning: rerun: no runtime for the sink thread ({e}); nothing is logged");
+            return logger.stats;
+        }
+    };
+    loop {
+        let snapshot = snapshots.borrow_and_update().clone();
+        match output.stream() {
+            Some(rec) => {
+                let (road, metrics) = (road.borrow().clone(), metrics.borrow().clone());
+                logger.log(rec, &snapshot, &road, &metrics);
+            }
+            None => {
+                logger.stats.skipped += 1;
+                logger.road_version = None;
+            }
+        }
+        let next = runtime.block_on(async {
+            tokio::select! {
+                biased;
+                _ = &mut stopped => false,
+                changed = snapshots.changed() => changed.is_ok(),
+            }
+        });
+        if !next {
+            break;
+        }
+    }
+    if let Some(rec) = output.stream()
+        && let Err(e) = rec.flush_with_timeout(FINISH_TIMEOUT)
+    {
+        eprintln!("warning: rerun: final flush: {e}");
+    }
+    if let Output::Viewer(viewer) = output
+        && !viewer.connected
+    {
+        viewer.abandon();
+    }
+    logger.stats
+}
+
+/// Where the recording goes.
+enum Output {
+    /// A file or the gRPC server: always ready.
+    Stream(RecordingStream),
+    /// A viewer that may not be listening (yet, or any more).
+    Viewer(Viewer),
+}
+
+impl Output {
+    /// The stream to log to now, None while no viewer is connected.
+    fn stream(&mut self) -> Option<&RecordingStream> {
+        match self {
+            Self::Stream(rec) => Some(rec),
+            Self::Viewer(viewer) => viewer.ready(),
+        }
+    }
+}
+
+/// A connection to a viewer, reopened when the viewer goes away. Nothing is logged while it is not
+/// connected, so the gRPC client's queue never fills and the sink thread never blocks on it.
+struct Viewer {
+    url: String,
+    rec: RecordingStream,
+    sink: Arc<GrpcSink>,
+    opened: Instant,
+    connected: bool,
+    warned: bool,
+    recording_id: String,
+}
+
+/// The gRPC sink behind an `Arc`, so its connection state stays readable.
+struct SharedGrpcSink(Arc<GrpcSink>);
+
+impl LogSink for SharedGrpcSink {
+    fn send(&self, msg: rerun::log::LogMsg) {
+        self.0.send(msg);
+    }
+    fn flush_blocking(&self, timeout: Duration) -> Result<(), SinkFlushError> {
+        self.0.flush_blocking(timeout)
+    }
+    fn default_batcher_config(&self) -> rerun::log::ChunkBatcherConfig {
+        self.0.default_batcher_config()
+    }
+}
+
+impl Viewer {
+    fn open(url: String) -> anyhow::Result<Self> {
+        let since_epoch =
+            std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+        let recording_id = format!("airroads-{}-{}", std::process::id(), since_epoch.as_millis());
+        let (rec, sink) = Self::connect(&url, &recording_id)?;
+        Ok(Self { url, rec, sink, opened: Instant::now(), connected: false, warned: false, recording_id })
+    }
+
+    fn connect(url: &str, recording_id: &str) -> anyhow::Result<(RecordingStream, Arc<GrpcSink>)> {
+        let RedapUri::Proxy(uri) = url.parse::<RedapUri>().with_context(|| format!("rerun URL {url}"))?
+        else {
+            anyhow::bail!("rerun URL {url}: not a proxy URL (rerun+http://host:port/proxy)");
+        };
+        let sink = Arc::new(GrpcSink::new(uri));
+        let rec = builder()
+            .recording_id(recording_id)
+            .set_sinks(vec![Box::new(SharedGrpcSink(sink.clone())) as Box<dyn LogSink>])?;
+        Ok((rec, sink))
+    }
+
+    fn ready(&mut self) -> Option<&RecordingStream> {
+        match self.sink.status() {
+            GrpcSinkConnectionState::Connected => {
+                if !self.connected && self.warned {
+                    eprintln!("airroads: rerun: connected to the viewer at {}", self.url);
+                }
+                (self.connected, self.warned) = (true, false);
+                return Some(&self.rec);
+            }
+            GrpcSinkConnectionState::Connecting { started } => {
+                if !self.warned && started.elapsed() > Duration::from_secs(2) {
+                    eprintln!(
+                        "warning: rerun: no viewer at {} (start one with `rerun`); the server keeps running \
+                         and logging starts when a viewer listens",
+                        self.url
+                    );
+                    self.warned = true;
+                }
+            }
+            GrpcSinkConnectionState::Disconnected(_) if self.opened.elapsed() > Duration::from_secs(1) => {
+                if self.connected {
+                    eprintln!("warning: rerun: the viewer at {} went away; reconnecting", self.url);
+                }
+                // The client makes no new attempts once disconnected: open a new one (same recording).
+                match Self::connect(&self.url, &self.recording_id) {
+                    Ok((rec, sink)) => {
+                        let old =
+                            (std::mem::replace(&mut self.rec, rec), std::mem::replace(&mut self.sink, sink));
+                        drop_in_background(old);
+                    }
+                    Err(e) => eprintln!("warning: rerun: {e:#}"),
+                }
+                (self.opened, self.connected) = (Instant::now(), false);
+            }
+            GrpcSinkConnectionState::Disconnected(_) => {}
+        }
+        None
+    }
+}
+
+impl Viewer {
+    /// Lets go of a connection that never reached a viewer without waiting for it.
+    fn abandon(self) {
+        drop_in_background((self.rec, self.sink));
+    }
+}
+
+/// Drops a stream on a thread of its own: the gRPC client's flush on drop waits up to 5 s for a
+/// viewer that is not there.
+fn drop_in_background(stream: (RecordingStream, Arc<GrpcSink>)) {
+    // If no thread can be spawned, the closure (and the stream) is dropped right here: slower, still correct.
+    let _ = std::thread::Builder::new().name("rerun-drop".into()).spawn(move || drop(stream));
+}
+
+/// Entity paths and trail of one UAV.
+struct UavLog {
+    root: EntityPath,
+    trail: EntityPath,
+    velocity: EntityPath,
+    target: EntityPath,
+    goal: EntityPath,
+    barrier: EntityPath,
+    slack: EntityPath,
+    points: VecDeque<[f32; 2]>,
+    trail_tick: Option<u64>,
+    had_goal: bool,
+    seen_tick: u64,
+}
+
+fn path(parts: &[&str]) -> EntityPath {
+    EntityPath::new(parts.iter().map(|p| EntityPathPart::new(*p)).collect())
+}
+
+impl UavLog {
+    fn new(id: &str) -> Self {
+        let below = |leaf| path(&["world", "uavs", id, leaf]);
+        Self {
+            root: path(&["world", "uavs", id]),
+            trail: below("trail"),
+            velocity: below("velocity"),
+            target: below("target"),
+            goal: below("goal"),
+            barrier: path(&["barrier", id]),
+            slack: path(&["slack", id]),
+            points: VecDeque::with_capacity(TRAIL_POINTS),
+            trail_tick: None,
+            had_goal: false,
+            seen_tick: 0,
+        }
+    }
+}
+
+/// What the sink remembers between snapshots.
+#[derive(Default)]
+struct Logger {
+    road_version: Option<u64>,
+    last_tick: Option<u64>,
+    uavs: HashMap<String, UavLog>,
+    stats: SinkStats,
+}
+
+fn xy(v: [f64; 2]) -> [f32; 2] {
+    [v[0] as f32, v[1] as f32]
+}
+
+fn color(status: UavStatus) -> Color {
+    match status {
+        UavStatus::Flying => Color::from_rgb(60, 200, 90),
+        UavStatus::Arrived => Color::from_rgb(70, 140, 255),
+        UavStatus::Braking => Color::from_rgb(255, 170, 40),
+        UavStatus::Failed => Color::from_rgb(230, 40, 40),
+        UavStatus::Stale => Color::from_rgb(150, 150, 150),
+    }
+}
+
+impl Logger {
+    fn log(&mut self, rec: &RecordingStream, snapshot: &Snapshot, road: &RoadView, metrics: &LoopMetrics) {
+        if self.last_tick == Some(snapshot.tick) {
+            return; // The first snapshot after a (re)connection may be one already logged.
+        }
+        if let Some(last) = self.last_tick {
+            self.stats.skipped += snapshot.tick.saturating_sub(last + 1);
+        }
+        self.last_tick = Some(snapshot.tick);
+        match self.log_snapshot(rec, snapshot, road, metrics) {
+            Ok(()) => self.stats.logged += 1,
+            Err(e) => {
+                if self.stats.errors == 0 {
+                    eprintln!("warning: rerun: logging tick {}: {e}", snapshot.tick);
+                }
+                self.stats.errors += 1;
+            }
+        }
+    }
+
+    fn log_snapshot(
+        &mut self,
+        rec: &RecordingStream,
+        snapshot: &Snapshot,
+        road: &RoadView,
+        metrics: &LoopMetrics,
+    ) -> RecordingStreamResult<()> {
+        rec.set_time_sequence(TICK_TIMELINE, i64::try_from(snapshot.tick).unwrap_or(i64::MAX));
+        rec.set_duration_secs(TIME_TIMELINE, snapshot.time);
+        if self.road_version != Some(road.version) {
+            // Rerun's 2D view draws y downwards; flipping `world` shows the road as on a map.
+            rec.log_static("world", &Transform3D::from_scale([1.0, -1.0, 1.0]))?;
+            let walls = road.walls.iter().map(|[a, b]| LineStrip2D::from_iter([xy(*a), xy(*b)]));
+            let walls = LineStrips2D::new(walls).with_colors([Color::from_rgb(220, 220, 220)]);
+            rec.log("world/road/walls", &walls.with_radii([Radius::new_ui_points(1.5)]))?;
+            let centre = LineStrip2D::from_iter(road.centerline.iter().map(|p| xy(*p)));
+            let centre = LineStrips2D::new([centre]).with_colors([Color::from_rgb(200, 180, 60)]);
+            rec.log("world/road/centerline", &centre.with_radii([Radius::new_ui_points(0.5)]))?;
+            self.road_version = Some(road.version);
+        }
+        let radius = (snapshot.d_c / 2.0) as f32;
+        for u in &snapshot.uavs {
+            if !self.uavs.contains_key(&u.id) {
+                self.uavs.insert(u.id.clone(), UavLog::new(&u.id));
+            }
+            if let Some(log) = self.uavs.get_mut(&u.id) {
+                log_uav(rec, log, u, snapshot.tick, radius)?;
+            }
+        }
+        let gone: Vec<String> = self
+            .uavs
+            .iter()
+            .filter(|(_, l)| l.seen_tick != snapshot.tick)
+            .map(|(id, _)| id.clone())
+            .collect();
+        for id in gone {
+            if let Some(log) = self.uavs.remove(&id) {
+                rec.log(log.root, &Clear::recursive())?;
+                rec.log(log.barrier, &Clear::flat())?;
+                rec.log(log.slack, &Clear::flat())?;
+            }
+        }
+        if let Some(m) = snapshot.min_collision_margin_m {
+            rec.log("margins/collision", &Scalars::single(m))?;
+        }
+        if let Some(m) = snapshot.min_road_margin_m {
+            rec.log("margins/road", &Scalars::single(m))?;
+        }
+        if metrics.ticks > 0 {
+            rec.log("tick_us/p50", &Scalars::single(metrics.tick.p50_us))?;
+            rec.log("tick_us/p99", &Scalars::single(metrics.tick.p99_us))?;
+        }
+        Ok(())
+    }
+}
+
+fn log_uav(
+    rec: &RecordingStream,
+    log: &mut UavLog,
+    u: &UavSnapshot,
+    tick: u64,
+    radius: f32,
+) -> RecordingStreamResult<()> {
+    log.seen_tick = tick;
+    let p = xy(u.p);
+    let point = Points2D::new([p]).with_labels([u.id.as_str()]).with_colors([color(u.status)]);
+    rec.log(log.root.clone(), &point.with_radii([radius]))?;
+    rec.log(log.velocity.clone(), &Arrows2D::from_vectors([xy(u.v)]).with_origins([p]))?;
+    rec.log(log.target.clone(), &Points2D::new([xy(u.target)]).with_radii([Radius::new_ui_points(3.0)]))?;
+    match u.goal {
+        Some(goal) => {
+            let goal = Points2D::new([xy(goal)]).with_colors([Color::from_rgb(255, 255, 255)]);
+            rec.log(log.goal.clone(), &goal.with_radii([Radius::new_ui_points(5.0)]))?;
+        }
+        None if log.had_goal => rec.log(log.goal.clone(), &Clear::flat())?,
+        None => {}
+    }
+    log.had_goal = u.goal.is_some();
+    if log.trail_tick.is_none_or(|t| tick >= t + TRAIL_EVERY_TICKS) {
+        if log.points.len() == TRAIL_POINTS {
+            log.points.pop_front();
+        }
+        log.points.push_back(p);
+        log.trail_tick = Some(tick);
+        let strip = LineStrip2D::from_iter(log.points.iter().copied());
+        rec.log(log.trail.clone(), &LineStrips2D::new([strip]).with_radii([Radius::new_ui_points(1.0)]))?;
+    }
+    if let Some(b) = u.min_barrier {
+        rec.log(log.barrier.clone(), &Scalars::single(b))?;
+    }
+    rec.log(log.slack.clone(), &Scalars::single(u.slack))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_every_form() {
+        assert_eq!("off".parse(), Ok(RerunMode::Off));
+        assert_eq!("serve".parse(), Ok(RerunMode::Serve));
+        assert_eq!("connect".parse(), Ok(RerunMode::Connect(None)));
+        let url = "rerun+http://10.0.0.2:9000/proxy".to_string();
+        assert_eq!("connect=10.0.0.2:9000".parse(), Ok(RerunMode::Connect(Some(url.clone()))));
+        assert_eq!(format!("connect={url}").parse(), Ok(RerunMode::Connect(Some(url))));
+        assert_eq!("save=out/run.rrd".parse(), Ok(RerunMode::Save("out/run.rrd".into())));
+    }
+
+    #[test]
+    fn refuses_anything_else() {
+        for bad in [
+            "",
+            "on",
+            "Off",
+            "connect=",
+            "connect=http://x:1/",
+            "save=",
+            "save=run.json",
+            "save=.rrd",
+            "serve=1",
+        ] {
+            let err = bad.parse::<RerunMode>().expect_err(bad).to_string();
+            assert!(err.starts_with(&format!("`{bad}`")), "{bad}: {err}");
+        }
+        assert!(matches!("save=x.txt".parse::<RerunMode>(), Err(RerunModeError::NotRrd(_))));
+        assert!(matches!("connect=a b".parse::<RerunMode>(), Err(RerunModeError::BadAddress(_))));
+    }
+}

@@ -1,0 +1,149 @@
+//! The immutable snapshot the fleet loop publishes after every tick (`GET /api/state`, `/ws`, Rerun).
+
+use fleet::{Fleet, Uav, collision_margin, road_margin};
+use serde::Serialize;
+use uav::Vec2;
+
+/// What one UAV is doing, as the dashboard colours it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum UavStatus {
+    /// Flying its policy towards its goal (or hovering without one); no slack in use.
+    Flying,
+    /// Within ε of its goal.
+    Arrived,
+    /// The filter needed slack this tick, or the fleet holds, or the policy failed: braking.
+    Braking,
+    /// The QP failed this tick; the UAV brakes.
+    Failed,
+    /// No fresh state from the link; its last known state was used.
+    Stale,
+}
+
+/// One UAV in a snapshot. Vectors are `[x, y]` in metres, m/s and m/s².
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct UavSnapshot {
+    /// Unique id.
+    pub id: String,
+    /// Name of its policy.
+    pub policy: String,
+    /// Position p (m).
+    pub p: [f64; 2],
+    /// Velocity v (m/s).
+    pub v: [f64; 2],
+    /// The policy's nominal input u_r (m/s²).
+    pub u_ref: [f64; 2],
+    /// The filtered input u sent to the UAV (m/s²).
+    pub u: [f64; 2],
+    /// Temporary target p^r (m).
+    pub target: [f64; 2],
+    /// Goal p_g, or null when it hovers.
+    pub goal: Option<[f64; 2]>,
+    /// Within ε of its goal.
+    pub arrived: bool,
+    /// What it is doing.
+    pub status: UavStatus,
+    /// CBF rows binding at u.
+    pub active_rows: usize,
+    /// Largest slack of its QP this tick (0 when none was needed).
+    pub slack: f64,
+    /// Smallest barrier value among its rows (null without rows).
+    pub min_barrier: Option<f64>,
+    /// Smallest collision margin S_kd (eq. 2) to a neighbour, null without neighbours nearby (m).
+    pub collision_margin_m: Option<f64>,
+    /// Road margin (eq. 6, braking distance included) to the nearest wall (m).
+    pub road_margin_m: f64,
+}
+
+/// The fleet after one tick.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Snapshot {
+    /// Ticks run since the server started.
+    pub tick: u64,
+    /// Time since the server started (s).
+    pub time: f64,
+    /// True while the fleet holds (`POST /api/fleet/pause`).
+    pub paused: bool,
+    /// Increases whenever the road changes (`GET /api/road` gives the layout).
+    pub road_version: u64,
+    /// Smallest collision margin over all pairs this tick, null with fewer than two UAVs nearby (m).
+    pub min_collision_margin_m: Option<f64>,
+    /// Smallest road margin over all UAVs this tick, null without UAVs (m).
+    pub min_road_margin_m: Option<f64>,
+    /// Safe distances D_c and D_s the margins are held above (m).
+    pub d_c: f64,
+    /// D_s (m).
+    pub d_s: f64,
+    /// Every UAV, in the order they were added.
+    pub uavs: Vec<UavSnapshot>,
+}
+
+fn xy(v: &Vec2) -> [f64; 2] {
+    [v.x, v.y]
+}
+
+fn status(u: &Uav, holding: bool) -> UavStatus {
+    let l = &u.last;
+    if l.stale {
+        UavStatus::Stale
+    } else if l.failed {
+        UavStatus::Failed
+    } else if u.nav.arrived {
+        UavStatus::Arrived
+    } else if l.max_slack > 1e-6 || l.policy_fallback || holding {
+        UavStatus::Braking
+    } else {
+        UavStatus::Flying
+    }
+}
+
+impl Snapshot {
+    /// The snapshot of `fleet` after its last tick; margins use the neighbour lists of that tick.
+    pub fn of(fleet: &Fleet, tick: u64, time: f64, road_version: u64) -> Self {
+        let p = fleet.config.params;
+        let road = fleet.road();
+        let lists = fleet.neighbour_lists();
+        let all = fleet.uavs();
+        let uavs: Vec<UavSnapshot> = all
+            .iter()
+            .enumerate()
+            .map(|(k, u)| {
+                let l = &u.last;
+                let collision = lists.get(k).and_then(|list| {
+                    list.iter()
+                        .filter_map(|&d| all.get(d))
+                        .map(|d| collision_margin(&u.state, &d.state, 2.0 * p.delta))
+                        .min_by(f64::total_cmp)
+                });
+                UavSnapshot {
+                    id: u.id.clone(),
+                    policy: u.policy.clone(),
+                    p: xy(&u.state.p),
+                    v: xy(&u.state.v),
+                    u_ref: xy(&l.u_ref),
+                    u: xy(&l.u),
+                    target: xy(&l.target),
+                    goal: u.nav.goal().map(|g| xy(&g)),
+                    arrived: u.nav.arrived,
+                    status: status(u, fleet.holding()),
+                    active_rows: l.active_rows,
+                    slack: l.max_slack,
+                    min_barrier: l.min_barrier.is_finite().then_some(l.min_barrier),
+                    collision_margin_m: collision,
+                    road_margin_m: road_margin(road, &u.state, p.delta),
+                }
+            })
+            .collect();
+        Self {
+            tick,
+            time,
+            paused: fleet.holding(),
+            road_version,
+            min_collision_margin_m: uavs.iter().filter_map(|u| u.collision_margin_m).min_by(f64::total_cmp),
+            min_road_margin_m: uavs.iter().map(|u| u.road_margin_m).min_by(f64::total_cmp),
+            d_c: p.d_c,
+            d_s: p.d_s,
+            uavs,
+        }
+    }
+}

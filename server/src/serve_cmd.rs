@@ -1,0 +1,158 @@
+//! `airroads serve`: checks the flags, starts the server and runs it until Ctrl-C or SIGTERM.
+
+use crate::cli::ServeArgs;
+use crate::run_cmd::{EXIT_INVALID, load_scenario};
+use airroads::serve::rerun_sink::{self, RerunMode};
+use airroads::serve::{self, ServeConfig, Server};
+use anyhow::Context as _;
+use std::process::ExitCode;
+
+/// Runs the subcommand: exit 0 after a clean shutdown, 1 on a runtime failure, 2 for invalid flags.
+pub fn main(args: ServeArgs) -> ExitCode {
+    let config = match config(&args) {
+        Ok(c) => c,
+        Err(message) => {
+            eprintln!("error: {message}");
+            return ExitCode::from(EXIT_INVALID);
+        }
+    };
+    let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
+        Ok(r) => r,
+        Err(e) => {
+            eprintln!("error: cannot start the async runtime: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    match runtime.block_on(run(args.addr, config, &args.rerun)) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// `airroads health`: exit 0 when `url` answers 200, 1 otherwise, 2 for an invalid URL.
+pub fn health(url: &str) -> ExitCode {
+    let Some((host, path)) = url.strip_prefix("http://").map(|r| r.split_once('/').unwrap_or((r, ""))) else {
+        eprintln!("error: --url {url}: expected http://HOST:PORT/PATH");
+        return ExitCode::from(EXIT_INVALID);
+    };
+    let check = async {
+        let addr = tokio::net::lookup_host(host)
+            .await?
+            .next()
+            .ok_or_else(|| anyhow::anyhow!("{host}: no address"))?;
+        let path = format!("/{path}");
+        let call = serve::client::request(addr, "GET", &path, None, &[]);
+        let (status, body) = tokio::time::timeout(std::time::Duration::from_secs(3), call).await??;
+        anyhow::ensure!(status == 200, "{url}: HTTP {status}: {body}");
+        anyhow::Ok(body)
+    };
+    let runtime = tokio::runtime::Builder::new_current_thread().enable_all().build();
+    match runtime.map_err(anyhow::Error::from).and_then(|r| r.block_on(check)) {
+        Ok(body) => {
+            say!("{body}");
+            ExitCode::SUCCESS
+        }
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// The server configuration the flags select; the error names the flag or file.
+fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
+    let token = args.token.clone().or_else(|| std::env::var("AIRROADS_TOKEN").ok()).filter(|t| !t.is_empty());
+    if token.is_none() && !args.addr.ip().is_loopback() {
+        return Err(format!(
+            "--addr {}: refusing to listen on a non-loopback address without a token (--token or AIRROADS_TOKEN)",
+            args.addr
+        ));
+    }
+    let initial = match &args.scenario {
+        Some(path) => load_scenario(path)?,
+        None => serve::demo_scenario().map_err(|e| format!("{e:#}"))?,
+    };
+    let policies = args.flight.policies(initial.params.delta)?;
+    let data_dir = if args.ephemeral {
+        None
+    } else if args.scenario.is_some() {
+        // An explicit scenario starts over; the state is saved as it flies.
+        let dir = args.data_dir.clone().unwrap_or_else(serve::persist::default_dir);
+        let _ = std::fs::remove_file(dir.join(serve::persist::STATE_FILE));
+        Some(dir)
+    } else {
+        Some(args.data_dir.clone().unwrap_or_else(serve::persist::default_dir))
+    };
+    Ok(ServeConfig {
+        fleet: args.flight.fleet_config(),
+        policies,
+        default_policy: args.flight.policy.clone(),
+        token,
+        data_dir,
+        initial,
+    })
+}
+
+async fn run(addr: std::net::SocketAddr, config: ServeConfig, rerun: &RerunMode) -> anyhow::Result<()> {
+    let listener = tokio::net::TcpListener::bind(addr).await.with_context(|| format!("binding {addr}"))?;
+    let local = listener.local_addr()?;
+    let data_dir = config.data_dir.clone();
+    let server = Server::start(config)?;
+    say!("airroads serving on http://{local}");
+    say!("  API        http://{local}/api (OpenAPI: /api/openapi.json), stream ws://{local}/ws");
+    say!("  fleet      {} UAVs from {}", server.state().snapshots.borrow().uavs.len(), server.resumed_from);
+    match &data_dir {
+        Some(dir) => say!("  data dir   {}", dir.display()),
+        None => say!("  data dir   none (--ephemeral)"),
+    }
+    say!(
+        "  changes    {}",
+        if server.state().token.is_some() { "need the bearer token" } else { "open (no token)" }
+    );
+    // Rerun is optional: a failure to start it is reported and the server runs without it.
+    let sink = match rerun_sink::start(rerun, server.state()) {
+        Ok(sink) => {
+            say!("  rerun      {rerun}");
+            sink
+        }
+        Err(e) => {
+            eprintln!("warning: --rerun {rerun}: {e:#}; running without Rerun");
+            None
+        }
+    };
+    let served = serve::serve(listener, server, shutdown_signal()).await;
+    if let Some(sink) = sink
+        && let Ok(None) = tokio::task::spawn_blocking(move || sink.finish()).await
+    {
+        eprintln!("warning: rerun: the log was not flushed within {:?}", rerun_sink::FINISH_TIMEOUT);
+    }
+    served
+}
+
+/// Completes on Ctrl-C or SIGTERM.
+async fn shutdown_signal() {
+    let ctrl_c = async {
+        if tokio::signal::ctrl_c().await.is_err() {
+            std::future::pending::<()>().await;
+        }
+    };
+    #[cfg(unix)]
+    let term = async {
+        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
+            Ok(mut s) => {
+                s.recv().await;
+            }
+            Err(_) => std::future::pending::<()>().await,
+        }
+    };
+    #[cfg(not(unix))]
+    let term = std::future::pending::<()>();
+    tokio::select! {
+        () = ctrl_c => {}
+        () = term => {}
+    }
+    say!("airroads: shutting down");
+}

@@ -1,0 +1,230 @@
+// End-to-end tests of the dashboard: a real `airroads serve` per test, Debian's Chromium, real
+// clicks and keys; outcomes are checked through the REST API. Screenshots go to ARTIFACTS.
+
+import { after, before, test } from "node:test";
+import assert from "node:assert/strict";
+import { join } from "node:path";
+import { api, clickWorld, launchBrowser, openDashboard, screenshot, startServer, until } from "./harness.mjs";
+
+const STRAIGHT = join(import.meta.dirname, "fixtures", "straight.json");
+let browser;
+
+before(async () => {
+  browser = await launchBrowser();
+});
+after(async () => {
+  await browser?.close();
+});
+
+/** Runs `body(page, server)` against a fresh server and page; screenshots the page on failure. */
+async function withDashboard(name, args, body) {
+  const server = await startServer(args);
+  const page = await openDashboard(browser, server.url);
+  try {
+    await body(page, server);
+    assert.deepEqual(page.jsErrors, [], "no JavaScript errors in the page");
+  } catch (e) {
+    await screenshot(page, `${name}-failed`).catch(() => {});
+    throw e;
+  } finally {
+    await page.close();
+    await server.stop();
+  }
+}
+
+const snapshot = (page) => page.evaluate(() => window.__airroads.snapshot);
+const near = (a, b, tol) => Math.hypot(a[0] - b[0], a[1] - b[1]) <= tol;
+
+test("the dashboard is served from the binary and the UAVs move on the canvas", async () => {
+  await withDashboard("live", [], async (page, { url }) => {
+    for (const [path, type] of [["/", "text/html"], ["/app.js", "text/javascript"], ["/style.css", "text/css"]]) {
+      const res = await fetch(url + path);
+      assert.equal(res.status, 200, path);
+      assert.match(res.headers.get("content-type"), new RegExp(type), path);
+    }
+    const missing = await fetch(url + "/api/no-such-route");
+    assert.equal(missing.status, 404);
+    assert.equal((await missing.json()).error.code, "not_found");
+
+    const first = await snapshot(page);
+    assert.equal(first.uavs.length, 6, "the demo flies six UAVs");
+    const canvasBefore = await page.evaluate(() => document.getElementById("view").toDataURL());
+    const moved = await until("a UAV to move 0.5 m in the page's snapshots", async () => {
+      const s = await snapshot(page);
+      return s.uavs.some((u, k) => !near(u.p, first.uavs[k].p, 0.5)) && s;
+    });
+    assert.ok(moved.tick > first.tick);
+    await until("the canvas to change", async () =>
+      (await page.evaluate(() => document.getElementById("view").toDataURL())) !== canvasBefore);
+    await until("the header to show the tick rate and tick time", async () => {
+      const [rate, p50] = await page.evaluate(() => ["rate", "p50"].map((id) => document.getElementById(id).textContent));
+      return Number(rate) > 5 && Number.isFinite(Number(p50));
+    });
+    await screenshot(page, "live");
+  });
+});
+
+test("pause and resume from the toolbar", async () => {
+  await withDashboard("pause", [], async (page, { url }) => {
+    await page.click("#pause");
+    await until("the fleet to hold (GET /api/state)", async () => (await api(url, "GET", "/api/state")).paused);
+    await page.locator("#paused-flag").waitFor({ state: "visible" });
+    await until("the button to offer Resume", async () => (await page.textContent("#pause")) === "Resume");
+    await screenshot(page, "paused");
+    await page.click("#pause");
+    await until("the fleet to fly again", async () => !(await api(url, "GET", "/api/state")).paused);
+    await page.locator("#paused-flag").waitFor({ state: "hidden" });
+  });
+});
+
+test("select a UAV by clicking it, click a goal on the road, and it arrives", async () => {
+  await withDashboard("goal", [], async (page, { url }) => {
+    // Hold the fleet so that the UAV sits still under the pointer while it is clicked.
+    await api(url, "POST", "/api/fleet/pause");
+    const uav = await until("uav1 to hover", async () => {
+      const s = await snapshot(page);
+      const u = s.uavs.find((u) => u.id === "uav1");
+      return s.paused && Math.hypot(...u.v) < 0.02 && u;
+    });
+    await clickWorld(page, uav.p[0], uav.p[1]);
+    assert.deepEqual(await page.evaluate(() => window.__airroads.selection), ["uav1"]);
+    await api(url, "POST", "/api/fleet/resume");
+
+    // A point on the centre line, 60% along the road, away from every UAV.
+    const geometry = await page.evaluate(() => window.__airroads.geometry);
+    const line = geometry.centerline;
+    const goal = line[Math.floor(line.length * 0.6)];
+    const s = await snapshot(page);
+    assert.ok(s.uavs.every((u) => !near(u.p, goal, 1)), "the goal is clear of UAVs");
+    await clickWorld(page, goal[0], goal[1]);
+    const set = await until("the goal of uav1 to be set (GET /api/uavs/uav1)", async () => {
+      const u = await api(url, "GET", "/api/uavs/uav1");
+      return u.goal && near(u.goal, goal, 0.1) && u;
+    });
+    assert.ok(!set.arrived);
+    await screenshot(page, "goal-set");
+    const arrived = await until(
+      "uav1 to arrive (GET /api/state)",
+      async () => {
+        const u = (await api(url, "GET", "/api/state")).uavs.find((u) => u.id === "uav1");
+        return u.arrived && u;
+      },
+      120000,
+      250,
+    );
+    assert.ok(near(arrived.p, set.goal, 0.15), `uav1 at ${arrived.p}, goal ${set.goal}`);
+    await screenshot(page, "goal-arrived");
+  });
+});
+
+test("add a UAV by clicking, give it a policy, remove it", async () => {
+  await withDashboard("add", [], async (page, { url }) => {
+    await page.click("#mode-add");
+    const geometry = await page.evaluate(() => window.__airroads.geometry);
+    const line = geometry.centerline;
+    const spot = line[Math.floor(line.length * 0.8)];
+    await clickWorld(page, spot[0], spot[1]);
+    const added = await until("a seventh UAV (GET /api/uavs)", async () => {
+      const uavs = await api(url, "GET", "/api/uavs");
+      return uavs.length === 7 && uavs[6];
+    });
+    assert.ok(near(added.p, spot, 0.2));
+    await until(`the new UAV ${added.id} to be selected`, async () =>
+      (await page.evaluate(() => window.__airroads.selection)).join() === added.id);
+    const policies = await api(url, "GET", "/api/policies");
+    const other = policies.policies.find((p) => p !== added.policy);
+    if (other) {
+      await page.selectOption("#policy", other);
+      await page.click("#set-policy");
+      await until(`the policy ${other}`, async () => (await api(url, "GET", `/api/uavs/${added.id}`)).policy === other);
+    }
+    await page.click("#remove");
+    await until("the UAV to be removed", async () => (await api(url, "GET", "/api/uavs")).length === 6);
+  });
+});
+
+/** Loads the straight one-UAV scenario through the file input and enters the road editor. */
+async function straightRoadInEditor(page, url) {
+  await page.setInputFiles("#scenario-file", STRAIGHT);
+  await until("the scenario to load", async () => (await api(url, "GET", "/api/uavs")).length === 1);
+  await page.waitForFunction(() => window.__airroads.geometry.layout.segments.length === 1);
+  await page.click("#fit");
+  await page.click("#mode-edit");
+  await page.click("#new-road");
+}
+
+/** Clicks the points of a road: the first two make the entry edge, then two per segment. */
+async function drawPoints(page, points) {
+  for (const [x, y] of points) await clickWorld(page, x, y);
+}
+
+test("draw a road, drag a vertex, undo/redo, apply it", async () => {
+  await withDashboard("road", [], async (page, { url }) => {
+    await straightRoadInEditor(page, url);
+    await drawPoints(page, [[0, -4], [0, 4], [10, -4], [10, 4], [16, -2], [13, 5]]);
+    let editor = await page.evaluate(() => window.__airroads.editor);
+    assert.equal(editor.segments.length, 2);
+    const tol = await page.evaluate(() => 1.5 / window.__airroads.app.camera.scale);
+    assert.ok(near(editor.segments[1][0], [16, -2], tol) && near(editor.segments[1][2], [13, 5], tol));
+
+    // Drag the far left vertex to (14, 4.5), undo, redo.
+    const [sx, sy] = await page.evaluate(() => window.__airroads.pagePoint(13, 5));
+    const [tx, ty] = await page.evaluate(() => window.__airroads.pagePoint(14, 4.5));
+    await page.click("#draw"); // leave drawing: drags move vertices
+    await page.mouse.move(sx, sy);
+    await page.mouse.down();
+    await page.mouse.move(tx, ty, { steps: 5 });
+    await page.mouse.up();
+    editor = await page.evaluate(() => window.__airroads.editor);
+    assert.ok(near(editor.segments[1][2], [14, 4.5], tol), `dragged to ${editor.segments[1][2]}`);
+    await page.keyboard.press("Control+z");
+    editor = await page.evaluate(() => window.__airroads.editor);
+    assert.ok(near(editor.segments[1][2], [13, 5], tol), "undo restores the vertex");
+    await page.keyboard.press("Control+Shift+z");
+    editor = await page.evaluate(() => window.__airroads.editor);
+    assert.ok(near(editor.segments[1][2], [14, 4.5], tol), "redo moves it again");
+
+    await page.click("#apply");
+    await page.locator("#message", { hasText: "road applied" }).waitFor();
+    const road = await api(url, "GET", "/api/road");
+    assert.deepEqual(road.segments, editor.segments, "the server has the drawn road");
+    assert.deepEqual(road.segments[0][0], road.segments[1][1], "joins are seamless");
+    assert.deepEqual(road.segments[0][2], road.segments[1][3], "joins are seamless");
+    await page.waitForFunction(() => window.__airroads.geometry.layout.segments.length === 2);
+    await screenshot(page, "road-applied");
+  });
+});
+
+test("an invalid road is refused and the offending segment is shown", async () => {
+  await withDashboard("invalid-road", [], async (page, { url }) => {
+    await straightRoadInEditor(page, url);
+    const before = await api(url, "GET", "/api/road");
+    // Segment 1 is not convex: its far edge folds in towards the entry edge.
+    await drawPoints(page, [[0, -4], [0, 4], [8, -4], [8, 4], [16, -4], [9, 0.5]]);
+    await page.click("#apply");
+    const message = page.locator("#message.error");
+    await message.waitFor();
+    const text = await message.textContent();
+    assert.match(text, /422 invalid_road/);
+    assert.match(text, /segment 1: .*not strictly convex/);
+    const editor = await page.evaluate(() => window.__airroads.editor);
+    assert.equal(editor.error.segment, 1, "segment 1 is highlighted");
+    assert.deepEqual(await api(url, "GET", "/api/road"), before, "the server's road is unchanged");
+    await screenshot(page, "road-invalid");
+  });
+});
+
+test("the access token is asked for once and sent with changes", async () => {
+  await withDashboard("token", ["--token", "s3cret"], async (page, { url }) => {
+    await page.click("#pause");
+    await page.locator("#token-dialog").waitFor({ state: "visible" });
+    await page.fill("#token-input", "s3cret");
+    await page.click("#token-dialog button[value=ok]");
+    await until("the fleet to hold", async () => (await api(url, "GET", "/api/state")).paused);
+    await until("the button to offer Resume", async () => (await page.textContent("#pause")) === "Resume");
+    await page.click("#pause");
+    await until("the fleet to fly again", async () => !(await api(url, "GET", "/api/state")).paused);
+    assert.equal(await page.locator("#token-dialog").isVisible(), false, "asked only once");
+    assert.equal(await page.evaluate(() => sessionStorage.getItem("airroads.token")), "s3cret");
+  });
+});

@@ -1,0 +1,216 @@
+//! End-to-end tests of the REST API against the real server on 127.0.0.1:0: every endpoint, its
+//! error cases (status, `{"error": {"code", "message", "field"}}`), and that refused changes change
+//! nothing.
+
+mod support;
+
+use serde_json::{Value, json};
+use support::{Running, config, small, start};
+
+fn error_field(body: &Value) -> &str {
+    body["error"]["field"].as_str().unwrap_or_default()
+}
+
+async fn uav_ids(server: &Running) -> Vec<String> {
+    let uavs = server.get("/api/uavs").await;
+    uavs.as_array().unwrap().iter().map(|u| u["id"].as_str().unwrap().to_string()).collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn health_openapi_state_and_metrics() {
+    let server = start(config(&small())).await;
+    let health = server.get("/healthz").await;
+    assert_eq!(health["status"], "ok");
+    let doc = server.get("/api/openapi.json").await;
+    assert_eq!(doc["openapi"], "3.1.0");
+    for path in
+        ["/api/road", "/api/uavs", "/api/uavs/{id}/goal", "/api/scenario", "/api/fleet/pause", "/api/state"]
+    {
+        assert!(doc["paths"][path].is_object(), "{path} missing from the OpenAPI document");
+    }
+    let state = server.wait_for(5.0, |s| s["tick"].as_u64().unwrap_or(0) >= 3).await;
+    let uav = &state["uavs"][0];
+    for key in ["id", "p", "v", "u_ref", "u", "target", "goal", "arrived", "active_rows", "slack", "status"] {
+        assert!(!uav[key].is_null() || key == "goal", "state.uavs[0].{key} missing: {uav}");
+    }
+    assert!(state["time"].as_f64().unwrap() > 0.0);
+    let metrics = server.get("/api/metrics").await;
+    assert!(metrics["ticks"].as_u64().unwrap() >= 3, "{metrics}");
+    assert!(metrics["tick"]["p99_us"].as_f64().unwrap() > 0.0, "{metrics}");
+    assert_eq!(metrics["qp"]["failures"], 0);
+    let (status, body) = server.call("GET", "/api/nowhere", None).await;
+    assert_eq!((status, body["error"]["code"].as_str()), (404, Some("not_found")));
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn road_is_validated_and_refused_when_a_uav_would_be_outside() {
+    let server = start(config(&small())).await;
+    let road = server.get("/api/road").await;
+    assert_eq!(road["segments"].as_array().unwrap().len(), 2);
+
+    // A non-convex segment: 422 naming the segment and the rule; the road is unchanged.
+    let mut bad = road.clone();
+    bad["segments"][1][0] = json!([11.0, -2.0]);
+    bad["segments"][1][1] = json!([20.0, -2.0]);
+    let (status, body) = server.call("PUT", "/api/road", Some(&bad.to_string())).await;
+    assert_eq!(status, 422, "{body}");
+    assert_eq!(body["error"]["code"], "invalid_road");
+    assert_eq!(error_field(&body), "segments[1]");
+    assert!(body["error"]["rule"].is_string(), "{body}");
+    assert_eq!(server.get("/api/road").await, road);
+
+    // A valid road that leaves the UAVs (at x = 2) outside: 409, unchanged.
+    let far = json!({"segments": roads::RoadLayout::straight(10.0, 30.0, 4.0, 2).segments});
+    let (status, body) = server.call("PUT", "/api/road", Some(&far.to_string())).await;
+    assert_eq!((status, body["error"]["code"].as_str()), (409, Some("unsafe_road")), "{body}");
+    assert_eq!(server.get("/api/road").await, road);
+
+    // A longer road that keeps them inside: applied, version up, goals kept.
+    let longer = json!({"segments": roads::RoadLayout::straight(0.0, 30.0, 4.0, 3).segments});
+    let (status, body) = server.call("PUT", "/api/road", Some(&longer.to_string())).await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(body["cleared_goals"], json!([]));
+    assert_eq!(server.get("/api/road").await, longer);
+    assert_eq!(server.get("/api/road/geometry").await["version"], body["version"]);
+
+    // Malformed, empty, wrong type, unknown key, NaN-like and huge numbers: 4xx, nothing changes.
+    let before = server.get("/api/road").await;
+    for (text, want) in [
+        ("{\"segments\": [", 400),
+        ("", 400),
+        ("{\"segments\": 3}", 422),
+        ("{\"segments\": [], \"extra\": 1}", 422),
+        ("{\"segments\": [[[NaN, 0], [0, 0], [0, 1], [1, 1]]]}", 400),
+        ("{\"segments\": [[[1e999, 0], [0, 0], [0, 1], [1, 1]]]}", 400),
+        ("{\"segments\": [[[1e300, 0], [0, 0], [0, 1], [1, 1]]]}", 422),
+        ("{\"segments\": []}", 422),
+    ] {
+        let json = [("Content-Type", "application/json")];
+        let (status, body) = server.call_with("PUT", "/api/road", Some(text), &json).await;
+        assert_eq!(status, want, "PUT /api/road {text:?}: {body}");
+        assert!(body["error"]["message"].is_string(), "{body}");
+    }
+    let (status, _) =
+        server.call_with("PUT", "/api/road", Some("{}"), &[("Content-Type", "text/plain")]).await;
+    assert_eq!(status, 415);
+    assert_eq!(server.get("/api/road").await, before);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_road_that_drops_goals_clears_them_and_the_uavs_hover() {
+    let server = start(config(&small())).await;
+    // Right after the start the UAVs are still near x = 2: a road ending at x = 4 keeps them, not their goals.
+    let short = json!({"segments": roads::RoadLayout::straight(-2.0, 4.0, 4.0, 1).segments});
+    let (status, body) = server.call("PUT", "/api/road", Some(&short.to_string())).await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(body["cleared_goals"], json!(["a", "b"]));
+    let speed = |u: &Value| u["v"][0].as_f64().unwrap().hypot(u["v"][1].as_f64().unwrap());
+    let state = server.wait_for(8.0, |s| s["uavs"].as_array().unwrap().iter().all(|u| speed(u) < 1e-3)).await;
+    for u in state["uavs"].as_array().unwrap() {
+        assert!(u["goal"].is_null() && speed(u) < 1e-3, "{u}");
+        assert!(u["p"][0].as_f64().unwrap() < 4.0 - 0.1, "{u}");
+    }
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn uavs_goals_policies_and_pause() {
+    let server = start(config(&small())).await;
+    let (status, body) = server
+        .call("POST", "/api/uavs", Some(&json!({"id": "c", "position": [10.0, 0.0]}).to_string()))
+        .await;
+    assert_eq!(status, 201, "{body}");
+    server.wait_for(2.0, |s| s["uavs"].as_array().unwrap().len() == 3).await;
+    assert_eq!(uav_ids(&server).await, ["a", "b", "c"]);
+
+    for (body, status, field) in [
+        (json!({"id": "c", "position": [12.0, 0.0]}), 409, "id"),
+        (json!({"id": "d", "position": [12.0, 5.0]}), 422, "position"),
+        (json!({"id": "d", "position": [10.1, 0.0]}), 422, "position"),
+        (json!({"id": "d", "position": [12.0, 1.95]}), 422, "position"),
+        (json!({"id": "d e", "position": [12.0, 0.0]}), 422, "id"),
+        (json!({"id": "", "position": [12.0, 0.0]}), 422, "id"),
+        (json!({"id": "d", "position": [12.0, 0.0], "policy": "nope"}), 422, "policy"),
+        (json!({"id": "d", "position": [12.0, 0.0], "goal": [50.0, 0.0]}), 422, "goal"),
+        (json!({"id": "d", "position": [12.0]}), 422, "position"),
+        (json!({"id": "d"}), 422, ""),
+    ] {
+        let (got, reply) = server.call("POST", "/api/uavs", Some(&body.to_string())).await;
+        assert_eq!(got, status, "POST {body}: {reply}");
+        assert_eq!(error_field(&reply), field, "POST {body}: {reply}");
+    }
+    tokio::time::sleep(std::time::Duration::from_millis(120)).await;
+    assert_eq!(uav_ids(&server).await, ["a", "b", "c"], "refused additions change nothing");
+
+    let goal = |g: Value| json!({"goal": g}).to_string();
+    let (status, body) = server.call("PUT", "/api/uavs/zz/goal", Some(&goal(json!([3.0, 0.0])))).await;
+    assert_eq!((status, error_field(&body)), (404, "id"));
+    let (status, body) = server.call("PUT", "/api/uavs/c/goal", Some(&goal(json!([40.0, 0.0])))).await;
+    assert_eq!((status, error_field(&body)), (422, "goal"), "{body}");
+    let (status, body) = server.call("PUT", "/api/uavs/c/goal", Some(&goal(json!([14.0, 0.5])))).await;
+    assert_eq!(status, 200, "{body}");
+    let state = server.wait_for(2.0, |s| s["uavs"][2]["goal"] == json!([14.0, 0.5])).await;
+    assert_eq!(state["uavs"][2]["goal"], json!([14.0, 0.5]));
+    let (status, _) = server.call("DELETE", "/api/uavs/c/goal", None).await;
+    assert_eq!(status, 204);
+    server.wait_for(2.0, |s| s["uavs"][2]["goal"].is_null()).await;
+
+    let (status, body) = server.call("PUT", "/api/uavs/c/policy", Some("{\"policy\": \"rl\"}")).await;
+    assert_eq!(status, 200, "{body}");
+    let (status, body) = server.call("PUT", "/api/uavs/c/policy", Some("{\"policy\": \"x\"}")).await;
+    assert_eq!((status, error_field(&body)), (422, "policy"));
+    assert_eq!(server.get("/api/policies").await["default"], "pd");
+
+    let (status, body) = server.call("POST", "/api/fleet/pause", None).await;
+    assert_eq!((status, &body["paused"]), (200, &json!(true)));
+    server.wait_for(2.0, |s| s["paused"] == json!(true)).await;
+    let (status, _) = server.call("POST", "/api/fleet/resume", None).await;
+    assert_eq!(status, 200);
+    server.wait_for(2.0, |s| s["paused"] == json!(false)).await;
+
+    let (status, _) = server.call("DELETE", "/api/uavs/c", None).await;
+    assert_eq!(status, 204);
+    let (status, body) = server.call("DELETE", "/api/uavs/c", None).await;
+    assert_eq!((status, body["error"]["code"].as_str()), (404, Some("unknown_uav")));
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn scenario_over_rest_is_validated() {
+    let server = start(config(&small())).await;
+    let mut bad = support::shipped("lab3.json");
+    bad["uavs"][1]["start"] = json!([100.0, 0.0]);
+    let (status, body) = server.call("POST", "/api/scenario", Some(&bad.to_string())).await;
+    assert_eq!((status, error_field(&body)), (422, "uavs[1].start"), "{body}");
+    let mut bad = support::shipped("lab3.json");
+    bad["params"]["delta"] = json!(-1.0);
+    let (status, body) = server.call("POST", "/api/scenario", Some(&bad.to_string())).await;
+    assert_eq!((status, error_field(&body)), (422, "params.delta"), "{body}");
+    assert_eq!(uav_ids(&server).await, ["a", "b"]);
+    let (status, body) =
+        server.call("POST", "/api/scenario", Some(&support::shipped("lab3.json").to_string())).await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(body["uavs"], 3);
+    server.wait_for(2.0, |s| s["uavs"].as_array().unwrap().len() == 3).await;
+    assert_eq!(uav_ids(&server).await, ["cf1", "cf2", "cf3"]);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_configured_token_guards_changes_but_not_reads() {
+    let mut cfg = config(&small());
+    cfg.token = Some("s3cret".into());
+    let server = start(cfg).await;
+    let body = json!({"id": "c", "position": [10.0, 0.0]}).to_string();
+    let (status, reply) = server.call("POST", "/api/uavs", Some(&body)).await;
+    assert_eq!((status, reply["error"]["code"].as_str()), (401, Some("unauthorized")));
+    let wrong = [("Authorization", "Bearer nope")];
+    assert_eq!(server.call_with("POST", "/api/fleet/pause", None, &wrong).await.0, 401);
+    let right = [("Authorization", "Bearer s3cret")];
+    assert_eq!(server.call_with("POST", "/api/uavs", Some(&body), &right).await.0, 201);
+    assert_eq!(server.call("GET", "/api/uavs", None).await.0, 200);
+    assert_eq!(server.call("GET", "/api/state", None).await.0, 200);
+    server.stop().await;
+}

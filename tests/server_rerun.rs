@@ -1,0 +1,238 @@
+//! Rerun: a real server records its fleet with `--rerun save=FILE.rrd`; the file is read back with
+//! Rerun's own decoder and checked entity by entity against what the server published.
+
+mod support;
+
+use airroads::serve::Server;
+use airroads::serve::rerun_sink::{self, RerunMode};
+use airroads::serve::state::AppState;
+use rerun::components::{LineStrip2D, Position2D};
+use rerun::external::re_log_encoding::DecoderApp;
+use rerun::log::{Chunk, LogMsg};
+use rerun::{Clear, ComponentIdentifier, EntityPath, LineStrips2D, Points2D, Scalars, TimelineName};
+use std::collections::HashMap;
+use std::time::Duration;
+
+/// The chunks of one recording, by entity.
+struct Recording {
+    application_ids: Vec<String>,
+    chunks: HashMap<EntityPath, Vec<Chunk>>,
+}
+
+fn read_rrd(path: &std::path::Path) -> Recording {
+    let file = std::fs::File::open(path).unwrap();
+    let mut recording = Recording { application_ids: Vec::new(), chunks: HashMap::new() };
+    for msg in DecoderApp::decode_lazy(std::io::BufReader::new(file)) {
+        match msg.expect("a valid .rrd") {
+            LogMsg::SetStoreInfo(info) => {
+                recording.application_ids.push(info.info.application_id().to_string())
+            }
+            LogMsg::ArrowMsg(_, arrow) => {
+                let chunk = Chunk::from_arrow_msg(&arrow).unwrap();
+                recording.chunks.entry(chunk.entity_path().clone()).or_default().push(chunk);
+            }
+            LogMsg::BlueprintActivationCommand(_) => {}
+        }
+    }
+    recording
+}
+
+impl Recording {
+    fn chunks(&self, path: &str) -> &[Chunk] {
+        self.chunks.get(&EntityPath::from(path)).map_or(&[], Vec::as_slice)
+    }
+
+    /// (tick, value) of every row of `path` holding `component`, in tick order; `read` gives the
+    /// values of a chunk's non-null rows of that component.
+    fn rows<T>(
+        &self,
+        path: &str,
+        component: ComponentIdentifier,
+        read: impl Fn(&Chunk) -> Vec<T>,
+    ) -> Vec<(i64, T)> {
+        let mut rows = Vec::new();
+        for chunk in self.chunks(path) {
+            assert!(chunk.timelines().contains_key(&TimelineName::from("time")), "{path}: no time timeline");
+            let ticks: Vec<i64> = chunk
+                .iter_component_indices(TimelineName::from("tick"), component)
+                .map(|(t, _)| t.as_i64())
+                .collect();
+            let values = read(chunk);
+            assert_eq!(ticks.len(), values.len(), "{path}: rows without a tick");
+            rows.extend(ticks.into_iter().zip(values));
+        }
+        rows.sort_by_key(|(t, _)| *t);
+        rows
+    }
+
+    /// The scalar series at `path`.
+    fn scalars(&self, path: &str) -> Vec<(i64, f64)> {
+        let component = Scalars::descriptor_scalars().component;
+        self.rows(path, component, |c| c.iter_slices::<f64>(component).map(|s| s[0]).collect())
+    }
+
+    /// The positions logged at `path` (one point per row).
+    fn points(&self, path: &str) -> Vec<(i64, [f32; 2])> {
+        let component = Points2D::descriptor_positions().component;
+        self.rows(path, component, |c| {
+            c.iter_component::<Position2D>(component).map(|b| [b[0].x(), b[0].y()]).collect()
+        })
+    }
+
+    /// The labels logged at `path` (one per row).
+    fn labels(&self, path: &str) -> Vec<(i64, String)> {
+        let component = Points2D::descriptor_labels().component;
+        self.rows(path, component, |c| c.iter_slices::<String>(component).map(|s| s[0].to_string()).collect())
+    }
+
+    /// The line strips logged at `path`, one batch per row.
+    fn strips(&self, path: &str) -> Vec<(i64, Vec<Vec<[f32; 2]>>)> {
+        let component = LineStrips2D::descriptor_strips().component;
+        self.rows(path, component, |c| {
+            c.iter_component::<LineStrip2D>(component)
+                .map(|batch| batch.iter().map(|s| s.0.iter().map(|v| v.0).collect()).collect())
+                .collect()
+        })
+    }
+}
+
+fn temp_rrd() -> std::path::PathBuf {
+    let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap().as_nanos();
+    std::env::temp_dir().join(format!("airroads-rerun-{}-{nanos}.rrd", std::process::id()))
+}
+
+fn walls_as_strips(road: &airroads::serve::engine::RoadView) -> Vec<Vec<[f32; 2]>> {
+    road.walls.iter().map(|w| w.iter().map(|p| [p[0] as f32, p[1] as f32]).collect()).collect()
+}
+
+/// A real server on 127.0.0.1:0 with a Rerun sink in `mode`.
+struct Running {
+    addr: std::net::SocketAddr,
+    state: AppState,
+    sink: rerun_sink::RerunSink,
+    stop: tokio::sync::oneshot::Sender<()>,
+    serving: tokio::task::JoinHandle<anyhow::Result<()>>,
+}
+
+async fn start(mode: &str) -> Running {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let server = Server::start(support::config(&support::small())).unwrap();
+    let state = server.state().clone();
+    let mode: RerunMode = mode.parse().unwrap();
+    let sink = rerun_sink::start(&mode, &state).unwrap().expect("a sink");
+    let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+    let serving = tokio::spawn(airroads::serve::serve(listener, server, async move {
+        let _ = stopped.await;
+    }));
+    Running { addr, state, sink, stop, serving }
+}
+
+impl Running {
+    /// Stops the server; the sink then ends by itself (the loop's channels close) and flushes.
+    async fn stop(self) -> rerun_sink::SinkStats {
+        self.stop.send(()).unwrap();
+        self.serving.await.unwrap().unwrap();
+        let sink = self.sink;
+        tokio::task::spawn_blocking(move || sink.finish()).await.unwrap().expect("sink finished in time")
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn save_mode_records_road_uavs_and_series_readable_by_rerun() {
+    let rrd = temp_rrd();
+    let server = start(&format!("save={}", rrd.display())).await;
+    let first_road = walls_as_strips(&server.state.road.borrow());
+
+    // Fly, then change the road (walls logged again) and remove `b` (its entities cleared), fly on.
+    tokio::time::sleep(Duration::from_millis(600)).await;
+    let longer = serde_json::json!({"segments": roads::RoadLayout::straight(0.0, 30.0, 4.0, 3).segments});
+    let (status, body) = support::raw(server.addr, "PUT", "/api/road", Some(&longer.to_string()), &[]).await;
+    assert_eq!(status, 200, "{body}");
+    let (status, body) = support::raw(server.addr, "DELETE", "/api/uavs/b", None, &[]).await;
+    assert_eq!(status, 204, "{body}");
+    let second_road = walls_as_strips(&server.state.road.borrow());
+    assert_ne!(first_road, second_road);
+    tokio::time::sleep(Duration::from_millis(600)).await;
+    let state = server.state.clone();
+    let stats = server.stop().await;
+    let last = state.snapshots.borrow().clone();
+    assert_eq!(stats.errors, 0);
+    assert!(stats.logged >= 10, "{stats:?}");
+
+    let rec = read_rrd(&rrd);
+    std::fs::remove_file(&rrd).unwrap();
+    assert_eq!(rec.application_ids.first().map(String::as_str), Some(rerun_sink::APPLICATION_ID));
+
+    // The road: the first layout, then the longer one, exactly as the server drew them.
+    let walls = rec.strips("world/road/walls");
+    assert_eq!(walls.len(), 2, "walls logged once per road version");
+    assert_eq!((&walls[0].1, &walls[1].1), (&first_road, &second_road));
+    let centre = rec.strips("world/road/centerline");
+    assert_eq!(centre.len(), 2);
+    assert!(centre.iter().all(|(_, strips)| strips.len() == 1 && strips[0].len() >= 2));
+
+    // Each UAV: labelled positions on increasing ticks, starting where the scenario put it.
+    for (id, y) in [("a", -1.0f32), ("b", 1.0)] {
+        let root = format!("world/uavs/{id}");
+        let points = rec.points(&root);
+        assert!(points.len() >= 5, "{id}: {} positions", points.len());
+        assert!(points.windows(2).all(|w| w[0].0 < w[1].0), "{id}: ticks not increasing");
+        let (x0, y0) = (points[0].1[0], points[0].1[1]);
+        assert!((x0 - 2.0).abs() < 0.3 && (y0 - y).abs() < 0.3, "{id} starts at ({x0}, {y0})");
+        let labels = rec.labels(&root);
+        assert!(labels.len() == points.len() && labels.iter().all(|(_, l)| l == id), "{id}: {labels:?}");
+        for leaf in ["velocity", "target", "trail"] {
+            assert!(!rec.chunks(&format!("{root}/{leaf}")).is_empty(), "{root}/{leaf} missing");
+        }
+        let goals = rec.points(&format!("{root}/goal"));
+        assert!(
+            !goals.is_empty()
+                && goals.iter().all(|(_, g)| (g[0] - 5.0).abs() < 1e-4 && (g[1] - y).abs() < 1e-4)
+        );
+        let slack = rec.scalars(&format!("slack/{id}"));
+        assert!(slack.len() >= 5 && slack.iter().all(|(_, s)| s.is_finite() && *s >= 0.0), "slack/{id}");
+        let barrier = rec.scalars(&format!("barrier/{id}"));
+        assert!(barrier.len() >= 5 && barrier.iter().all(|(_, b)| b.is_finite()), "barrier/{id}");
+    }
+    // `a` flew towards its goal; its last logged position is where the server left it.
+    let a = rec.points("world/uavs/a");
+    let final_a = last.uavs.iter().find(|u| u.id == "a").unwrap().p;
+    assert!(a.last().unwrap().1[0] > a[0].1[0] + 0.2, "a did not move: {a:?}");
+    assert!((f64::from(a.last().unwrap().1[0]) - final_a[0]).abs() < 0.2, "{a:?} vs {final_a:?}");
+
+    // `b` was removed: its subtree was cleared once, recursively, and not logged afterwards.
+    let clear = Clear::descriptor_is_recursive().component;
+    let cleared =
+        rec.rows("world/uavs/b", clear, |c| c.iter_slices::<bool>(clear).map(|s| s.value(0)).collect());
+    assert_eq!(cleared.len(), 1, "{cleared:?}");
+    assert!(cleared[0].1, "not recursive");
+    assert!(rec.points("world/uavs/b").iter().all(|(t, _)| *t < cleared[0].0));
+
+    // Fleet series: margins stay positive, tick timing p99 ≥ p50.
+    for series in ["margins/road", "margins/collision", "tick_us/p50", "tick_us/p99"] {
+        let values = rec.scalars(series);
+        assert!(values.len() >= 5, "{series}: {} values", values.len());
+        assert!(values.iter().all(|(_, v)| v.is_finite() && *v > 0.0), "{series}: {values:?}");
+    }
+    let p50: HashMap<i64, f64> = rec.scalars("tick_us/p50").into_iter().collect();
+    assert!(rec.scalars("tick_us/p99").iter().all(|(t, p99)| p50.get(t).is_none_or(|p50| p99 >= p50)));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn connect_without_a_viewer_keeps_the_server_running() {
+    // A port nothing listens on: the sink logs nothing and skips; the loop and the API carry on.
+    let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
+    let server = start(&format!("connect={closed}")).await;
+    let tick = server.state.snapshots.borrow().tick;
+    tokio::time::sleep(Duration::from_millis(1500)).await;
+    let (status, _) = support::raw(server.addr, "GET", "/healthz", None, &[]).await;
+    assert_eq!(status, 200);
+    let ticked = server.state.snapshots.borrow().tick - tick;
+    assert!(ticked >= 20, "{ticked} ticks in 1.5 s");
+    let stopping = std::time::Instant::now();
+    let stats = server.stop().await;
+    assert!(stopping.elapsed() < Duration::from_secs(3), "shutdown took {:?}", stopping.elapsed());
+    assert_eq!((stats.logged, stats.errors), (0, 0));
+    assert!(stats.skipped >= 20, "{stats:?}");
+}

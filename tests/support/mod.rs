@@ -1,0 +1,131 @@
+//! Helpers of the server's end-to-end tests: start the real server on 127.0.0.1:0 and talk to it
+//! with a minimal HTTP/1.1 client over a TCP socket (no client library to trust instead).
+
+#![allow(dead_code)]
+
+use airroads::serve::{ServeConfig, Server};
+use serde_json::Value;
+use std::net::SocketAddr;
+use std::path::PathBuf;
+use tokio::sync::oneshot;
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
+}
+
+/// A validated scenario from JSON.
+pub fn scenario(json: &Value) -> fleet::ValidScenario {
+    fleet::Scenario::from_json(&json.to_string()).unwrap().validate().unwrap()
+}
+
+/// A shipped scenario file as JSON.
+pub fn shipped(name: &str) -> Value {
+    let text = std::fs::read_to_string(repo().join("scenarios").join(name)).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+/// A straight road 20 m long, 4 m wide (two segments), with two UAVs flying 3 m along it.
+pub fn small() -> Value {
+    serde_json::json!({
+        "name": "small",
+        "segments": roads::RoadLayout::straight(0.0, 20.0, 4.0, 2).segments,
+        "uavs": [
+            {"id": "a", "start": [2.0, -1.0], "goal": [5.0, -1.0]},
+            {"id": "b", "start": [2.0, 1.0], "goal": [5.0, 1.0]}
+        ]
+    })
+}
+
+/// A running server and how to reach it.
+pub struct Running {
+    /// Its address.
+    pub addr: SocketAddr,
+    stop: Option<oneshot::Sender<()>>,
+    task: Option<tokio::task::JoinHandle<anyhow::Result<()>>>,
+}
+
+/// The configuration of a test server flying `initial` with the PD policy by default.
+pub fn config(initial: &Value) -> ServeConfig {
+    let policies = policies::PolicyRegistry::standard(5.0).unwrap();
+    ServeConfig {
+        fleet: fleet::FleetConfig::default(),
+        policies,
+        default_policy: "pd".into(),
+        token: None,
+        data_dir: None,
+        initial: scenario(initial),
+    }
+}
+
+/// Starts the real server on 127.0.0.1:0.
+pub async fn start(config: ServeConfig) -> Running {
+    let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let addr = listener.local_addr().unwrap();
+    let server = Server::start(config).unwrap();
+    let (stop, stopped) = oneshot::channel::<()>();
+    let task = tokio::spawn(airroads::serve::serve(listener, server, async move {
+        let _ = stopped.await;
+    }));
+    Running { addr, stop: Some(stop), task: Some(task) }
+}
+
+impl Running {
+    /// Shuts the server down and waits until it stopped.
+    pub async fn stop(mut self) {
+        let _ = self.stop.take().unwrap().send(());
+        self.task.take().unwrap().await.unwrap().unwrap();
+    }
+
+    /// Sends a request; returns the status and the body parsed as JSON (Null when empty).
+    pub async fn call(&self, method: &str, path: &str, body: Option<&str>) -> (u16, Value) {
+        self.call_with(method, path, body, &[]).await
+    }
+
+    /// Sends a request with extra headers.
+    pub async fn call_with(
+        &self,
+        method: &str,
+        path: &str,
+        body: Option<&str>,
+        headers: &[(&str, &str)],
+    ) -> (u16, Value) {
+        let (status, text) = raw(self.addr, method, path, body, headers).await;
+        let value = if text.trim().is_empty() {
+            Value::Null
+        } else {
+            serde_json::from_str(&text).unwrap_or_else(|e| panic!("{method} {path}: not JSON ({e}): {text}"))
+        };
+        (status, value)
+    }
+
+    /// `GET path` as JSON, asserting 200.
+    pub async fn get(&self, path: &str) -> Value {
+        let (status, body) = self.call("GET", path, None).await;
+        assert_eq!(status, 200, "GET {path}: {body}");
+        body
+    }
+
+    /// Polls `GET /api/state` until `done(state)` or `timeout_s` seconds passed; returns the last state.
+    pub async fn wait_for(&self, timeout_s: f64, done: impl Fn(&Value) -> bool) -> Value {
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs_f64(timeout_s);
+        loop {
+            let state = self.get("/api/state").await;
+            if done(&state) || std::time::Instant::now() > deadline {
+                return state;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        }
+    }
+}
+
+/// One HTTP/1.1 exchange with `Connection: close`: the status code and the body text.
+pub async fn raw(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    body: Option<&str>,
+    headers: &[(&str, &str)],
+) -> (u16, String) {
+    airroads::serve::client::request(addr, method, path, body, headers).await.unwrap()
+}
