@@ -188,16 +188,7 @@ impl FlightArgs {
     /// The policies these flags make available (`pd`, `rl` and every `--model`), checked to contain
     /// `--policy`; the error names the flag and the reason.
     pub fn policies(&self, delta: f64) -> Result<policies::PolicyRegistry, String> {
-        let mut registry =
-            policies::PolicyRegistry::standard(delta).map_err(|e| format!("shipped model: {e}"))?;
-        for spec in &self.models {
-            let Some((name, path)) = spec.split_once('=') else {
-                return Err(format!("--model {spec}: expected NAME=FILE.onnx"));
-            };
-            registry.load(name, std::path::Path::new(path)).map_err(|e| format!("--model {name}: {e}"))?;
-        }
-        registry.check(&self.policy).map_err(|e| format!("--policy: {e}"))?;
-        Ok(registry)
+        load_policies(&self.policy, &self.models, delta)
     }
 
     /// The fleet configuration these flags select (params come from the scenario).
