@@ -3,8 +3,9 @@
 
 import { after, before, test } from "node:test";
 import assert from "node:assert/strict";
+import { readFileSync } from "node:fs";
 import { join } from "node:path";
-import { api, clickWorld, launchBrowser, openDashboard, screenshot, startServer, until } from "./harness.mjs";
+import { ARTIFACTS, api, clickWorld, launchBrowser, openDashboard, screenshot, startServer, until } from "./harness.mjs";
 
 const STRAIGHT = join(import.meta.dirname, "fixtures", "straight.json");
 let browser;
@@ -226,5 +227,47 @@ test("the access token is asked for once and sent with changes", async () => {
     await until("the fleet to fly again", async () => !(await api(url, "GET", "/api/state")).paused);
     assert.equal(await page.locator("#token-dialog").isVisible(), false, "asked only once");
     assert.equal(await page.evaluate(() => sessionStorage.getItem("airroads.token")), "s3cret");
+  });
+});
+
+test("insert and delete segments, export the layout and import it again", async () => {
+  await withDashboard("segments", [], async (page, { url }) => {
+    await page.setInputFiles("#scenario-file", STRAIGHT);
+    await until("the scenario to load", async () => (await api(url, "GET", "/api/uavs")).length === 1);
+    await page.waitForFunction(() => window.__airroads.geometry.layout.segments.length === 1);
+    await page.click("#fit");
+    await page.click("#mode-edit");
+    await page.waitForFunction(() => window.__airroads.editor.segments.length === 1);
+    const editorSegments = async () => (await page.evaluate(() => window.__airroads.editor)).segments;
+
+    // Select the straight segment by clicking inside it and split it in two at x = 10.
+    await clickWorld(page, 5, 2);
+    await page.click("#insert");
+    let segments = await editorSegments();
+    assert.equal(segments.length, 2, "insert splits the segment");
+    assert.deepEqual([segments[0][0], segments[0][2]], [[10, -5], [10, 5]], "split at the middle of the walls");
+    assert.deepEqual([segments[1][1], segments[1][3]], [[10, -5], [10, 5]], "the join is seamless");
+
+    // Export: the browser downloads the layout JSON.
+    const [download] = await Promise.all([page.waitForEvent("download"), page.click("#export")]);
+    const exported = join(ARTIFACTS, "road-export.json");
+    await download.saveAs(exported);
+    const layout = JSON.parse(readFileSync(exported, "utf8"));
+    assert.deepEqual(layout.segments, segments, "the export is the editor's layout");
+
+    // Delete the far segment, then import the export: both segments are back.
+    await clickWorld(page, 15, 2);
+    await page.click("#delete-seg");
+    segments = await editorSegments();
+    assert.equal(segments.length, 1, "delete removes the selected segment");
+    assert.deepEqual([segments[0][0], segments[0][2]], [[10, -5], [10, 5]], "the road now ends at x = 10");
+    await page.setInputFiles("#import-file", exported);
+    await page.locator("#message", { hasText: "imported 2 segments" }).waitFor();
+    assert.deepEqual(await editorSegments(), layout.segments, "import restores the exported layout");
+
+    await page.click("#apply");
+    await page.locator("#message", { hasText: "road applied" }).waitFor();
+    assert.deepEqual((await api(url, "GET", "/api/road")).segments, layout.segments, "the server has the imported road");
+    await screenshot(page, "segments-imported");
   });
 });
