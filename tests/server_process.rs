@@ -97,3 +97,33 @@ fn sigterm_saves_and_exits_cleanly() {
     assert_eq!(out.status.code(), Some(0));
     assert!(data.join("state.json").exists());
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn cfsim_crazyflies_take_off_and_sigterm_lands_them_before_exiting() {
+    let data = scratch("cfsim");
+    let lab3 = support::repo().join("scenarios/lab3.json");
+    let args = ["--policy", "pd", "--scenario", lab3.to_str().unwrap(), "--cfsim", "3", "--cfsim-port", "0"];
+    let (child, addr) = serve(&data, &args);
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(20);
+    loop {
+        let (_, state) = call(addr, "GET", "/api/state", None).await;
+        let uavs = state["uavs"].as_array().cloned().unwrap_or_default();
+        if uavs.len() == 3
+            && uavs
+                .iter()
+                .all(|u| u["phase"] == "flying" && u["link"].as_str().unwrap().starts_with("udp://"))
+        {
+            break;
+        }
+        assert!(std::time::Instant::now() < deadline, "the simulated Crazyflies did not take off: {state}");
+        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+    }
+    let started = std::time::Instant::now();
+    let status = Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    // Landing takes its 2 s before the server exits.
+    assert!(started.elapsed() >= std::time::Duration::from_secs(2), "exited before landing");
+    assert!(started.elapsed() < std::time::Duration::from_secs(12));
+}

@@ -77,4 +77,7 @@ export class Api {
   loadScenario(text) { return this.request("POST", "/api/scenario", text); }
   pause() { return this.request("POST", "/api/fleet/pause"); }
   resume() { return this.request("POST", "/api/fleet/resume"); }
+  land(id) { return this.request("POST", `/api/uavs/${encodeURIComponent(id)}/land`); }
+  landAll() { return this.request("POST", "/api/fleet/land"); }
+  emergencyStop() { return this.request("POST", "/api/fleet/stop"); }
 }

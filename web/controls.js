@@ -118,6 +118,15 @@ export function bindControls(app) {
   on("set-policy", () => setPolicy(app));
   on("remove", () => removeSelected(app));
   on("fit", () => app.fit());
+  on("land", () => {
+    const ids = [...app.selection];
+    if (!ids.length) return showMessage("select UAVs to land first", true);
+    return report(`land ${ids.length} UAV(s)`, ids.map((id) => app.api.land(id)));
+  });
+  on("land-all", () => report("land all", [app.api.landAll()]));
+  on("estop", () => {
+    if (confirm("Emergency stop: cut the motors of every UAV now?")) report("emergency stop", [app.api.emergencyStop()]);
+  });
   on("pause", () => {
     const paused = app.snapshot && app.snapshot.paused;
     report(paused ? "resume" : "pause", [paused ? app.api.resume() : app.api.pause()]);

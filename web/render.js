@@ -9,6 +9,12 @@ export const STATUS_COLOURS = {
   braking: "#e08a1e",
   failed: "#d63131",
   stale: "#8a8a8a",
+  lost: "#b0179b",
+  connecting: "#b9c2cc",
+  taking_off: "#7fc8a0",
+  landing: "#8fb3e8",
+  landed: "#5b6570",
+  stopped: "#3b0d0d",
 };
 const LABEL_LIMIT = 250; // more UAVs on screen than this: labels only for the selected ones
 

@@ -27,6 +27,9 @@ pub enum EditError {
     /// The policy name is not loaded.
     #[error("policy: {0}")]
     UnknownPolicy(String),
+    /// A new road would leave a flying UAV outside it or closer than D_s to a wall.
+    #[error("segments: {0}")]
+    RoadConflict(String),
 }
 
 /// `x < min`, and true for a NaN `x` (a margin computed from absurd coordinates is refused too).
@@ -100,6 +103,25 @@ impl Fleet {
         check_goal_on(&self.road, goal, field)
     }
 
+    /// Checks what [`Fleet::try_add`] checks: a new id, a loaded policy, a safe start, a goal on the road.
+    pub fn check_new(
+        &self,
+        id: &str,
+        policy: &str,
+        state: &UavState,
+        goal: Option<Vec2>,
+    ) -> Result<(), EditError> {
+        if self.uav(id).is_some() {
+            return Err(EditError::DuplicateId(id.to_string()));
+        }
+        self.policies.check(policy).map_err(|e| EditError::UnknownPolicy(e.to_string()))?;
+        self.check_start(state, "position")?;
+        if let Some(g) = goal {
+            self.check_goal(g, "goal")?;
+        }
+        Ok(())
+    }
+
     /// Adds a UAV after checking its id, policy, start and goal.
     pub fn try_add(
         &mut self,
@@ -109,14 +131,7 @@ impl Fleet {
         state: UavState,
         goal: Option<Vec2>,
     ) -> Result<(), EditError> {
-        if self.uav(&id).is_some() {
-            return Err(EditError::DuplicateId(id));
-        }
-        self.policies.check(&policy).map_err(|e| EditError::UnknownPolicy(e.to_string()))?;
-        self.check_start(&state, "position")?;
-        if let Some(g) = goal {
-            self.check_goal(g, "goal")?;
-        }
+        self.check_new(&id, &policy, &state, goal)?;
         self.add(id, policy, link, state, goal);
         Ok(())
     }
@@ -146,6 +161,28 @@ impl Fleet {
         Ok(())
     }
 
+    /// Lands one UAV through its link, ahead of its next command; it leaves the filter and its
+    /// neighbours avoid it until it is down.
+    pub fn land(&mut self, id: &str) -> Result<(), EditError> {
+        let k = self.index(id)?;
+        self.uavs[k].link.land();
+        Ok(())
+    }
+
+    /// Lands every UAV.
+    pub fn land_all(&mut self) {
+        for uav in &mut self.uavs {
+            uav.link.land();
+        }
+    }
+
+    /// Emergency stop: cuts every UAV's motors at once.
+    pub fn emergency_stop_all(&mut self) {
+        for uav in &mut self.uavs {
+            uav.link.emergency_stop();
+        }
+    }
+
     /// Starts over on `road` with `params` and no UAVs (a scenario load); policies and ticks stay.
     pub fn reset(&mut self, params: uav::Params, road: Road) {
         self.config.params = params;
@@ -158,7 +195,8 @@ impl Fleet {
     /// UAVs hover); their ids are returned.
     pub fn replace_road(&mut self, road: Road) -> Result<Vec<String>, EditError> {
         let p = self.config.params;
-        for uav in &self.uavs {
+        // UAVs on the ground (landed, stopped, not yet taken off) are not in the road's airspace.
+        for uav in self.uavs.iter().filter(|u| u.phase.airborne() || u.last.lost) {
             let margin = road_margin(&road, &uav.state, p.delta);
             if below(margin, p.d_s) {
                 let reason = format!(
@@ -166,7 +204,7 @@ impl Fleet {
                      (braking margin), less than D_s = {} m",
                     uav.id, uav.state.p.x, uav.state.p.y, p.d_s
                 );
-                return Err(unsafe_at("segments", reason));
+                return Err(EditError::RoadConflict(reason));
             }
         }
         let mut cleared = Vec::new();

@@ -1,9 +1,10 @@
 //! One tick of the fleet loop (`shared/design/layout.md`): states → targets → neighbours → policies
 //! (batched) → CBF-QP filter → commands.
 
+use crate::lost::obstacle_row;
 use crate::neighbours::NeighbourSearch;
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
-use links::Link;
+use links::{Link, LinkPhase};
 use policies::{Observation, PolicyRegistry, observation};
 use roads::{NavMode, NavState, Navigator, Road};
 use safety::barrier::collision_row;
@@ -48,7 +49,7 @@ impl std::str::FromStr for CollisionShare {
 }
 
 /// How the fleet navigates and filters.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FleetConfig {
     /// Parameters (dt, δ, r_s, D_s, D_c, ζ, ε).
     pub params: Params,
@@ -60,6 +61,25 @@ pub struct FleetConfig {
     pub filter: FilterSettings,
     /// How pair rows are shared.
     pub share: CollisionShare,
+    /// A UAV whose link gives no fresh state for this long (s) is lost ([`crate::lost`]).
+    pub stale_after: f64,
+    /// How long (s) a lost UAV may keep moving: the Crazyflie's setpoint watchdog cuts its motors
+    /// 2 s after the last setpoint, so its reach stops growing after that.
+    pub lost_reach_horizon: f64,
+}
+
+impl Default for FleetConfig {
+    fn default() -> Self {
+        Self {
+            params: Params::default(),
+            road_rule: RoadRule::default(),
+            nav: NavMode::default(),
+            filter: FilterSettings::default(),
+            share: CollisionShare::default(),
+            stale_after: 0.3,
+            lost_reach_horizon: 2.0,
+        }
+    }
 }
 
 /// What happened to one UAV in the last tick.
@@ -87,6 +107,9 @@ pub struct UavTick {
     pub policy_fallback: bool,
     /// The link had no state this tick; the last known one was used.
     pub stale: bool,
+    /// No fresh state for `stale_after` or the link is reconnecting while the UAV may be airborne:
+    /// its neighbours treat its reach since the last state as an obstacle.
+    pub lost: bool,
     /// Wall time of the filter for this UAV (µs), when a QP was solved.
     pub solve_us: f64,
 }
@@ -105,6 +128,24 @@ pub struct Uav {
     pub state: UavState,
     /// What happened in the last tick.
     pub last: UavTick,
+    /// Where it is in its flight, as its link said at the start of the last tick.
+    pub phase: LinkPhase,
+    /// Consecutive ticks without a fresh state from the link.
+    pub stale_ticks: u32,
+    /// It was airborne when last heard from, so while lost it may still be in the air.
+    pub(crate) airborne: bool,
+}
+
+impl Uav {
+    /// It flies its policy through the filter this tick (airborne, following commands, not lost).
+    pub fn flying(&self) -> bool {
+        self.phase == LinkPhase::Flying && !self.last.lost
+    }
+
+    /// Its neighbours must avoid it: in the air (or possibly, while lost) but not flying the filter.
+    pub fn obstacle(&self) -> bool {
+        !self.flying() && (self.phase.airborne() || self.last.lost)
+    }
 }
 
 /// The fleet: road, UAVs, policies and the reusable filter and scratch buffers.
@@ -172,7 +213,18 @@ impl Fleet {
     ) {
         let mut nav = NavState::new(state.p);
         nav.set_goal(&self.road, goal, state.p);
-        self.uavs.push(Uav { id, policy, link, nav, state, last: UavTick::default() });
+        let phase = link.phase();
+        self.uavs.push(Uav {
+            id,
+            policy,
+            link,
+            nav,
+            state,
+            last: UavTick::default(),
+            phase,
+            stale_ticks: 0,
+            airborne: phase.airborne(),
+        });
     }
 
     /// Runs one tick and returns the number of UAVs that have arrived.
@@ -188,7 +240,8 @@ impl Fleet {
         self.positions.extend(self.uavs.iter().map(|u| u.state.p));
         let v_max = self.uavs.iter().map(|u| u.state.v.norm()).fold(0.0, f64::max);
         let reach = activation_radius(params.d_c, 2.0 * v_max, 2.0 * params.delta)
-            .max(YIELD_RADIUS_IN_DC * params.d_c);
+            .max(YIELD_RADIUS_IN_DC * params.d_c)
+            + self.max_stale_reach();
         self.neighbours.update(&self.positions, reach);
         self.make_way();
         self.run_policies();
@@ -217,13 +270,23 @@ impl Fleet {
     }
 
     fn read_states(&mut self) {
+        let (dt, stale_after) = (self.config.params.dt, self.config.stale_after);
         for uav in &mut self.uavs {
+            uav.phase = uav.link.phase();
             match uav.link.state() {
                 Some(s) if s.is_finite() => {
                     uav.state = s;
-                    uav.last.stale = false;
+                    uav.stale_ticks = 0;
                 }
-                _ => uav.last.stale = true,
+                _ => uav.stale_ticks = uav.stale_ticks.saturating_add(1),
+            }
+            uav.last.stale = uav.stale_ticks > 0;
+            let silent = f64::from(uav.stale_ticks) * dt >= stale_after;
+            uav.last.lost = uav.airborne && (silent || uav.phase == LinkPhase::Connecting);
+            if uav.phase.airborne() && !silent {
+                uav.airborne = true;
+            } else if matches!(uav.phase, LinkPhase::Landed | LinkPhase::Stopped) {
+                uav.airborne = false;
             }
         }
     }
@@ -241,7 +304,7 @@ impl Fleet {
         for (name, policy) in self.policies.iter_mut() {
             self.batch.clear();
             self.observations.clear();
-            for (k, uav) in self.uavs.iter().enumerate().filter(|(_, u)| u.policy == name) {
+            for (k, uav) in self.uavs.iter().enumerate().filter(|(_, u)| u.policy == name && u.flying()) {
                 self.batch.push(k);
                 self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
             }
@@ -262,6 +325,14 @@ impl Fleet {
         let p = &self.config.params;
         let me = self.uavs[k].state;
         self.rows.clear();
+        if !self.uavs[k].flying() {
+            // Not following commands (taking off, landing, lost): brake, which is also what its
+            // link holds it to; its neighbours treat it as an obstacle.
+            let last = &mut self.uavs[k].last;
+            (last.u, last.rows, last.active_rows, last.max_slack) = (last.u_ref, 0, 0, 0.0);
+            (last.solved, last.failed, last.solve_us, last.min_barrier) = (false, false, 0.0, f64::INFINITY);
+            return;
+        }
         let segment = self.uavs[k].nav.tracker.current.unwrap_or(0);
         road_rows(&self.road, self.config.road_rule, me.p, me.v, segment, p, &mut self.rows);
         let delta_sum = 2.0 * p.delta;
@@ -271,6 +342,13 @@ impl Fleet {
         let d_c = p.d_c + delta_sum * p.dt * p.dt;
         for &d in &self.neighbours.lists[k] {
             let other = self.uavs[d].state;
+            if !self.uavs[d].flying() || self.uavs[d].stale_ticks > 0 {
+                if self.uavs[d].obstacle() || self.uavs[d].flying() {
+                    let disk = self.disk_of(d);
+                    self.rows.push(obstacle_row(me, &disk, d_c, p, RowKind::Collision(d)));
+                }
+                continue;
+            }
             let (p_kd, v_kd) = (me.p - other.p, me.v - other.v);
             if p_kd.norm() > activation_radius(p.d_c, v_kd.norm(), delta_sum) {
                 continue;

@@ -6,6 +6,7 @@
 
 mod edit;
 mod fleet;
+mod lost;
 mod margins;
 mod metrics;
 mod neighbours;
@@ -16,7 +17,8 @@ mod yielding;
 
 pub use edit::EditError;
 pub use fleet::{CollisionShare, Fleet, FleetConfig, Uav, UavTick};
+pub use lost::{ReachDisk, WATCHDOG_HOLD_S, obstacle_row, point_disk, reach_disk};
 pub use margins::{collision_margin, road_margin};
 pub use metrics::{MetricsRecorder, QpMetrics, RunMetrics};
-pub use run::{RunOptions, RunOutcome, TRAJECTORY_HEADER, run_scenario};
+pub use run::{RunOptions, RunOutcome, TAKEOFF_TIMEOUT_S, TRAJECTORY_HEADER, run_scenario, run_scenario_on};
 pub use scenario::{Scenario, ScenarioError, ScenarioUav, UavSpec, ValidScenario};

@@ -3,8 +3,8 @@
 
 use crate::fleet::{Fleet, FleetConfig};
 use crate::metrics::{MetricsRecorder, RunMetrics};
-use crate::scenario::ValidScenario;
-use links::SimLink;
+use crate::scenario::{UavSpec, ValidScenario};
+use links::{Link, LinkPhase, SimLink};
 use policies::PolicyRegistry;
 use std::io::Write;
 use uav::UavState;
@@ -35,8 +35,27 @@ pub const TRAJECTORY_HEADER: &str =
 /// Runs `scenario` in the in-process simulator. The policy must exist in `policies`.
 pub fn run_scenario(
     scenario: &ValidScenario,
+    options: RunOptions,
+    policies: PolicyRegistry,
+) -> std::io::Result<RunOutcome> {
+    let dt = scenario.params.dt;
+    let mut sim = |_: &UavSpec, state: UavState| -> Box<dyn Link> { Box::new(SimLink::new(state, dt)) };
+    run_scenario_on(scenario, options, policies, &mut sim, &mut || {})
+}
+
+/// How long the UAVs of a run on real links may take to take off (s).
+pub const TAKEOFF_TIMEOUT_S: f64 = 30.0;
+
+/// Runs `scenario` with each UAV on the link `make_link` gives it; `wait_tick` is called before
+/// every tick (a real-time run sleeps there until the tick is due). On links that take off, the
+/// run starts once every UAV is flying (an error after [`TAKEOFF_TIMEOUT_S`]); the metrics count
+/// from there, and every UAV is landed at the end.
+pub fn run_scenario_on(
+    scenario: &ValidScenario,
     mut options: RunOptions,
     policies: PolicyRegistry,
+    make_link: &mut dyn FnMut(&UavSpec, UavState) -> Box<dyn Link>,
+    wait_tick: &mut dyn FnMut(),
 ) -> std::io::Result<RunOutcome> {
     let mut config = options.config;
     config.params = scenario.params;
@@ -44,9 +63,29 @@ pub fn run_scenario(
     let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
     for u in &scenario.uavs {
         let state = UavState::at_rest(u.start);
-        let link = Box::new(SimLink::new(state, params.dt));
-        fleet.add(u.id.clone(), options.policy.clone(), link, state, Some(u.goal));
+        fleet.add(u.id.clone(), options.policy.clone(), make_link(u, state), state, Some(u.goal));
     }
+    // Take-off: the fleet holds (every UAV brakes) until all links fly.
+    let mut preflight = 0.0;
+    fleet.set_hold(true);
+    while fleet.uavs().iter().any(|u| u.link.phase() != LinkPhase::Flying) {
+        if preflight > TAKEOFF_TIMEOUT_S {
+            let waiting: Vec<&str> = fleet
+                .uavs()
+                .iter()
+                .filter(|u| u.link.phase() != LinkPhase::Flying)
+                .map(|u| u.id.as_str())
+                .collect();
+            return Err(std::io::Error::other(format!(
+                "not flying after {TAKEOFF_TIMEOUT_S} s: {}",
+                waiting.join(", ")
+            )));
+        }
+        wait_tick();
+        fleet.tick();
+        preflight += params.dt;
+    }
+    fleet.set_hold(false);
     if let Some(w) = options.trajectory.as_mut() {
         writeln!(w, "{TRAJECTORY_HEADER}")?;
     }
@@ -54,6 +93,7 @@ pub fn run_scenario(
     let n = scenario.uavs.len();
     for tick in 0..params.max_ticks() {
         let t = tick as f64 * params.dt;
+        wait_tick();
         let arrived = fleet.tick();
         recorder.record(&fleet, t);
         if let Some(w) = options.trajectory.as_mut() {
@@ -85,6 +125,21 @@ pub fn run_scenario(
     if let Some(w) = options.trajectory.as_mut() {
         w.flush()?;
     }
+    land(&mut fleet, wait_tick, params.dt);
     let policy_fallbacks = recorder.policy_fallbacks;
     Ok(RunOutcome { metrics: recorder.finish(&fleet, &scenario.name), policy_fallbacks })
+}
+
+/// Lands every UAV whose link takes off and ticks until they are down (at most 10 s).
+fn land(fleet: &mut Fleet, wait_tick: &mut dyn FnMut(), dt: f64) {
+    if fleet.uavs().iter().all(|u| u.link.describe() == links::SIM_LINK) {
+        return;
+    }
+    fleet.land_all();
+    let mut waited = 0.0;
+    while waited < 10.0 && fleet.uavs().iter().any(|u| u.link.phase().airborne()) {
+        wait_tick();
+        fleet.tick();
+        waited += dt;
+    }
 }

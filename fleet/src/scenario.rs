@@ -29,6 +29,9 @@ pub struct ScenarioUav {
     pub start: [f64; 2],
     /// Goal position [x, y] (m).
     pub goal: [f64; 2],
+    /// How it is flown: `sim` (default, in-process) or a Crazyflie URI (`radio://…`, `udp://…`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// A UAV of a validated scenario.
@@ -40,6 +43,8 @@ pub struct UavSpec {
     pub start: Vec2,
     /// Goal position (m).
     pub goal: Vec2,
+    /// Its link (None: in-process simulator).
+    pub link: Option<String>,
 }
 
 /// A scenario whose road, parameters and fleet passed validation.
@@ -122,7 +127,10 @@ impl Scenario {
                 let reason = format!("closer than D_c = {} m to uavs[{j}].start", p.d_c);
                 return Err(invalid(format!("uavs[{i}].start"), reason));
             }
-            uavs.push(UavSpec { id: u.id.clone(), start, goal });
+            if let Some(link) = &u.link {
+                links::check_link(link).map_err(|reason| invalid(format!("uavs[{i}].link"), reason))?;
+            }
+            uavs.push(UavSpec { id: u.id.clone(), start, goal, link: u.link.clone() });
         }
         Ok(ValidScenario { name: self.name.clone(), params: self.params, road, uavs })
     }

@@ -86,7 +86,12 @@ fn random_fleet(rng: &mut StdRng, road: &Road, params: &Params, wanted: usize) -
         .iter()
         .zip(&goals)
         .enumerate()
-        .map(|(i, (s, g))| ScenarioUav { id: format!("u{i}"), start: [s.x, s.y], goal: [g.x, g.y] })
+        .map(|(i, (s, g))| ScenarioUav {
+            id: format!("u{i}"),
+            start: [s.x, s.y],
+            goal: [g.x, g.y],
+            link: None,
+        })
         .collect()
 }
 

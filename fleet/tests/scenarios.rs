@@ -68,7 +68,12 @@ fn hairpin_uavs_with_the_rl_policy_are_safe_and_arrive() {
 fn hairpin() -> Scenario {
     let centre = [[0.0, 0.0], [8.0, 0.0], [4.0, 6.928], [12.0, 6.928]];
     let layout = RoadLayout::from_centerline(&centre, &[3.0; 4]);
-    let uav = |i: usize, start: [f64; 2], goal: [f64; 2]| ScenarioUav { id: format!("h{i}"), start, goal };
+    let uav = |i: usize, start: [f64; 2], goal: [f64; 2]| ScenarioUav {
+        id: format!("h{i}"),
+        start,
+        goal,
+        link: None,
+    };
     Scenario {
         name: "hairpin".into(),
         params: Params { t_max: 60.0, ..Params::default() },

@@ -1,27 +1,101 @@
 //! Where commands go and states come from. The fleet loop talks to every UAV through [`Link`]; this
-//! crate has the in-process simulator, and hardware links (Crazyflie over CRTP) slot in beside it.
+//! crate has the in-process simulator, and hardware links (the `crazyflie` crate's CRTP relay) slot
+//! in beside it. A fleet may mix links.
 
 use uav::{UavState, Vec2};
 
-/// The connection to one UAV. Implementations never block the caller.
+/// The link of a UAV that names none: the in-process simulator.
+pub const SIM_LINK: &str = "sim";
+
+/// Checks a link name: `sim`, or a Crazyflie URI (`radio://…`, `usb://…`, `udp://HOST:PORT`).
+pub fn check_link(link: &str) -> Result<(), String> {
+    let uri = ["radio://", "usb://", "udp://"].iter().any(|s| link.starts_with(s) && link.len() > s.len());
+    if link == SIM_LINK || (uri && link.len() <= 256 && !link.chars().any(char::is_whitespace)) {
+        Ok(())
+    } else {
+        Err(format!(
+            "`{link}` is not a link: expected `sim` or a Crazyflie URI (radio://0/80/2M/E7E7E7E7E7, udp://HOST:PORT)"
+        ))
+    }
+}
+
+/// Where a linked UAV is in its flight, as its link sees it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum LinkPhase {
+    /// Connecting, or reconnecting after a loss; no command reaches the UAV yet.
+    Connecting,
+    /// Connected and taking off to the flight altitude; commands are not followed yet.
+    TakingOff,
+    /// Airborne and following each tick's command.
+    #[default]
+    Flying,
+    /// Landing on request (or on shutdown).
+    Landing,
+    /// On the ground with motors off after a landing.
+    Landed,
+    /// Motors cut by an emergency stop; stays down until the server restarts the link.
+    Stopped,
+}
+
+impl LinkPhase {
+    /// The JSON/CLI name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            LinkPhase::Connecting => "connecting",
+            LinkPhase::TakingOff => "taking_off",
+            LinkPhase::Flying => "flying",
+            LinkPhase::Landing => "landing",
+            LinkPhase::Landed => "landed",
+            LinkPhase::Stopped => "stopped",
+        }
+    }
+
+    /// The UAV is in the air at the fleet's altitude (or on its way there or down): an obstacle.
+    pub fn airborne(&self) -> bool {
+        matches!(self, LinkPhase::TakingOff | LinkPhase::Flying | LinkPhase::Landing)
+    }
+}
+
+/// The connection to one UAV. Implementations never block the caller: the fleet loop calls them
+/// every tick and must not wait on a radio or a socket.
 pub trait Link: Send {
-    /// The latest state estimate, or None when the link has none (lost, not yet connected).
+    /// The newest state received since the previous call, or None when none arrived (link slow,
+    /// lost, or not connected yet). The fleet counts how long a UAV has gone without one.
     fn state(&mut self) -> Option<UavState>;
     /// Hands over the filtered acceleration for the coming period (latest wins).
     fn send(&mut self, u: Vec2);
+    /// Where the UAV is in its flight. In-process links are always flying.
+    fn phase(&self) -> LinkPhase {
+        LinkPhase::Flying
+    }
+    /// Lands the UAV, ahead of any queued command. In-process links have nothing to land.
+    fn land(&mut self) {}
+    /// Cuts the motors at once (emergency stop), ahead of any queued command.
+    fn emergency_stop(&mut self) {}
+    /// What the link is, e.g. `sim` or the Crazyflie URI (shown in the snapshot).
+    fn describe(&self) -> String {
+        "sim".into()
+    }
 }
 
+/// How long an in-process UAV takes to land (s).
+pub const SIM_LANDING_S: f64 = 1.0;
+
 /// In-process simulator of one UAV: the exact double-integrator step (paper eq. 1) per command.
+/// It lands (in [`SIM_LANDING_S`], following the commands meanwhile) and stops on request.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SimLink {
     state: UavState,
     dt: f64,
+    phase: LinkPhase,
+    /// Commands left until a landing UAV is down.
+    landing_steps: u32,
 }
 
 impl SimLink {
     /// A simulated UAV in `state`, advanced by `dt` seconds per command.
     pub fn new(state: UavState, dt: f64) -> Self {
-        Self { state, dt }
+        Self { state, dt, phase: LinkPhase::Flying, landing_steps: 0 }
     }
 }
 
@@ -31,7 +105,34 @@ impl Link for SimLink {
     }
 
     fn send(&mut self, u: Vec2) {
+        match self.phase {
+            LinkPhase::Landed | LinkPhase::Stopped => return,
+            LinkPhase::Landing if self.landing_steps == 0 => {
+                self.phase = LinkPhase::Landed;
+                self.state.v = Vec2::zeros();
+                return;
+            }
+            LinkPhase::Landing => self.landing_steps -= 1,
+            _ => {}
+        }
         self.state = self.state.stepped(u, self.dt);
+    }
+
+    fn phase(&self) -> LinkPhase {
+        self.phase
+    }
+
+    fn land(&mut self) {
+        if self.phase == LinkPhase::Flying {
+            self.phase = LinkPhase::Landing;
+            // Saturating float-to-int cast: a non-positive or NaN dt lands at once.
+            self.landing_steps = (SIM_LANDING_S / self.dt).ceil() as u32;
+        }
+    }
+
+    fn emergency_stop(&mut self) {
+        self.phase = LinkPhase::Stopped;
+        self.state.v = Vec2::zeros();
     }
 }
 
@@ -46,5 +147,28 @@ mod tests {
         let s = link.state().unwrap();
         assert!((s.p - Vec2::new(1.0025, 2.0)).norm() < 1e-15);
         assert!((s.v - Vec2::new(0.1, 0.0)).norm() < 1e-15);
+        assert_eq!(link.phase(), LinkPhase::Flying);
+    }
+
+    #[test]
+    fn sim_link_lands_after_its_landing_time_and_stops_at_once() {
+        let mut link = SimLink::new(UavState::at_rest(Vec2::zeros()), 0.05);
+        link.land();
+        assert_eq!(link.phase(), LinkPhase::Landing);
+        for _ in 0..20 {
+            link.send(Vec2::zeros());
+        }
+        assert_eq!(link.phase(), LinkPhase::Landing);
+        link.send(Vec2::zeros());
+        assert_eq!(link.phase(), LinkPhase::Landed);
+        link.send(Vec2::new(1.0, 0.0));
+        assert_eq!(link.state().unwrap().p, Vec2::zeros(), "a landed UAV does not move");
+
+        let mut link = SimLink::new(UavState { p: Vec2::zeros(), v: Vec2::new(1.0, 0.0) }, 0.05);
+        link.emergency_stop();
+        link.send(Vec2::new(1.0, 0.0));
+        assert_eq!(link.phase(), LinkPhase::Stopped);
+        assert_eq!(link.state().unwrap().p, Vec2::zeros(), "a stopped UAV does not move");
+        assert!(!link.phase().airborne());
     }
 }

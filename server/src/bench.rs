@@ -14,6 +14,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
     match args.target {
         BenchTarget::Filter => bench_filter(args.iterations),
         BenchTarget::Server => return crate::bench_server::main(&args),
+        BenchTarget::Crazyflie => return crate::bench_crazyflie::main(&args),
     }
     ExitCode::SUCCESS
 }

@@ -57,6 +57,8 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         token: None,
         data_dir: None,
         initial,
+        relay: Default::default(),
+        resume: false,
     };
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
     let addr = listener.local_addr()?;

@@ -106,6 +106,21 @@ pub struct ServeArgs {
     /// rerun+http://host:port/proxy), `save=FILE.rrd`, or `serve` (a gRPC server on 127.0.0.1:9876).
     #[arg(long, default_value = "off", value_name = "MODE")]
     pub rerun: airroads::serve::rerun_sink::RerunMode,
+    /// Fly the first N UAVs of the scenario as simulated Crazyflies (cfsim, in this process) through
+    /// the real CRTP path over UDP, on ports from --cfsim-port up. Starts from the scenario, like
+    /// --scenario, not from the saved state.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    pub cfsim: usize,
+    /// First UDP port of the --cfsim Crazyflies (0: any free ports).
+    #[arg(long, default_value_t = 19850, value_name = "PORT")]
+    pub cfsim_port: u16,
+    /// Receive motion-capture poses (`{"id", "t", "p": [x, y, z]}` per UDP datagram) on this address
+    /// and forward each to its Crazyflie as an external position.
+    #[arg(long, value_name = "ADDR")]
+    pub mocap: Option<std::net::SocketAddr>,
+    /// Crazyflie flight altitude (m).
+    #[arg(long, default_value_t = 1.0, value_name = "M")]
+    pub altitude: f64,
     /// Flight options (`--policy` is the policy of UAVs added without one).
     #[command(flatten)]
     pub flight: FlightArgs,
@@ -130,6 +145,11 @@ pub struct RunArgs {
     /// Write the trajectory (CSV, one row per UAV and tick) here.
     #[arg(long)]
     pub trajectory: Option<PathBuf>,
+    /// `sim`: the in-process simulator, as fast as it computes. `cfsim`: every UAV a simulated
+    /// Crazyflie flown through the real CRTP path over UDP, in real time (take-off first, landing
+    /// after); the metrics count from the moment all fly.
+    #[arg(long, default_value = "sim", value_parser = ["sim", "cfsim"])]
+    pub link: String,
     /// Flight options.
     #[command(flatten)]
     pub flight: FlightArgs,
@@ -173,6 +193,9 @@ pub struct BenchArgs {
     /// Scenario the server flies (`server`; default: the embedded demo).
     #[arg(long)]
     pub scenario: Option<PathBuf>,
+    /// Fleet sizes to measure (`crazyflie`), comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [1, 10, 25, 50, 100])]
+    pub crazyflies: Vec<usize>,
 }
 
 /// Benchmarks.
@@ -182,6 +205,9 @@ pub enum BenchTarget {
     Filter,
     /// The server under load: tick p99 with 0 and with 200 WebSocket clients (20 stalled), REST p99.
     Server,
+    /// Crazyflie relay: setpoint latency from tick to the simulated Crazyflie, and how many
+    /// Crazyflies one server's link tasks keep at 20 Hz.
+    Crazyflie,
 }
 
 impl FlightArgs {

@@ -2,7 +2,7 @@
 
 use crate::cli::RunArgs;
 use anyhow::Context;
-use fleet::{RunMetrics, RunOptions, Scenario, ScenarioError, ValidScenario, run_scenario};
+use fleet::{RunMetrics, RunOptions, Scenario, ScenarioError, ValidScenario, run_scenario, run_scenario_on};
 use policies::PolicyRegistry;
 use std::path::Path;
 use std::process::ExitCode;
@@ -80,6 +80,49 @@ pub fn main(args: RunArgs) -> ExitCode {
     }
 }
 
+/// Flies `scenario` with one simulated Crazyflie per UAV through the CRTP/UDP path, in real time.
+fn run_on_cfsim(
+    scenario: &ValidScenario,
+    options: RunOptions,
+    policies: PolicyRegistry,
+) -> anyhow::Result<fleet::RunOutcome> {
+    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    let mut scenario = scenario.clone();
+    let sims = {
+        let _inside = runtime.enter();
+        let count = scenario.uavs.len();
+        airroads::cfsim_fleet::spawn(&mut scenario, count, 0)?
+    };
+    say!("flying {} simulated Crazyflies over CRTP/UDP (take-off first)", sims.len());
+    let dt = scenario.params.dt;
+    let relay = crazyflie::RelayConfig { dt, ..Default::default() };
+    let handle = runtime.handle().clone();
+    let mut make_link = |u: &fleet::UavSpec, _| -> Box<dyn links::Link> {
+        let uri = u.link.as_deref().unwrap_or_default();
+        Box::new(crazyflie::CrazyflieLink::spawn(&handle, uri, relay))
+    };
+    // Ticks at 1/dt of wall time, like the server's loop (late ticks are not made up).
+    let period = std::time::Duration::from_secs_f64(dt);
+    let mut next = std::time::Instant::now();
+    let mut wait_tick = || {
+        next += period;
+        let now = std::time::Instant::now();
+        if next > now {
+            std::thread::sleep(next - now);
+        } else {
+            next = now;
+        }
+    };
+    let outcome = run_scenario_on(&scenario, options, policies, &mut make_link, &mut wait_tick)
+        .context("flying the simulated Crazyflies")?;
+    runtime.block_on(async {
+        for sim in sims {
+            sim.shutdown().await;
+        }
+    });
+    Ok(outcome)
+}
+
 fn execute(args: &RunArgs, scenario: &ValidScenario, policies: PolicyRegistry) -> anyhow::Result<RunMetrics> {
     let trajectory: Option<Box<dyn std::io::Write>> = match &args.trajectory {
         Some(path) => {
@@ -91,7 +134,11 @@ fn execute(args: &RunArgs, scenario: &ValidScenario, policies: PolicyRegistry) -
     };
     let options =
         RunOptions { config: args.flight.fleet_config(), policy: args.flight.policy.clone(), trajectory };
-    let outcome = run_scenario(scenario, options, policies).context("writing the trajectory")?;
+    let outcome = if args.link == "cfsim" {
+        run_on_cfsim(scenario, options, policies)?
+    } else {
+        run_scenario(scenario, options, policies).context("writing the trajectory")?
+    };
     print_summary(&outcome.metrics, outcome.policy_fallbacks);
     if let Some(path) = &args.out {
         let json = serde_json::to_string_pretty(&outcome.metrics)?;

@@ -2,7 +2,7 @@
 
 use crate::cli::ServeArgs;
 use crate::run_cmd::{EXIT_INVALID, load_scenario};
-use airroads::serve::rerun_sink::{self, RerunMode};
+use airroads::serve::rerun_sink;
 use airroads::serve::{self, ServeConfig, Server};
 use anyhow::Context as _;
 use std::process::ExitCode;
@@ -23,7 +23,7 @@ pub fn main(args: ServeArgs) -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    match runtime.block_on(run(args.addr, config, &args.rerun)) {
+    match runtime.block_on(run(&args, config)) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             eprintln!("error: {e:#}");
@@ -76,13 +76,14 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
         None => serve::demo_scenario().map_err(|e| format!("{e:#}"))?,
     };
     let policies = args.flight.policies(initial.params.delta)?;
+    if args.cfsim > initial.uavs.len() {
+        return Err(format!("--cfsim {}: the scenario has only {} UAVs", args.cfsim, initial.uavs.len()));
+    }
+    if !(args.altitude.is_finite() && (0.2..=10.0).contains(&args.altitude)) {
+        return Err(format!("--altitude {}: must be between 0.2 and 10 m", args.altitude));
+    }
     let data_dir = if args.ephemeral {
         None
-    } else if args.scenario.is_some() {
-        // An explicit scenario starts over; the state is saved as it flies.
-        let dir = args.data_dir.clone().unwrap_or_else(serve::persist::default_dir);
-        let _ = std::fs::remove_file(dir.join(serve::persist::STATE_FILE));
-        Some(dir)
     } else {
         Some(args.data_dir.clone().unwrap_or_else(serve::persist::default_dir))
     };
@@ -93,20 +94,42 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
         token,
         data_dir,
         initial,
+        relay: crazyflie::RelayConfig { altitude: args.altitude, ..Default::default() },
+        // An explicit scenario (or --cfsim) starts over; the state is then saved as it flies. The
+        // old state file stays until the first save replaces it, so a failed start loses nothing.
+        resume: args.scenario.is_none() && args.cfsim == 0,
     })
 }
 
-async fn run(addr: std::net::SocketAddr, config: ServeConfig, rerun: &RerunMode) -> anyhow::Result<()> {
+async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
+    let (addr, rerun) = (args.addr, &args.rerun);
     let listener = tokio::net::TcpListener::bind(addr).await.with_context(|| format!("binding {addr}"))?;
     let local = listener.local_addr()?;
     let data_dir = config.data_dir.clone();
+    let sims = airroads::cfsim_fleet::spawn(&mut config.initial, args.cfsim, args.cfsim_port)?;
     let server = Server::start(config)?;
+    let mocap = match args.mocap {
+        Some(at) => {
+            let socket = tokio::net::UdpSocket::bind(at).await.with_context(|| format!("--mocap {at}"))?;
+            let counters = std::sync::Arc::new(serve::mocap::MocapCounters::default());
+            tokio::spawn(serve::mocap::ingest(socket, server.mocap.clone(), counters));
+            Some(at)
+        }
+        None => None,
+    };
     say!("airroads serving on http://{local}");
     say!("  API        http://{local}/api (OpenAPI: /api/openapi.json), stream ws://{local}/ws");
     say!("  fleet      {} UAVs from {}", server.state().snapshots.borrow().uavs.len(), server.resumed_from);
     match &data_dir {
         Some(dir) => say!("  data dir   {}", dir.display()),
         None => say!("  data dir   none (--ephemeral)"),
+    }
+    if !sims.is_empty() {
+        let first = sims.first().map(|s| s.uri()).unwrap_or_default();
+        say!("  cfsim      {} simulated Crazyflies over CRTP/UDP from {first}", sims.len());
+    }
+    if let Some(at) = mocap {
+        say!("  mocap      udp://{at} ({{\"id\", \"t\", \"p\": [x, y, z]}} per datagram)");
     }
     say!(
         "  changes    {}",
@@ -128,6 +151,9 @@ async fn run(addr: std::net::SocketAddr, config: ServeConfig, rerun: &RerunMode)
         && let Ok(None) = tokio::task::spawn_blocking(move || sink.finish()).await
     {
         eprintln!("warning: rerun: the log was not flushed within {:?}", rerun_sink::FINISH_TIMEOUT);
+    }
+    for sim in sims {
+        sim.shutdown().await;
     }
     served
 }

@@ -271,3 +271,29 @@ test("insert and delete segments, export the layout and import it again", async 
     await screenshot(page, "segments-imported");
   });
 });
+
+test("land a selected UAV, then the emergency stop cuts every UAV", async () => {
+  await withDashboard("land", [], async (page, { url }) => {
+    await api(url, "POST", "/api/fleet/pause");
+    const uav = await until("uav2 to hover", async () => {
+      const s = await snapshot(page);
+      const u = s.uavs.find((u) => u.id === "uav2");
+      return s.paused && Math.hypot(...u.v) < 0.02 && u;
+    });
+    await clickWorld(page, uav.p[0], uav.p[1]);
+    assert.deepEqual(await page.evaluate(() => window.__airroads.selection), ["uav2"]);
+    await page.click("#land");
+    await until("uav2 to land (GET /api/uavs/uav2)", async () => {
+      const u = await api(url, "GET", "/api/uavs/uav2");
+      return u.phase === "landed" && u.status === "landed";
+    });
+    const others = (await api(url, "GET", "/api/state")).uavs.filter((u) => u.id !== "uav2");
+    assert.ok(others.every((u) => u.phase === "flying"), "only the selected UAV lands");
+
+    page.once("dialog", (d) => d.accept());
+    await page.click("#estop");
+    await until("every UAV to be stopped", async () =>
+      (await api(url, "GET", "/api/state")).uavs.every((u) => u.phase === "stopped" || u.id === "uav2"));
+    await screenshot(page, "stopped");
+  });
+});

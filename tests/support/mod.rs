@@ -55,6 +55,8 @@ pub fn config(initial: &Value) -> ServeConfig {
         token: None,
         data_dir: None,
         initial: scenario(initial),
+        relay: Default::default(),
+        resume: true,
     }
 }
 

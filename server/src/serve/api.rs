@@ -26,10 +26,13 @@ pub fn router() -> Router<AppState> {
         .route("/api/uavs/{id}", routing::get(get_uav).delete(remove_uav))
         .route("/api/uavs/{id}/goal", routing::put(set_goal).delete(clear_goal))
         .route("/api/uavs/{id}/policy", routing::put(set_policy))
+        .route("/api/uavs/{id}/land", routing::post(land_uav))
         .route("/api/policies", routing::get(list_policies))
         .route("/api/scenario", routing::post(load_scenario))
         .route("/api/fleet/pause", routing::post(pause))
         .route("/api/fleet/resume", routing::post(resume))
+        .route("/api/fleet/land", routing::post(land_fleet))
+        .route("/api/fleet/stop", routing::post(stop_fleet))
         .route("/api/state", routing::get(get_state))
         .route("/api/metrics", routing::get(get_metrics))
 }
@@ -75,12 +78,7 @@ async fn put_road(
             Ok(Json(json!({"version": version, "cleared_goals": cleared_goals})).into_response())
         }
         Ok(_) => Ok(StatusCode::OK.into_response()),
-        // A UAV would be outside or too close to a wall of the new road: a conflict with the fleet.
-        Err(mut e) if e.code == "unsafe" => {
-            e.status = StatusCode::CONFLICT;
-            e.code = "unsafe_road";
-            Err(e)
-        }
+        // A UAV that would be outside or too close to a wall is a 409 (EditError::RoadConflict).
         Err(e) => Err(e),
     }
 }
@@ -104,6 +102,8 @@ struct NewUav {
     policy: Option<String>,
     #[serde(default)]
     goal: Option<[f64; 2]>,
+    #[serde(default)]
+    link: Option<String>,
 }
 
 /// Ids appear in URL paths: 1 to 64 characters from `A-Z a-z 0-9 _ - .`.
@@ -131,9 +131,13 @@ async fn add_uav(State(app): State<AppState>, ApiJson(new): ApiJson<NewUav>) -> 
     check_id(&new.id)?;
     let position = point("position", new.position)?;
     let goal = new.goal.map(|g| point("goal", g)).transpose()?;
-    let id = new.id.clone();
-    app.apply(Command::AddUav { id: new.id, position, policy: new.policy, goal }).await?;
-    let body = json!({"id": id, "position": new.position, "goal": new.goal});
+    if let Some(link) = &new.link {
+        links::check_link(link).map_err(|reason| ApiError::invalid("link", reason))?;
+    }
+    let (id, link) = (new.id.clone(), new.link.clone());
+    app.apply(Command::AddUav { id: new.id, position, policy: new.policy, goal, link: new.link }).await?;
+    let link = link.unwrap_or_else(|| links::SIM_LINK.into());
+    let body = json!({"id": id, "position": new.position, "goal": new.goal, "link": link});
     Ok((StatusCode::CREATED, [(header::LOCATION, format!("/api/uavs/{id}"))], Json(body)).into_response())
 }
 
@@ -208,6 +212,21 @@ async fn pause(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
 async fn resume(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
     app.apply(Command::Hold(false)).await?;
     Ok(Json(json!({"paused": false})))
+}
+
+async fn land_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
+    app.apply_urgent(Command::Land(Some(id.clone()))).await?;
+    Ok(Json(json!({"landing": [id]})))
+}
+
+async fn land_fleet(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+    app.apply_urgent(Command::Land(None)).await?;
+    Ok(Json(json!({"landing": "all"})))
+}
+
+async fn stop_fleet(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+    app.apply_urgent(Command::EmergencyStop).await?;
+    Ok(Json(json!({"stopped": "all"})))
 }
 
 async fn get_state(State(app): State<AppState>) -> Response {

@@ -21,6 +21,8 @@ pub enum Command {
         policy: Option<String>,
         /// Goal (None: hover).
         goal: Option<Vec2>,
+        /// `sim` (None) or a Crazyflie URI.
+        link: Option<String>,
     },
     /// Remove a UAV.
     RemoveUav(String),
@@ -32,6 +34,10 @@ pub enum Command {
     LoadScenario(Box<ValidScenario>),
     /// Hold (true: every UAV brakes to a hover) or resume (false).
     Hold(bool),
+    /// Land one UAV (Some) or all (None). Sent on the urgent channel.
+    Land(Option<String>),
+    /// Emergency stop of every UAV: motors off. Sent on the urgent channel.
+    EmergencyStop,
 }
 
 /// What a command did.

@@ -5,11 +5,11 @@
 //! `send`s to watches (which never block); late ticks are counted and skipped, never bunched.
 
 use super::command::{Command, Outcome, Request};
+use super::linking::LinkFactory;
 use super::persist::SavedState;
 use super::snapshot::Snapshot;
 use super::stats::{LoopMetrics, TickStats};
 use fleet::{EditError, Fleet};
-use links::SimLink;
 use roads::{Road, RoadLayout};
 use serde::Serialize;
 use std::sync::Arc;
@@ -53,6 +53,8 @@ impl RoadView {
 pub struct LoopChannels {
     /// Commands from the REST handlers.
     pub requests: mpsc::Receiver<Request>,
+    /// Land and stop requests, applied before any other command.
+    pub urgent: mpsc::UnboundedReceiver<Request>,
     /// The snapshot after each tick.
     pub snapshots: watch::Sender<Arc<Snapshot>>,
     /// Loop statistics after each tick.
@@ -67,6 +69,7 @@ pub struct LoopChannels {
 pub struct Engine {
     fleet: Fleet,
     default_policy: String,
+    links: LinkFactory,
     channels: LoopChannels,
     stats: TickStats,
     road_version: u64,
@@ -75,10 +78,10 @@ pub struct Engine {
 }
 
 impl Engine {
-    /// A loop over `fleet`; UAVs added without a policy fly `default_policy`.
-    pub fn new(fleet: Fleet, default_policy: String, channels: LoopChannels) -> Self {
+    /// A loop over `fleet`; UAVs added without a policy fly `default_policy`, links come from `links`.
+    pub fn new(fleet: Fleet, default_policy: String, links: LinkFactory, channels: LoopChannels) -> Self {
         let stats = TickStats::new(fleet.config.params.dt);
-        Self { fleet, default_policy, channels, stats, road_version: 0, ticks: 0, time: 0.0 }
+        Self { fleet, default_policy, links, channels, stats, road_version: 0, ticks: 0, time: 0.0 }
     }
 
     /// Runs the loop on a new thread until `stop` is set or every command sender is gone.
@@ -116,6 +119,12 @@ impl Engine {
     /// Applies queued commands; false when every sender is gone (the server shut down).
     fn apply_commands(&mut self) -> bool {
         let mut applied = 0;
+        // Land and stop go out ahead of anything queued (the urgent channel only carries those).
+        while let Ok(request) = self.channels.urgent.try_recv() {
+            let outcome = self.apply(request.command);
+            let _ = request.reply.send(outcome);
+            applied += 1;
+        }
         while applied < MAX_COMMANDS_PER_TICK {
             match self.channels.requests.try_recv() {
                 Ok(request) => {
@@ -144,18 +153,23 @@ impl Engine {
                 self.road_changed();
                 return Ok(Outcome::RoadReplaced { cleared_goals });
             }
-            Command::AddUav { id, position, policy, goal } => {
+            Command::AddUav { id, position, policy, goal, link } => {
                 let state = UavState::at_rest(position);
                 let policy = policy.unwrap_or_else(|| self.default_policy.clone());
-                let link = Box::new(SimLink::new(state, dt));
+                // Checked before the link exists: a refused UAV never starts a radio session.
+                self.fleet.check_new(&id, &policy, &state, goal)?;
+                let link = self.links.make(&id, link.as_deref(), state, dt);
                 self.fleet.try_add(id, policy, link, state, goal)?;
             }
+            Command::Land(Some(id)) => self.fleet.land(&id)?,
+            Command::Land(None) => self.fleet.land_all(),
+            Command::EmergencyStop => self.fleet.emergency_stop_all(),
             Command::RemoveUav(id) => drop(self.fleet.remove(&id)?),
             Command::SetGoal(id, goal) => self.fleet.set_goal(&id, goal)?,
             Command::SetPolicy(id, policy) => self.fleet.set_policy(&id, &policy)?,
             Command::LoadScenario(scenario) => {
                 let policy = self.default_policy.clone();
-                load_scenario(&mut self.fleet, &scenario, &policy)?;
+                load_scenario(&mut self.fleet, &scenario, &policy, &self.links)?;
                 self.road_changed();
                 return Ok(Outcome::ScenarioLoaded { tick: self.ticks });
             }
@@ -200,6 +214,7 @@ pub fn load_scenario(
     fleet: &mut Fleet,
     scenario: &fleet::ValidScenario,
     policy: &str,
+    links: &LinkFactory,
 ) -> Result<(), EditError> {
     // Checked before anything changes; the scenario's starts and goals were validated with it.
     if !fleet.policy_names().any(|n| n == policy) {
@@ -208,7 +223,7 @@ pub fn load_scenario(
     fleet.reset(scenario.params, scenario.road.clone());
     for u in &scenario.uavs {
         let state = UavState::at_rest(u.start);
-        let link = Box::new(SimLink::new(state, scenario.params.dt));
+        let link = links.make(&u.id, u.link.as_deref(), state, scenario.params.dt);
         fleet.add(u.id.clone(), policy.to_string(), link, state, Some(u.goal));
     }
     Ok(())

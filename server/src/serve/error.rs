@@ -64,6 +64,9 @@ impl From<EditError> for ApiError {
             EditError::Unsafe { field, reason } => {
                 Self::new(StatusCode::UNPROCESSABLE_ENTITY, "unsafe", reason).field(field)
             }
+            EditError::RoadConflict(reason) => {
+                Self::new(StatusCode::CONFLICT, "unsafe_road", reason).field("segments")
+            }
             EditError::UnknownPolicy(reason) => {
                 Self::new(StatusCode::UNPROCESSABLE_ENTITY, "unknown_policy", reason).field("policy")
             }

@@ -8,8 +8,11 @@ pub mod client;
 pub mod command;
 pub mod engine;
 pub mod error;
+pub mod linking;
+pub mod mocap;
 pub mod openapi;
 pub mod persist;
+mod rerun_log;
 pub mod rerun_sink;
 pub mod snapshot;
 pub mod state;
@@ -22,6 +25,7 @@ use axum::Router;
 use axum::extract::ws::Utf8Bytes;
 use engine::{Engine, LoopChannels, RoadView};
 use fleet::{Fleet, FleetConfig, ValidScenario};
+use linking::{LinkFactory, MocapRoutes};
 use persist::SavedState;
 use policies::PolicyRegistry;
 use snapshot::Snapshot;
@@ -50,6 +54,10 @@ pub struct ServeConfig {
     pub data_dir: Option<PathBuf>,
     /// What to fly when the data directory has no saved state.
     pub initial: ValidScenario,
+    /// How Crazyflie links fly (altitude, take-off and landing times, log period).
+    pub relay: crazyflie::RelayConfig,
+    /// Resume the saved state of `data_dir` when there is one (false: start from `initial`).
+    pub resume: bool,
 }
 
 /// A running server: the fleet loop thread and the shared handler state.
@@ -60,6 +68,8 @@ pub struct Server {
     writer: Option<tokio::task::JoinHandle<()>>,
     /// Where the initial fleet came from (`saved state` or the scenario's name), for the banner.
     pub resumed_from: String,
+    /// Where motion-capture poses of each Crazyflie go.
+    pub mocap: MocapRoutes,
 }
 
 /// The scenario embedded as the default demo (always valid: a test checks it).
@@ -69,16 +79,16 @@ pub fn demo_scenario() -> anyhow::Result<ValidScenario> {
 }
 
 /// Builds the fleet: the saved state of `data_dir` if there is one, else `initial`.
-fn initial_fleet(config: ServeConfig) -> anyhow::Result<(Fleet, String)> {
+fn initial_fleet(config: ServeConfig, factory: &LinkFactory) -> anyhow::Result<(Fleet, String)> {
     let saved = match &config.data_dir {
-        Some(dir) => persist::load(dir)?,
-        None => None,
+        Some(dir) if config.resume => persist::load(dir)?,
+        _ => None,
     };
     let mut fleet_config = config.fleet;
     let Some(saved) = saved else {
         fleet_config.params = config.initial.params;
         let mut fleet = Fleet::new(fleet_config, config.initial.road.clone(), config.policies);
-        engine::load_scenario(&mut fleet, &config.initial, &config.default_policy)?;
+        engine::load_scenario(&mut fleet, &config.initial, &config.default_policy, factory)?;
         return Ok((fleet, format!("scenario `{}`", config.initial.name)));
     };
     saved.params.validate()?;
@@ -88,8 +98,16 @@ fn initial_fleet(config: ServeConfig) -> anyhow::Result<(Fleet, String)> {
         let policy =
             if fleet.policy_names().any(|n| n == u.policy) { &u.policy } else { &config.default_policy };
         let state = UavState::at_rest(Vec2::new(u.position[0], u.position[1]));
-        let link = Box::new(links::SimLink::new(state, saved.params.dt));
         let goal = u.goal.map(|g| Vec2::new(g[0], g[1]));
+        if let Some(Err(e)) = u.link.as_deref().map(links::check_link) {
+            eprintln!("airroads: saved UAV `{}` not resumed: link: {e}", u.id);
+            continue;
+        }
+        if let Err(e) = fleet.check_new(&u.id, policy, &state, goal) {
+            eprintln!("airroads: saved UAV `{}` not resumed: {e}", u.id);
+            continue;
+        }
+        let link = factory.make(&u.id, u.link.as_deref(), state, saved.params.dt);
         if let Err(e) = fleet.try_add(u.id.clone(), policy.clone(), link, state, goal) {
             eprintln!("airroads: saved UAV `{}` not resumed: {e}", u.id);
         }
@@ -110,8 +128,10 @@ impl Server {
             "default policy `{default_policy}` is not loaded (available: {})",
             policies.join(", ")
         );
-        let (fleet, resumed_from) = initial_fleet(config)?;
+        let factory = LinkFactory::new(tokio::runtime::Handle::current(), config.relay);
+        let (fleet, resumed_from) = initial_fleet(config, &factory)?;
         let (commands, requests) = mpsc::channel(1024);
+        let (urgent, urgent_requests) = mpsc::unbounded_channel();
         let first = Snapshot::of(&fleet, 0, 0.0, 0);
         let first_frame = Frame { tick: 0, text: Utf8Bytes::from(serde_json::to_string(&first)?) };
         let (snapshots_tx, snapshots) = watch::channel(Arc::new(first));
@@ -121,17 +141,21 @@ impl Server {
         let (frames_tx, frames) = watch::channel(first_frame);
         let channels = LoopChannels {
             requests,
+            urgent: urgent_requests,
             snapshots: snapshots_tx,
             metrics: metrics_tx,
             saved: saved_tx,
             road: road_tx,
         };
         let stop = Arc::new(AtomicBool::new(false));
-        let fleet_loop = Engine::new(fleet, default_policy.to_string(), channels).spawn(stop.clone())?;
+        let mocap = factory.mocap.clone();
+        let fleet_loop =
+            Engine::new(fleet, default_policy.to_string(), factory, channels).spawn(stop.clone())?;
         tokio::spawn(serialise(snapshots.clone(), frames_tx));
         let writer = data_dir.map(|dir| tokio::spawn(persist::writer(dir, saved)));
         let app = AppState {
             commands,
+            urgent,
             snapshots,
             frames,
             road,
@@ -141,7 +165,7 @@ impl Server {
             default_policy,
             stream: Arc::new(StreamCounters::default()),
         };
-        Ok(Self { app, stop, fleet_loop: Some(fleet_loop), writer, resumed_from })
+        Ok(Self { app, stop, fleet_loop: Some(fleet_loop), writer, resumed_from, mocap })
     }
 
     /// The shared handler state (for tests and other sinks such as Rerun).
@@ -174,6 +198,42 @@ impl Server {
     }
 }
 
+/// How long shutdown waits for the Crazyflies to land.
+pub const LANDING_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(8);
+
+/// Lands every UAV flown over a radio or UDP link and waits (up to [`LANDING_TIMEOUT`]) until none
+/// is airborne. In-process UAVs keep their place: they resume from the saved state.
+pub async fn land_crazyflies(state: &AppState) {
+    let airborne = |s: &Snapshot| -> Vec<String> {
+        s.uavs
+            .iter()
+            .filter(|u| u.link != links::SIM_LINK && matches!(u.phase, "taking_off" | "flying" | "landing"))
+            .map(|u| u.id.clone())
+            .collect()
+    };
+    let ids = airborne(&state.snapshots.borrow());
+    if ids.is_empty() {
+        return;
+    }
+    eprintln!("airroads: landing {} Crazyflies before exiting", ids.len());
+    for id in ids {
+        if let Err(e) = state.apply_urgent(command::Command::Land(Some(id.clone()))).await {
+            eprintln!("airroads: {id} not landed: {}", e.message);
+        }
+    }
+    let mut snapshots = state.snapshots.clone();
+    let landed = async {
+        while !airborne(&snapshots.borrow_and_update()).is_empty() {
+            if snapshots.changed().await.is_err() {
+                return;
+            }
+        }
+    };
+    if tokio::time::timeout(LANDING_TIMEOUT, landed).await.is_err() {
+        eprintln!("airroads: not every Crazyflie reported landed within {LANDING_TIMEOUT:?}");
+    }
+}
+
 async fn not_found() -> error::ApiError {
     error::ApiError::new(axum::http::StatusCode::NOT_FOUND, "not_found", "no such route")
 }
@@ -198,10 +258,13 @@ pub async fn serve(
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
     let app = server.router();
-    // Stopping the loop first ends every WebSocket stream, so the graceful shutdown does not wait on them.
+    // Crazyflies land before the loop stops (it keeps flying the others meanwhile); then stopping
+    // the loop ends every WebSocket stream, so the graceful shutdown does not wait on them.
     let stop = server.stop.clone();
+    let state = server.app.clone();
     let shutdown = async move {
         shutdown.await;
+        land_crazyflies(&state).await;
         stop.store(true, Ordering::Relaxed);
     };
     axum::serve(listener, app).with_graceful_shutdown(shutdown).await.context("HTTP server")?;

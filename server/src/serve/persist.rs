@@ -42,6 +42,9 @@ pub struct SavedUav {
     pub position: [f64; 2],
     /// Goal, or null.
     pub goal: Option<[f64; 2]>,
+    /// Its Crazyflie URI; absent for an in-process UAV.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub link: Option<String>,
 }
 
 /// The format tag written into every state file.
@@ -63,6 +66,7 @@ impl SavedState {
                     policy: u.policy.clone(),
                     position: [u.state.p.x, u.state.p.y],
                     goal: u.nav.goal().map(|g| [g.x, g.y]),
+                    link: Some(u.link.describe()).filter(|l| l != links::SIM_LINK),
                 })
                 .collect(),
         }
@@ -153,7 +157,22 @@ mod tests {
             params: Params::default(),
             segments: RoadLayout::straight(0.0, 10.0, 4.0, 2).segments,
             paused: true,
-            uavs: vec![SavedUav { id: "a".into(), policy: "pd".into(), position: [1.0, 0.5], goal: None }],
+            uavs: vec![
+                SavedUav {
+                    id: "a".into(),
+                    policy: "pd".into(),
+                    position: [1.0, 0.5],
+                    goal: None,
+                    link: None,
+                },
+                SavedUav {
+                    id: "cf1".into(),
+                    policy: "pd".into(),
+                    position: [3.0, -0.5],
+                    goal: Some([8.0, 0.0]),
+                    link: Some("radio://0/80/2M/E7E7E7E7E1".into()),
+                },
+            ],
         };
         save(&dir, &state).unwrap();
         save(&dir, &state).unwrap();

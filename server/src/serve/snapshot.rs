@@ -1,6 +1,7 @@
 //! The immutable snapshot the fleet loop publishes after every tick (`GET /api/state`, `/ws`, Rerun).
 
 use fleet::{Fleet, Uav, collision_margin, road_margin};
+use links::LinkPhase;
 use serde::Serialize;
 use uav::Vec2;
 
@@ -18,6 +19,18 @@ pub enum UavStatus {
     Failed,
     /// No fresh state from the link; its last known state was used.
     Stale,
+    /// No state for `stale_after` (or reconnecting while it may be airborne): neighbours avoid its reach.
+    Lost,
+    /// Connecting to its Crazyflie.
+    Connecting,
+    /// Taking off to the flight altitude.
+    TakingOff,
+    /// Landing.
+    Landing,
+    /// On the ground after landing.
+    Landed,
+    /// Motors cut by an emergency stop.
+    Stopped,
 }
 
 /// One UAV in a snapshot. Vectors are `[x, y]` in metres, m/s and m/s².
@@ -43,6 +56,12 @@ pub struct UavSnapshot {
     pub arrived: bool,
     /// What it is doing.
     pub status: UavStatus,
+    /// Its link: `sim` or the Crazyflie URI.
+    pub link: String,
+    /// Where it is in its flight as its link reports it (`flying` for in-process UAVs).
+    pub phase: &'static str,
+    /// Its link is lost (see `status`).
+    pub lost: bool,
     /// CBF rows binding at u.
     pub active_rows: usize,
     /// Largest slack of its QP this tick (0 when none was needed).
@@ -84,6 +103,17 @@ fn xy(v: &Vec2) -> [f64; 2] {
 
 fn status(u: &Uav, holding: bool) -> UavStatus {
     let l = &u.last;
+    if l.lost {
+        return UavStatus::Lost;
+    }
+    match u.phase {
+        LinkPhase::Connecting => return UavStatus::Connecting,
+        LinkPhase::TakingOff => return UavStatus::TakingOff,
+        LinkPhase::Landing => return UavStatus::Landing,
+        LinkPhase::Landed => return UavStatus::Landed,
+        LinkPhase::Stopped => return UavStatus::Stopped,
+        LinkPhase::Flying => {}
+    }
     if l.stale {
         UavStatus::Stale
     } else if l.failed {
@@ -109,9 +139,12 @@ impl Snapshot {
             .enumerate()
             .map(|(k, u)| {
                 let l = &u.last;
-                let collision = lists.get(k).and_then(|list| {
+                // UAVs on the ground (landed, stopped, not yet up) are not in each other's airspace.
+                let in_air = |u: &Uav| u.phase.airborne() || u.last.lost;
+                let collision = lists.get(k).filter(|_| in_air(u)).and_then(|list| {
                     list.iter()
                         .filter_map(|&d| all.get(d))
+                        .filter(|d| in_air(d))
                         .map(|d| collision_margin(&u.state, &d.state, 2.0 * p.delta))
                         .min_by(f64::total_cmp)
                 });
@@ -126,6 +159,9 @@ impl Snapshot {
                     goal: u.nav.goal().map(|g| xy(&g)),
                     arrived: u.nav.arrived,
                     status: status(u, fleet.holding()),
+                    link: u.link.describe(),
+                    phase: u.phase.name(),
+                    lost: l.lost,
                     active_rows: l.active_rows,
                     slack: l.max_slack,
                     min_barrier: l.min_barrier.is_finite().then_some(l.min_barrier),

@@ -31,7 +31,8 @@ pub struct StreamCounters {
     pub clients: AtomicUsize,
     /// Frames sent.
     pub frames_sent: AtomicU64,
-    /// Frames a client skipped because it was slower than the loop.
+    /// Frames a client without `rate` skipped because it was slower than the loop (a rate-limited
+    /// client's skips are by request and not counted).
     pub frames_skipped: AtomicU64,
     /// Clients dropped because a send stalled.
     pub clients_dropped: AtomicU64,
@@ -42,6 +43,8 @@ pub struct StreamCounters {
 pub struct AppState {
     /// Commands into the fleet loop.
     pub commands: mpsc::Sender<Request>,
+    /// Land and stop requests, which the loop applies before any other command.
+    pub urgent: mpsc::UnboundedSender<Request>,
     /// The latest snapshot.
     pub snapshots: watch::Receiver<Arc<Snapshot>>,
     /// The latest snapshot as JSON text (serialised once, sent to every client).
@@ -61,6 +64,16 @@ pub struct AppState {
 }
 
 impl AppState {
+    /// Sends a land or stop `command` ahead of every queued change and waits for its outcome.
+    pub async fn apply_urgent(&self, command: Command) -> Result<Outcome, ApiError> {
+        let (reply, answer) = oneshot::channel();
+        self.urgent.send(Request { command, reply }).map_err(|_| ApiError::loop_unavailable())?;
+        match tokio::time::timeout(COMMAND_TIMEOUT, answer).await {
+            Ok(Ok(outcome)) => outcome.map_err(ApiError::from),
+            _ => Err(ApiError::loop_unavailable()),
+        }
+    }
+
     /// Sends `command` to the fleet loop and waits (off the loop) for its outcome.
     pub async fn apply(&self, command: Command) -> Result<Outcome, ApiError> {
         let (reply, answer) = oneshot::channel();

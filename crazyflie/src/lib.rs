@@ -1,0 +1,10 @@
+//! Crazyflie 2.1 relay: CRTP transports (Crazyradio through crazyflie-link, UDP to simulators) and
+//! [`CrazyflieLink`], the fleet's [`links::Link`] to one Crazyflie.
+
+mod relay;
+mod session;
+pub mod transport;
+pub mod udp;
+
+pub use relay::{CrazyflieLink, RelayConfig, Sample, Setpoint, Shared, Urgent};
+pub use session::STATE_VARIABLES;

@@ -1,0 +1,223 @@
+//! [`CrazyflieLink`]: the fleet's [`Link`] to one Crazyflie. The fleet loop's side is synchronous and
+//! never waits: it reads the newest state sample under a short lock and hands each tick's command
+//! over on a `watch` channel (latest wins). A tokio task per Crazyflie ([`crate::session`]) owns the
+//! CRTP connection: it connects, takes off, streams setpoints, lands, and reconnects after a loss.
+
+use crate::session;
+use links::{Link, LinkPhase};
+use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::{Duration, Instant};
+use tokio::sync::{mpsc, watch};
+use uav::{UavState, Vec2};
+
+/// How a Crazyflie is flown.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RelayConfig {
+    /// Flight altitude z (m); the fleet works in the horizontal plane at this height.
+    pub altitude: f64,
+    /// Duration of the high-level commander's take-off (s).
+    pub takeoff_s: f64,
+    /// Duration of the high-level commander's landing (s).
+    pub land_s: f64,
+    /// Period of the state log block (ms, 10–20 typical).
+    pub log_period_ms: u64,
+    /// A state older than this is not given to the fleet, and no setpoint is sent on it (s).
+    pub stale_after: f64,
+    /// Wait between reconnection attempts (s).
+    pub reconnect_after: f64,
+    /// Longest first connection, tables of contents included (s).
+    pub connect_timeout: f64,
+    /// Longest reconnection (s): the tables of contents are cached by then, and a Crazyflie must
+    /// be back before its watchdog cuts the motors 2 s after the loss.
+    pub reconnect_timeout: f64,
+    /// The fleet's tick (s): a setpoint is the state the command leads to one tick ahead.
+    pub dt: f64,
+}
+
+impl Default for RelayConfig {
+    fn default() -> Self {
+        Self {
+            altitude: 1.0,
+            takeoff_s: 2.0,
+            land_s: 2.0,
+            log_period_ms: 10,
+            stale_after: 0.3,
+            reconnect_after: 0.1,
+            connect_timeout: 15.0,
+            reconnect_timeout: 1.0,
+            dt: 0.05,
+        }
+    }
+}
+
+/// One state estimate from the Crazyflie's log block.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    /// Position [x, y, z] (m).
+    pub p: [f64; 3],
+    /// Velocity [vx, vy, vz] (m/s).
+    pub v: [f64; 3],
+    /// When it arrived.
+    pub at: Instant,
+    /// Increases with every sample.
+    pub seq: u64,
+}
+
+/// A full-state setpoint for the coming tick: where the filtered command leads.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Setpoint {
+    /// Position [x, y, z] (m).
+    pub p: [f32; 3],
+    /// Velocity (m/s).
+    pub v: [f32; 3],
+    /// Acceleration feed-forward: the filtered input u (m/s²).
+    pub a: [f32; 3],
+    /// When the fleet handed the command over (for latency measurements).
+    pub issued: Instant,
+}
+
+/// A request that goes out ahead of any setpoint.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Urgent {
+    /// Land with the high-level commander.
+    Land,
+    /// Emergency stop: motors off at once.
+    Stop,
+}
+
+/// State shared by the link (fleet thread) and its session task.
+#[derive(Debug, Default)]
+pub struct Shared {
+    sample: Mutex<Option<Sample>>,
+    phase: AtomicU8,
+    /// The last connection error, for the operator.
+    error: Mutex<Option<String>>,
+}
+
+const PHASES: [LinkPhase; 6] = [
+    LinkPhase::Connecting,
+    LinkPhase::TakingOff,
+    LinkPhase::Flying,
+    LinkPhase::Landing,
+    LinkPhase::Landed,
+    LinkPhase::Stopped,
+];
+
+impl Shared {
+    /// The newest sample.
+    pub fn sample(&self) -> Option<Sample> {
+        *self.sample.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Stores a new sample.
+    pub fn set_sample(&self, p: [f64; 3], v: [f64; 3]) {
+        let mut slot = self.sample.lock().unwrap_or_else(PoisonError::into_inner);
+        let seq = slot.map_or(1, |s| s.seq + 1);
+        *slot = Some(Sample { p, v, at: Instant::now(), seq });
+    }
+
+    /// The session's phase.
+    pub fn phase(&self) -> LinkPhase {
+        PHASES[usize::from(self.phase.load(Ordering::Acquire)).min(PHASES.len() - 1)]
+    }
+
+    /// Sets the session's phase.
+    pub fn set_phase(&self, phase: LinkPhase) {
+        let index = PHASES.iter().position(|p| *p == phase).unwrap_or(0);
+        // PHASES has 6 entries: the index fits in a u8.
+        self.phase.store(index as u8, Ordering::Release);
+    }
+
+    /// Records the last connection error.
+    pub fn set_error(&self, error: Option<String>) {
+        *self.error.lock().unwrap_or_else(PoisonError::into_inner) = error;
+    }
+
+    /// The last connection error, if the link is not connected because of one.
+    pub fn error(&self) -> Option<String> {
+        self.error.lock().unwrap_or_else(PoisonError::into_inner).clone()
+    }
+}
+
+/// The fleet's link to one Crazyflie (`radio://…` through a Crazyradio, `udp://HOST:PORT` to a
+/// simulator). Dropping it lands the Crazyflie.
+pub struct CrazyflieLink {
+    uri: String,
+    config: RelayConfig,
+    shared: Arc<Shared>,
+    setpoints: watch::Sender<Option<Setpoint>>,
+    urgent: mpsc::UnboundedSender<Urgent>,
+    external: mpsc::Sender<[f32; 3]>,
+    last_seq: u64,
+}
+
+impl CrazyflieLink {
+    /// Starts the session task for `uri` on `runtime`. Nothing is awaited here: the task connects
+    /// in the background and the link reports `connecting` until then.
+    pub fn spawn(runtime: &tokio::runtime::Handle, uri: &str, config: RelayConfig) -> Self {
+        let shared = Arc::new(Shared::default());
+        let (setpoints, setpoint_rx) = watch::channel(None);
+        let (urgent, urgent_rx) = mpsc::unbounded_channel();
+        // Motion-capture poses: a short queue, the newest matter; full means drop (never block).
+        let (external, external_rx) = mpsc::channel(8);
+        let channels = session::Channels { setpoints: setpoint_rx, urgent: urgent_rx, external: external_rx };
+        runtime.spawn(session::supervise(uri.to_string(), config, shared.clone(), channels));
+        Self { uri: uri.to_string(), config, shared, setpoints, urgent, external, last_seq: 0 }
+    }
+
+    /// The state shared with the session (phase, newest sample, last error).
+    pub fn shared(&self) -> &Arc<Shared> {
+        &self.shared
+    }
+
+    /// A sender for motion-capture positions of this Crazyflie (forwarded as external position).
+    pub fn external_position_sender(&self) -> mpsc::Sender<[f32; 3]> {
+        self.external.clone()
+    }
+}
+
+impl Link for CrazyflieLink {
+    fn state(&mut self) -> Option<UavState> {
+        let s = self.shared.sample()?;
+        if s.seq == self.last_seq || s.at.elapsed() > Duration::from_secs_f64(self.config.stale_after) {
+            return None;
+        }
+        self.last_seq = s.seq;
+        Some(UavState { p: Vec2::new(s.p[0], s.p[1]), v: Vec2::new(s.v[0], s.v[1]) })
+    }
+
+    fn send(&mut self, u: Vec2) {
+        let Some(s) = self.shared.sample() else { return };
+        if !uav::is_finite(&u) {
+            return;
+        }
+        let dt = self.config.dt;
+        let state = UavState { p: Vec2::new(s.p[0], s.p[1]), v: Vec2::new(s.v[0], s.v[1]) };
+        let next = state.stepped(u, dt);
+        let setpoint = Setpoint {
+            p: [next.p.x as f32, next.p.y as f32, self.config.altitude as f32],
+            v: [next.v.x as f32, next.v.y as f32, 0.0],
+            a: [u.x as f32, u.y as f32, 0.0],
+            issued: Instant::now(),
+        };
+        self.setpoints.send_replace(Some(setpoint));
+    }
+
+    fn phase(&self) -> LinkPhase {
+        self.shared.phase()
+    }
+
+    fn land(&mut self) {
+        // Unbounded: never blocks; fails only when the session is gone (nothing left to land).
+        let _ = self.urgent.send(Urgent::Land);
+    }
+
+    fn emergency_stop(&mut self) {
+        let _ = self.urgent.send(Urgent::Stop);
+    }
+
+    fn describe(&self) -> String {
+        self.uri.clone()
+    }
+}

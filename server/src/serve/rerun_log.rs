@@ -1,0 +1,204 @@
+//! What the Rerun sink logs for each snapshot (entities and series listed in `rerun_sink`), and
+//! what it remembers between snapshots: the road version, each UAV's trail, the sink's counters.
+
+use super::engine::RoadView;
+use super::rerun_sink::{SinkStats, TICK_TIMELINE, TIME_TIMELINE, TRAIL_EVERY_TICKS, TRAIL_POINTS};
+use super::snapshot::{Snapshot, UavSnapshot, UavStatus};
+use super::stats::LoopMetrics;
+use rerun::{
+    Arrows2D, Clear, Color, EntityPath, EntityPathPart, LineStrip2D, LineStrips2D, Points2D, Radius,
+    RecordingStream, RecordingStreamResult, Scalars, Transform3D,
+};
+use std::collections::{HashMap, VecDeque};
+
+/// Entity paths and trail of one UAV.
+struct UavLog {
+    root: EntityPath,
+    trail: EntityPath,
+    velocity: EntityPath,
+    target: EntityPath,
+    goal: EntityPath,
+    barrier: EntityPath,
+    slack: EntityPath,
+    points: VecDeque<[f32; 2]>,
+    trail_tick: Option<u64>,
+    had_goal: bool,
+    seen_tick: u64,
+}
+
+fn path(parts: &[&str]) -> EntityPath {
+    EntityPath::new(parts.iter().map(|p| EntityPathPart::new(*p)).collect())
+}
+
+impl UavLog {
+    fn new(id: &str) -> Self {
+        let below = |leaf| path(&["world", "uavs", id, leaf]);
+        Self {
+            root: path(&["world", "uavs", id]),
+            trail: below("trail"),
+            velocity: below("velocity"),
+            target: below("target"),
+            goal: below("goal"),
+            barrier: path(&["barrier", id]),
+            slack: path(&["slack", id]),
+            points: VecDeque::with_capacity(TRAIL_POINTS),
+            trail_tick: None,
+            had_goal: false,
+            seen_tick: 0,
+        }
+    }
+}
+
+/// What the sink remembers between snapshots.
+#[derive(Default)]
+pub(super) struct Logger {
+    road_version: Option<u64>,
+    last_tick: Option<u64>,
+    uavs: HashMap<String, UavLog>,
+    pub(super) stats: SinkStats,
+}
+
+fn xy(v: [f64; 2]) -> [f32; 2] {
+    [v[0] as f32, v[1] as f32]
+}
+
+fn color(status: UavStatus) -> Color {
+    match status {
+        UavStatus::Flying => Color::from_rgb(60, 200, 90),
+        UavStatus::Arrived => Color::from_rgb(70, 140, 255),
+        UavStatus::Braking => Color::from_rgb(255, 170, 40),
+        UavStatus::Failed => Color::from_rgb(230, 40, 40),
+        UavStatus::Stale => Color::from_rgb(150, 150, 150),
+        UavStatus::Lost => Color::from_rgb(176, 23, 155),
+        UavStatus::Connecting => Color::from_rgb(185, 194, 204),
+        UavStatus::TakingOff => Color::from_rgb(127, 200, 160),
+        UavStatus::Landing => Color::from_rgb(143, 179, 232),
+        UavStatus::Landed => Color::from_rgb(91, 101, 112),
+        UavStatus::Stopped => Color::from_rgb(59, 13, 13),
+    }
+}
+
+impl Logger {
+    /// Logs the road again with the next snapshot (a new viewer has not seen it).
+    pub(super) fn forget_road(&mut self) {
+        self.road_version = None;
+    }
+
+    /// Logs one snapshot (and the road when it changed) on the tick timeline.
+    pub(super) fn log(
+        &mut self,
+        rec: &RecordingStream,
+        snapshot: &Snapshot,
+        road: &RoadView,
+        metrics: &LoopMetrics,
+    ) {
+        if self.last_tick == Some(snapshot.tick) {
+            return; // The first snapshot after a (re)connection may be one already logged.
+        }
+        if let Some(last) = self.last_tick {
+            self.stats.skipped += snapshot.tick.saturating_sub(last + 1);
+        }
+        self.last_tick = Some(snapshot.tick);
+        match self.log_snapshot(rec, snapshot, road, metrics) {
+            Ok(()) => self.stats.logged += 1,
+            Err(e) => {
+                if self.stats.errors == 0 {
+                    eprintln!("warning: rerun: logging tick {}: {e}", snapshot.tick);
+                }
+                self.stats.errors += 1;
+            }
+        }
+    }
+
+    fn log_snapshot(
+        &mut self,
+        rec: &RecordingStream,
+        snapshot: &Snapshot,
+        road: &RoadView,
+        metrics: &LoopMetrics,
+    ) -> RecordingStreamResult<()> {
+        rec.set_time_sequence(TICK_TIMELINE, i64::try_from(snapshot.tick).unwrap_or(i64::MAX));
+        rec.set_duration_secs(TIME_TIMELINE, snapshot.time);
+        if self.road_version != Some(road.version) {
+            // Rerun's 2D view draws y downwards; flipping `world` shows the road as on a map.
+            rec.log_static("world", &Transform3D::from_scale([1.0, -1.0, 1.0]))?;
+            let walls = road.walls.iter().map(|[a, b]| LineStrip2D::from_iter([xy(*a), xy(*b)]));
+            let walls = LineStrips2D::new(walls).with_colors([Color::from_rgb(220, 220, 220)]);
+            rec.log("world/road/walls", &walls.with_radii([Radius::new_ui_points(1.5)]))?;
+            let centre = LineStrip2D::from_iter(road.centerline.iter().map(|p| xy(*p)));
+            let centre = LineStrips2D::new([centre]).with_colors([Color::from_rgb(200, 180, 60)]);
+            rec.log("world/road/centerline", &centre.with_radii([Radius::new_ui_points(0.5)]))?;
+            self.road_version = Some(road.version);
+        }
+        let radius = (snapshot.d_c / 2.0) as f32;
+        for u in &snapshot.uavs {
+            if !self.uavs.contains_key(&u.id) {
+                self.uavs.insert(u.id.clone(), UavLog::new(&u.id));
+            }
+            if let Some(log) = self.uavs.get_mut(&u.id) {
+                log_uav(rec, log, u, snapshot.tick, radius)?;
+            }
+        }
+        let gone: Vec<String> = self
+            .uavs
+            .iter()
+            .filter(|(_, l)| l.seen_tick != snapshot.tick)
+            .map(|(id, _)| id.clone())
+            .collect();
+        for id in gone {
+            if let Some(log) = self.uavs.remove(&id) {
+                rec.log(log.root, &Clear::recursive())?;
+                rec.log(log.barrier, &Clear::flat())?;
+                rec.log(log.slack, &Clear::flat())?;
+            }
+        }
+        if let Some(m) = snapshot.min_collision_margin_m {
+            rec.log("margins/collision", &Scalars::single(m))?;
+        }
+        if let Some(m) = snapshot.min_road_margin_m {
+            rec.log("margins/road", &Scalars::single(m))?;
+        }
+        if metrics.ticks > 0 {
+            rec.log("tick_us/p50", &Scalars::single(metrics.tick.p50_us))?;
+            rec.log("tick_us/p99", &Scalars::single(metrics.tick.p99_us))?;
+        }
+        Ok(())
+    }
+}
+
+fn log_uav(
+    rec: &RecordingStream,
+    log: &mut UavLog,
+    u: &UavSnapshot,
+    tick: u64,
+    radius: f32,
+) -> RecordingStreamResult<()> {
+    log.seen_tick = tick;
+    let p = xy(u.p);
+    let point = Points2D::new([p]).with_labels([u.id.as_str()]).with_colors([color(u.status)]);
+    rec.log(log.root.clone(), &point.with_radii([radius]))?;
+    rec.log(log.velocity.clone(), &Arrows2D::from_vectors([xy(u.v)]).with_origins([p]))?;
+    rec.log(log.target.clone(), &Points2D::new([xy(u.target)]).with_radii([Radius::new_ui_points(3.0)]))?;
+    match u.goal {
+        Some(goal) => {
+            let goal = Points2D::new([xy(goal)]).with_colors([Color::from_rgb(255, 255, 255)]);
+            rec.log(log.goal.clone(), &goal.with_radii([Radius::new_ui_points(5.0)]))?;
+        }
+        None if log.had_goal => rec.log(log.goal.clone(), &Clear::flat())?,
+        None => {}
+    }
+    log.had_goal = u.goal.is_some();
+    if log.trail_tick.is_none_or(|t| tick >= t + TRAIL_EVERY_TICKS) {
+        if log.points.len() == TRAIL_POINTS {
+            log.points.pop_front();
+        }
+        log.points.push_back(p);
+        log.trail_tick = Some(tick);
+        let strip = LineStrip2D::from_iter(log.points.iter().copied());
+        rec.log(log.trail.clone(), &LineStrips2D::new([strip]).with_radii([Radius::new_ui_points(1.0)]))?;
+    }
+    if let Some(b) = u.min_barrier {
+        rec.log(log.barrier.clone(), &Scalars::single(b))?;
+    }
+    rec.log(log.slack.clone(), &Scalars::single(u.slack))
+}

@@ -1,0 +1,251 @@
+//! Simulated Crazyflies (cfsim) flown through the real CRTP/UDP path: by `airroads run --link
+//! cfsim`, and by the server (take-off, flight to the goals, land, emergency stop, a link loss, and
+//! landing on shutdown). Ground truth comes from the simulators themselves.
+
+mod support;
+
+use cfsim::{Faults, SimConfig, SimCrazyflie, SimHandle};
+use serde_json::Value;
+use std::process::Command;
+use std::time::{Duration, Instant};
+use support::{config, repo, shipped, start};
+
+/// Simulated Crazyflies on the ground at each UAV's start; the scenario's UAVs get their links.
+fn with_sims(mut scenario: Value) -> (Value, Vec<SimHandle>) {
+    let mut sims = Vec::new();
+    let delta = scenario["params"]["delta"].as_f64().unwrap_or(5.0);
+    for uav in scenario["uavs"].as_array_mut().unwrap() {
+        let start = [uav["start"][0].as_f64().unwrap(), uav["start"][1].as_f64().unwrap(), 0.0];
+        let sim_config =
+            SimConfig { initial_position: start, max_accel: 1.2 * delta, ..SimConfig::default() };
+        let sim = SimCrazyflie::spawn("127.0.0.1:0".parse().unwrap(), sim_config).unwrap();
+        uav["link"] = Value::String(sim.uri());
+        sims.push(sim);
+    }
+    (scenario, sims)
+}
+
+fn uav_field<'a>(state: &'a Value, key: &str) -> Vec<&'a Value> {
+    state["uavs"].as_array().unwrap().iter().map(|u| &u[key]).collect()
+}
+
+/// Smallest horizontal distance between two simulators' true positions.
+fn min_true_distance(sims: &[SimHandle]) -> f64 {
+    let p: Vec<[f64; 3]> = sims.iter().map(|s| s.truth().position).collect();
+    let mut min = f64::INFINITY;
+    for i in 0..p.len() {
+        for j in i + 1..p.len() {
+            min = min.min((p[i][0] - p[j][0]).hypot(p[i][1] - p[j][1]));
+        }
+    }
+    min
+}
+
+#[test]
+fn run_with_link_cfsim_flies_lab3_safely_like_the_in_process_run() {
+    let dir = std::env::temp_dir().join(format!("airroads-cfsim-run-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scenario = repo().join("scenarios/lab3.json");
+    let run = |link: &str| {
+        let out = dir.join(format!("{link}.json"));
+        let status = Command::new(env!("CARGO_BIN_EXE_airroads"))
+            .args(["run", scenario.to_str().unwrap(), "--policy", "pd", "--link", link, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        let metrics: Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+        (status, metrics)
+    };
+    let (status, over_crtp) = run("cfsim");
+    assert!(
+        status.status.success(),
+        "{}\n{}",
+        String::from_utf8_lossy(&status.stdout),
+        String::from_utf8_lossy(&status.stderr)
+    );
+    let (_, in_process) = run("sim");
+    // The same METRICS.json keys, and the same properties: safe, all arrived.
+    let keys = |m: &Value| m.as_object().unwrap().keys().cloned().collect::<Vec<_>>();
+    assert_eq!(keys(&over_crtp), keys(&in_process));
+    for m in [&over_crtp, &in_process] {
+        assert_eq!(m["safe"], true, "{m}");
+        assert_eq!(m["all_arrived"], true, "{m}");
+        assert!(m["min_collision_margin_m"].as_f64().unwrap() >= 0.3, "{m}");
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_server_flies_three_crazyflies_to_their_goals_and_lands_them() {
+    let (scenario, sims) = with_sims(shipped("lab3.json"));
+    let server = start(config(&scenario)).await;
+    let state = server.wait_for(15.0, |s| uav_field(s, "phase").iter().all(|p| *p == "flying")).await;
+    assert!(uav_field(&state, "phase").iter().all(|p| *p == "flying"), "not all took off: {state}");
+    assert!(uav_field(&state, "link").iter().all(|l| l.as_str().unwrap().starts_with("udp://")));
+    for sim in &sims {
+        assert!((sim.truth().position[2] - 1.0).abs() < 0.15, "altitude {:?}", sim.truth().position);
+    }
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let mut min_distance = f64::INFINITY;
+    loop {
+        min_distance = min_distance.min(min_true_distance(&sims));
+        let state = server.get("/api/state").await;
+        if uav_field(&state, "arrived").iter().all(|a| **a == Value::Bool(true)) {
+            break;
+        }
+        assert!(Instant::now() < deadline, "not all arrived within 60 s: {state}");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(min_distance >= 0.3, "true distance {min_distance} m < D_c");
+
+    let (status, body) = server.call("POST", "/api/fleet/land", None).await;
+    assert_eq!(status, 200, "{body}");
+    let state = server.wait_for(8.0, |s| uav_field(s, "phase").iter().all(|p| *p == "landed")).await;
+    assert!(uav_field(&state, "status").iter().all(|p| *p == "landed"), "{state}");
+    for sim in &sims {
+        let t = sim.truth();
+        assert!(t.position[2] < 0.05 && !t.motors_on, "not down: {:?}", t.position);
+    }
+    server.stop().await;
+    for sim in sims {
+        sim.shutdown().await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_lost_crazyflie_is_avoided_and_the_fleet_stays_safe() {
+    let (scenario, sims) = with_sims(shipped("lab3.json"));
+    let server = start(config(&scenario)).await;
+    server.wait_for(15.0, |s| uav_field(s, "phase").iter().all(|p| *p == "flying")).await;
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    // cf1 goes out of range for 1.5 s mid-flight: no states, no setpoints reach it.
+    sims[0].set_faults(Faults { disconnected: true, ..Faults::NONE });
+    let lost_until = Instant::now() + Duration::from_millis(1500);
+    let mut seen_lost = false;
+    let mut min_distance = f64::INFINITY;
+    while Instant::now() < lost_until {
+        let state = server.get("/api/uavs/cf1").await;
+        seen_lost |= state["status"] == "lost" && state["lost"] == true;
+        min_distance = min_distance.min(min_true_distance(&sims));
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(seen_lost, "cf1 never reported lost");
+    sims[0].set_faults(Faults::NONE);
+    let deadline = Instant::now() + Duration::from_secs(20);
+    while Instant::now() < deadline {
+        min_distance = min_distance.min(min_true_distance(&sims));
+        let cf1 = server.get("/api/uavs/cf1").await;
+        if cf1["phase"] == "flying" && cf1["lost"] == false {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let cf1 = server.get("/api/uavs/cf1").await;
+    assert_eq!(cf1["lost"], false, "cf1 did not come back: {cf1}");
+    for _ in 0..100 {
+        min_distance = min_distance.min(min_true_distance(&sims));
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(min_distance >= 0.3, "true distance {min_distance} m < D_c");
+
+    let (status, _) = server.call("POST", "/api/fleet/stop", None).await;
+    assert_eq!(status, 200);
+    let state = server.wait_for(3.0, |s| uav_field(s, "phase").iter().all(|p| *p == "stopped")).await;
+    assert!(uav_field(&state, "phase").iter().all(|p| *p == "stopped"), "{state}");
+    for sim in &sims {
+        assert!(!sim.truth().motors_on, "motors still on");
+    }
+    server.stop().await;
+    for sim in sims {
+        sim.shutdown().await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn shutdown_lands_every_crazyflie_before_the_server_exits() {
+    let (scenario, sims) = with_sims(shipped("lab3.json"));
+    let server = start(config(&scenario)).await;
+    server.wait_for(15.0, |s| uav_field(s, "phase").iter().all(|p| *p == "flying")).await;
+    let (status, body) = server.call("POST", "/api/uavs/cf2/land", None).await;
+    assert_eq!(status, 200, "{body}");
+    let (status, _) = server.call("POST", "/api/uavs/nope/land", None).await;
+    assert_eq!(status, 404);
+    server.stop().await;
+    for sim in &sims {
+        let t = sim.truth();
+        assert!(t.position[2] < 0.05 && !t.motors_on, "not landed at shutdown: {:?}", t.position);
+    }
+    for sim in sims {
+        sim.shutdown().await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn motion_capture_poses_reach_their_crazyflie_as_external_positions() {
+    use airroads::serve::mocap::{MocapCounters, ingest};
+    use std::sync::Arc;
+    use std::sync::atomic::Ordering::Relaxed;
+    let (scenario, sims) = with_sims(shipped("lab3.json"));
+    let server = airroads::serve::Server::start(config(&scenario)).unwrap();
+    let socket = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
+    let mocap_addr = socket.local_addr().unwrap();
+    let counters = Arc::new(MocapCounters::default());
+    tokio::spawn(ingest(socket, server.mocap.clone(), counters.clone()));
+    // The Crazyflie links register once created; wait until cf2 is connected.
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while server.state().snapshots.borrow().uavs.iter().any(|u| u.phase == "connecting") {
+        assert!(Instant::now() < deadline, "the Crazyflies did not connect");
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let bridge = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();
+    let mut sent = 0;
+    let deadline = Instant::now() + Duration::from_secs(5);
+    while sims[1].external_position_count() == 0 {
+        assert!(Instant::now() < deadline, "no external position reached cf2");
+        let pose = serde_json::json!({"id": "cf2", "t": sent as f64 * 0.01, "p": [1.25, -0.5, 0.75]});
+        bridge.send_to(pose.to_string().as_bytes(), mocap_addr).unwrap();
+        sent += 1;
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    assert_eq!(sims[1].last_external_position(), Some([1.25, -0.5, 0.75]));
+    assert_eq!(sims[0].external_position_count(), 0, "cf1's pose went elsewhere");
+    // Unknown ids and garbage are counted, never forwarded, and never stop the ingestion.
+    bridge.send_to(br#"{"id": "nobody", "t": 0, "p": [0, 0, 1]}"#, mocap_addr).unwrap();
+    bridge.send_to(b"\xff garbage", mocap_addr).unwrap();
+    bridge.send_to(br#"{"id": "cf2", "t": 1, "p": [NaN, 0, 1]}"#, mocap_addr).unwrap();
+    let deadline = Instant::now() + Duration::from_secs(2);
+    while counters.unrouted.load(Relaxed) < 1 || counters.invalid.load(Relaxed) < 2 {
+        assert!(Instant::now() < deadline, "bad datagrams not counted");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    assert!(counters.forwarded.load(Relaxed) >= 1);
+    server.shutdown().await;
+    for sim in sims {
+        sim.shutdown().await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_radio_uav_without_a_crazyradio_never_takes_the_server_down() {
+    // This machine (and CI) has no Crazyradio: opening the radio fails (or panics inside the
+    // client library) in the UAV's own task; the server keeps ticking and the UAV stays connecting.
+    let server = start(config(&support::small())).await;
+    let body = r#"{"id": "cf9", "position": [10.0, 0.0], "link": "radio://0/80/2M/E7E7E7E7E9"}"#;
+    let (status, reply) = server.call("POST", "/api/uavs", Some(body)).await;
+    assert_eq!(status, 201, "{reply}");
+    assert_eq!(reply["link"], "radio://0/80/2M/E7E7E7E7E9");
+    let before = server.get("/api/state").await["tick"].as_u64().unwrap();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let state = server.get("/api/state").await;
+    assert!(state["tick"].as_u64().unwrap() >= before + 30, "the loop stalled: {state}");
+    let cf9 = server.get("/api/uavs/cf9").await;
+    assert_eq!(cf9["status"], "connecting", "{cf9}");
+    assert_eq!(cf9["lost"], false, "never airborne, so not lost");
+    let (status, reply) = server
+        .call("POST", "/api/uavs", Some(r#"{"id": "x", "position": [12.0, 0.0], "link": "bluetooth://cf"}"#))
+        .await;
+    assert_eq!((status, reply["error"]["field"].as_str()), (422, Some("link")), "{reply}");
+    let (status, _) = server.call("DELETE", "/api/uavs/cf9", None).await;
+    assert_eq!(status, 204);
+    server.stop().await;
+}
