@@ -7,7 +7,7 @@ import { Camera, bounds } from "./camera.js";
 import { RoadEditor } from "./editor.js";
 import { Trails } from "./trails.js";
 import { MarginPlot } from "./plot.js";
-import { drawBox, drawEditor, drawFleet, drawRoad } from "./render.js";
+import { STATUS_COLOURS, drawBox, drawEditor, drawFleet, drawRoad } from "./render.js";
 import { segmentAt } from "./geometry.js";
 import { attachInput } from "./input.js";
 import { bindControls, showMessage } from "./controls.js";
@@ -111,6 +111,29 @@ export class App {
     $("ds").textContent = snap.d_s;
     $("paused-flag").hidden = !snap.paused;
     $("pause").textContent = snap.paused ? "Resume" : "Pause";
+    this.updateLegend(snap);
+  }
+
+  /** The status colours in use, with how many UAVs have each (e.g. a lost Crazyflie stands out). */
+  updateLegend(snap) {
+    const counts = new Map();
+    for (const u of snap.uavs) counts.set(u.status, (counts.get(u.status) || 0) + 1);
+    const key = [...counts].map(([s, n]) => `${s}:${n}`).join(",");
+    if (key === this.legendKey) return;
+    this.legendKey = key;
+    const legend = $("legend");
+    legend.replaceChildren(
+      ...Object.keys(STATUS_COLOURS)
+        .filter((s) => counts.has(s))
+        .map((s) => {
+          const row = document.createElement("span");
+          row.dataset.status = s;
+          const dot = document.createElement("i");
+          dot.style.background = STATUS_COLOURS[s];
+          row.append(dot, `${s.replace("_", " ")} ${counts.get(s)}`);
+          return row;
+        }),
+    );
   }
 
   async pollMetrics() {

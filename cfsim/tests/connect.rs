@@ -89,14 +89,8 @@ async fn params_read_and_write() {
 async fn log_block_streams_at_the_requested_rate() {
     let sim = sim_at([0.5, -0.25, 0.0]);
     let cf = connect(&sim).await;
-    let vars = [
-        "stateEstimate.x",
-        "stateEstimate.y",
-        "stateEstimate.z",
-        "stateEstimate.vx",
-        "stateEstimate.vy",
-        "stateEstimate.vz",
-    ];
+    // The variables the relay logs.
+    let vars = crazyflie::STATE_VARIABLES;
     let stream = log_stream(&cf, &vars, 10).await;
     assert_eq!(sim.truth().log_blocks, 1);
 

@@ -217,7 +217,7 @@ impl Link for CrazyflieLink {
         let _ = self.urgent.send(Urgent::Stop);
     }
 
-    fn describe(&self) -> String {
-        self.uri.clone()
+    fn describe(&self) -> &str {
+        &self.uri
     }
 }

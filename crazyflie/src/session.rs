@@ -204,7 +204,7 @@ async fn fly(
             phase_until = Some(Instant::now() + Duration::from_secs_f64(config.land_s + 0.2));
         }
     }
-    let mut urgent_open = true;
+    let (mut urgent_open, mut setpoints_open) = (true, true);
     let mut last_sample = Instant::now();
     loop {
         if !urgent_open && matches!(shared.phase(), LinkPhase::Landed | LinkPhase::Stopped) {
@@ -252,9 +252,10 @@ async fn fly(
             _ = sleep_until(last_sample + stale) => {
                 return End::Lost(format!("no state for {} ms", stale.as_millis()));
             }
-            changed = ch.setpoints.changed() => {
+            changed = ch.setpoints.changed(), if setpoints_open => {
                 if changed.is_err() {
-                    urgent_open = false;
+                    // The link is gone (its urgent channel closes with it): no more setpoints.
+                    setpoints_open = false;
                     continue;
                 }
                 let setpoint = *ch.setpoints.borrow_and_update();

@@ -73,8 +73,8 @@ pub trait Link: Send {
     /// Cuts the motors at once (emergency stop), ahead of any queued command.
     fn emergency_stop(&mut self) {}
     /// What the link is, e.g. `sim` or the Crazyflie URI (shown in the snapshot).
-    fn describe(&self) -> String {
-        "sim".into()
+    fn describe(&self) -> &str {
+        SIM_LINK
     }
 }
 

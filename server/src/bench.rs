@@ -19,6 +19,17 @@ pub fn main(args: BenchArgs) -> ExitCode {
     ExitCode::SUCCESS
 }
 
+/// A multi-thread tokio runtime for the benchmarks; None (the error printed) if it cannot start.
+pub fn runtime() -> Option<tokio::runtime::Runtime> {
+    match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
+        Ok(r) => Some(r),
+        Err(e) => {
+            eprintln!("error: cannot start the async runtime: {e}");
+            None
+        }
+    }
+}
+
 /// A random instance whose nominal input violates every row (rows facing it within ±60°, each cut
 /// 0.1–1 m/s² below it), so no call can return the nominal input unchanged.
 fn instance(rng: &mut StdRng, rows: usize, out: &mut Vec<Row>) -> Vec2 {

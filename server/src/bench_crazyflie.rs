@@ -15,13 +15,7 @@ use uav::Vec2;
 
 /// Runs the benchmark.
 pub fn main(args: &BenchArgs) -> ExitCode {
-    let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("error: cannot start the async runtime: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
+    let Some(runtime) = crate::bench::runtime() else { return ExitCode::FAILURE };
     say!("Crazyflie relay over CRTP/UDP (loopback), 20 Hz, {:.0} s per fleet size", args.seconds);
     say!(
         "{:>6} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10}",

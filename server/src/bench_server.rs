@@ -18,13 +18,7 @@ const REST_WORKERS: usize = 8;
 
 /// Runs the benchmark.
 pub fn main(args: &BenchArgs) -> ExitCode {
-    let runtime = match tokio::runtime::Builder::new_multi_thread().enable_all().build() {
-        Ok(r) => r,
-        Err(e) => {
-            eprintln!("error: cannot start the async runtime: {e}");
-            return ExitCode::FAILURE;
-        }
-    };
+    let Some(runtime) = crate::bench::runtime() else { return ExitCode::FAILURE };
     match runtime.block_on(bench(args)) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {

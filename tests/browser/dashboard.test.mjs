@@ -289,11 +289,13 @@ test("land a selected UAV, then the emergency stop cuts every UAV", async () => 
     });
     const others = (await api(url, "GET", "/api/state")).uavs.filter((u) => u.id !== "uav2");
     assert.ok(others.every((u) => u.phase === "flying"), "only the selected UAV lands");
+    await page.locator('#legend [data-status="landed"]', { hasText: "landed 1" }).waitFor();
 
     page.once("dialog", (d) => d.accept());
     await page.click("#estop");
     await until("every UAV to be stopped", async () =>
       (await api(url, "GET", "/api/state")).uavs.every((u) => u.phase === "stopped" || u.id === "uav2"));
+    await page.locator('#legend [data-status="stopped"]').waitFor();
     await screenshot(page, "stopped");
   });
 });

@@ -66,7 +66,7 @@ impl SavedState {
                     policy: u.policy.clone(),
                     position: [u.state.p.x, u.state.p.y],
                     goal: u.nav.goal().map(|g| [g.x, g.y]),
-                    link: Some(u.link.describe()).filter(|l| l != links::SIM_LINK),
+                    link: Some(u.link.describe()).filter(|l| *l != links::SIM_LINK).map(str::to_string),
                 })
                 .collect(),
         }

@@ -159,7 +159,7 @@ impl Snapshot {
                     goal: u.nav.goal().map(|g| xy(&g)),
                     arrived: u.nav.arrived,
                     status: status(u, fleet.holding()),
-                    link: u.link.describe(),
+                    link: u.link.describe().to_string(),
                     phase: u.phase.name(),
                     lost: l.lost,
                     active_rows: l.active_rows,
