@@ -33,7 +33,10 @@ struct Phase {
     name: String,
     ticks: Vec<f64>,
     frames: u64,
-    rest_ms: Vec<f64>,
+    /// Latencies of GET requests (ms).
+    reads_ms: Vec<f64>,
+    /// Latencies of PUT requests (ms): answered once the loop applied them between two ticks.
+    changes_ms: Vec<f64>,
     rest_errors: u64,
 }
 
@@ -79,9 +82,9 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         }
     });
     let frames = Arc::new(AtomicU64::new(0));
-    let take = |name: String, rest_ms: Vec<f64>, rest_errors: u64| {
+    let take = |name: String, (reads_ms, changes_ms, rest_errors): (Vec<f64>, Vec<f64>, u64)| {
         let ticks = durations.lock().map(|mut v| std::mem::take(&mut *v)).unwrap_or_default();
-        Phase { name, ticks, frames: frames.swap(0, Relaxed), rest_ms, rest_errors }
+        Phase { name, ticks, frames: frames.swap(0, Relaxed), reads_ms, changes_ms, rest_errors }
     };
 
     say!(
@@ -91,9 +94,9 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     );
     let mut phases = Vec::new();
     tokio::time::sleep(Duration::from_secs(1)).await;
-    take(String::new(), Vec::new(), 0);
+    take(String::new(), Default::default());
     tokio::time::sleep(seconds).await;
-    phases.push(take("no clients".into(), Vec::new(), 0));
+    phases.push(take("no clients".into(), Default::default()));
 
     let stalled_count = args.clients / 10;
     let mut stalled = Vec::new();
@@ -111,10 +114,10 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             });
         }
     }
-    take(String::new(), Vec::new(), 0);
+    take(String::new(), Default::default());
     tokio::time::sleep(seconds).await;
     let ws_name = format!("{} ws ({stalled_count} stalled)", args.clients);
-    phases.push(take(ws_name.clone(), Vec::new(), 0));
+    phases.push(take(ws_name.clone(), Default::default()));
 
     let running = Arc::new(AtomicBool::new(true));
     let ids: Vec<String> = state.snapshots.borrow().uavs.iter().map(|u| u.id.clone()).collect();
@@ -124,13 +127,14 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     }
     tokio::time::sleep(seconds).await;
     running.store(false, Relaxed);
-    let (mut rest_ms, mut rest_errors) = (Vec::new(), 0);
+    let mut rest = (Vec::new(), Vec::new(), 0);
     for worker in workers {
-        let (times, errors) = worker.await?;
-        rest_ms.extend(times);
-        rest_errors += errors;
+        let (reads, changes, errors) = worker.await?;
+        rest.0.extend(reads);
+        rest.1.extend(changes);
+        rest.2 += errors;
     }
-    phases.push(take(format!("{ws_name} + {REST_WORKERS} REST"), rest_ms, rest_errors));
+    phases.push(take(format!("{ws_name} + {REST_WORKERS} REST"), rest));
     let dropped = state.stream.clients_dropped.load(Relaxed);
     drop(stalled);
     let _ = stop.send(());
@@ -140,69 +144,73 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Loops over GET /api/state, GET /api/uavs, PUT goal (unchanged goal) and GET /api/metrics.
+/// Loops over GET /api/state, GET /api/uavs, GET /api/uavs/{id} then PUT its goal (unchanged) and
+/// GET /api/metrics, one connection per request. Returns read and change latencies (ms) and errors.
 async fn rest_worker(
     addr: SocketAddr,
     ids: Vec<String>,
     worker: usize,
     running: Arc<AtomicBool>,
-) -> (Vec<f64>, u64) {
-    let (mut times, mut errors) = (Vec::new(), 0);
+) -> (Vec<f64>, Vec<f64>, u64) {
+    let (mut reads, mut changes, mut errors) = (Vec::new(), Vec::new(), 0);
     let mut k = worker;
     while running.load(Relaxed) {
-        let started = Instant::now();
-        let result = match k % 4 {
-            0 => client::request(addr, "GET", "/api/state", None, &[]).await,
-            1 => client::request(addr, "GET", "/api/uavs", None, &[]).await,
-            2 if !ids.is_empty() => {
-                let id = &ids[k % ids.len()];
-                let path = format!("/api/uavs/{id}");
-                match client::request(addr, "GET", &path, None, &[]).await {
-                    Ok((200, body)) => {
-                        let goal =
-                            serde_json::from_str::<serde_json::Value>(&body).ok().map(|u| u["goal"].clone());
-                        match goal.filter(|g| g.is_array()) {
-                            Some(goal) => {
-                                let body = serde_json::json!({ "goal": goal }).to_string();
-                                client::request(addr, "PUT", &format!("{path}/goal"), Some(&body), &[]).await
-                            }
-                            None => Ok((200, String::new())),
-                        }
-                    }
-                    other => other,
-                }
-            }
-            _ => client::request(addr, "GET", "/api/metrics", None, &[]).await,
+        let path = match k % 4 {
+            0 => "/api/state".to_string(),
+            1 => "/api/uavs".to_string(),
+            2 if !ids.is_empty() => format!("/api/uavs/{}", ids[k % ids.len()]),
+            _ => "/api/metrics".to_string(),
         };
-        match result {
-            Ok((status, _)) if status < 300 => times.push(started.elapsed().as_secs_f64() * 1e3),
+        k += 1;
+        let started = Instant::now();
+        let body = match client::request(addr, "GET", &path, None, &[]).await {
+            Ok((200, body)) => {
+                reads.push(started.elapsed().as_secs_f64() * 1e3);
+                body
+            }
+            _ => {
+                errors += 1;
+                continue;
+            }
+        };
+        // One UAV: put its goal back as it is (a real change request, applied between ticks).
+        let goal = serde_json::from_str::<serde_json::Value>(&body).ok().map(|u| u["goal"].clone());
+        let Some(goal) = goal.filter(|g| path.starts_with("/api/uavs/") && g.is_array()) else { continue };
+        let body = serde_json::json!({ "goal": goal }).to_string();
+        let started = Instant::now();
+        match client::request(addr, "PUT", &format!("{path}/goal"), Some(&body), &[]).await {
+            Ok((200, _)) => changes.push(started.elapsed().as_secs_f64() * 1e3),
             _ => errors += 1,
         }
-        k += 1;
     }
-    (times, errors)
+    (reads, changes, errors)
 }
 
 fn print_table(phases: &mut [Phase], seconds: f64) {
     say!(
-        "{:<34} {:>6} {:>11} {:>11} {:>11} {:>9} {:>7} {:>11} {:>11} {:>6}",
+        "{:<34} {:>6} {:>11} {:>11} {:>11} {:>9} {:>6} {:>10} {:>10} {:>6} {:>10} {:>10} {:>6}",
         "phase",
         "ticks",
         "tick p50µs",
         "tick p99µs",
         "tick maxµs",
         "frames/s",
-        "REST n",
-        "REST p50ms",
-        "REST p99ms",
+        "GET n",
+        "GET p50ms",
+        "GET p99ms",
+        "PUT n",
+        "PUT p50ms",
+        "PUT p99ms",
         "errors"
     );
     for p in phases {
         let t = percentiles(&mut p.ticks);
-        let (n, r) = (p.rest_ms.len(), percentiles(&mut p.rest_ms));
-        let rest = |x: f64| if n == 0 { "-".to_string() } else { format!("{x:.2}") };
+        let (n, r) = (p.reads_ms.len(), percentiles(&mut p.reads_ms));
+        let (m, c) = (p.changes_ms.len(), percentiles(&mut p.changes_ms));
+        // `percentiles` names its fields for µs; these samples are ms.
+        let ms = |count: usize, x: f64| if count == 0 { "-".to_string() } else { format!("{x:.2}") };
         say!(
-            "{:<34} {:>6} {:>11.1} {:>11.1} {:>11.1} {:>9.0} {:>7} {:>11} {:>11} {:>6}",
+            "{:<34} {:>6} {:>11.1} {:>11.1} {:>11.1} {:>9.0} {:>6} {:>10} {:>10} {:>6} {:>10} {:>10} {:>6}",
             p.name,
             p.ticks.len(),
             t.p50_us,
@@ -210,8 +218,11 @@ fn print_table(phases: &mut [Phase], seconds: f64) {
             t.max_us,
             p.frames as f64 / seconds,
             n,
-            rest(r.p50_us),
-            rest(r.p99_us),
+            ms(n, r.p50_us),
+            ms(n, r.p99_us),
+            m,
+            ms(m, c.p50_us),
+            ms(m, c.p99_us),
             p.rest_errors
         );
     }
