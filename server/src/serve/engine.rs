@@ -118,13 +118,15 @@ impl Engine {
 
     /// Applies queued commands; false when every sender is gone (the server shut down).
     fn apply_commands(&mut self) -> bool {
-        let mut applied = 0;
-        // Land and stop go out ahead of anything queued (the urgent channel only carries those).
+        // Land and stop go out ahead of anything queued (the urgent channel only carries those),
+        // outside the cap on other changes.
+        let mut urgent = 0;
         while let Ok(request) = self.channels.urgent.try_recv() {
             let outcome = self.apply(request.command);
             let _ = request.reply.send(outcome);
-            applied += 1;
+            urgent += 1;
         }
+        let mut applied = 0;
         while applied < MAX_COMMANDS_PER_TICK {
             match self.channels.requests.try_recv() {
                 Ok(request) => {
@@ -137,6 +139,7 @@ impl Engine {
                 Err(mpsc::error::TryRecvError::Disconnected) => return false,
             }
         }
+        let applied = applied + urgent;
         if applied > 0 {
             self.stats.commands(applied as u64);
             self.publish_saved();
@@ -227,4 +230,51 @@ pub fn load_scenario(
         fleet.add(u.id.clone(), policy.to_string(), link, state, Some(u.goal));
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use links::LinkPhase;
+    use tokio::sync::oneshot;
+
+    #[test]
+    fn land_goes_out_ahead_of_queued_changes_and_changes_are_capped_per_gap() {
+        let runtime = tokio::runtime::Builder::new_current_thread().build().unwrap();
+        let scenario = super::super::demo_scenario().unwrap();
+        let policies = policies::PolicyRegistry::with_pd(scenario.params.delta);
+        let config = fleet::FleetConfig { params: scenario.params, ..Default::default() };
+        let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
+        let factory = LinkFactory::new(runtime.handle().clone(), crazyflie::RelayConfig::default());
+        load_scenario(&mut fleet, &scenario, "pd", &factory).unwrap();
+        let first = fleet.uavs()[0].id.clone();
+        let goal = scenario.uavs[1].goal;
+
+        let (commands, requests) = mpsc::channel(1024);
+        let (urgent, urgent_requests) = mpsc::unbounded_channel();
+        let snapshots = watch::channel(Arc::new(Snapshot::of(&fleet, 0, 0.0, 0))).0;
+        let metrics = watch::channel(Arc::new(LoopMetrics::default())).0;
+        let saved = watch::channel(Arc::new(SavedState::of(&fleet))).0;
+        let road = watch::channel(Arc::new(RoadView::of(fleet.road(), 0))).0;
+        let channels = LoopChannels { requests, urgent: urgent_requests, snapshots, metrics, saved, road };
+        let mut engine = Engine::new(fleet, "pd".into(), factory, channels);
+
+        // 100 goal changes queued first, then a land request on the urgent channel.
+        let mut answers = Vec::new();
+        for _ in 0..100 {
+            let (reply, answer) = oneshot::channel();
+            commands
+                .try_send(Request { command: Command::SetGoal(first.clone(), Some(goal)), reply })
+                .unwrap();
+            answers.push(answer);
+        }
+        let (reply, mut landed) = oneshot::channel();
+        urgent.send(Request { command: Command::Land(Some(first.clone())), reply }).unwrap();
+
+        assert!(engine.apply_commands());
+        assert_eq!(landed.try_recv().unwrap(), Ok(Outcome::Done), "the land request was applied");
+        assert_eq!(engine.fleet.uavs()[0].link.phase(), LinkPhase::Landing);
+        let applied = answers.iter_mut().map(|a| a.try_recv().is_ok()).filter(|done| *done).count();
+        assert_eq!(applied, MAX_COMMANDS_PER_TICK, "the rest wait for the next gap between ticks");
+    }
 }
