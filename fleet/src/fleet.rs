@@ -142,9 +142,15 @@ impl Uav {
         self.phase == LinkPhase::Flying && !self.last.lost
     }
 
-    /// Its neighbours must avoid it: in the air (or possibly, while lost) but not flying the filter.
-    pub fn obstacle(&self) -> bool {
-        !self.flying() && (self.phase.airborne() || self.last.lost)
+    /// In the air, or possibly so while lost: its neighbours must keep D_c from it.
+    pub fn in_the_air(&self) -> bool {
+        self.phase.airborne() || self.last.lost
+    }
+
+    /// It shares pair rows with its neighbours this tick: flying the filter on a fresh state.
+    /// Otherwise a neighbour in the air is avoided alone, as its reach disk ([`crate::lost`]).
+    pub fn cooperates(&self) -> bool {
+        self.flying() && self.stale_ticks == 0
     }
 }
 
@@ -342,8 +348,8 @@ impl Fleet {
         let d_c = p.d_c + delta_sum * p.dt * p.dt;
         for &d in &self.neighbours.lists[k] {
             let other = self.uavs[d].state;
-            if !self.uavs[d].flying() || self.uavs[d].stale_ticks > 0 {
-                if self.uavs[d].obstacle() || self.uavs[d].flying() {
+            if !self.uavs[d].cooperates() {
+                if self.uavs[d].in_the_air() {
                     let disk = self.disk_of(d);
                     self.rows.push(obstacle_row(me, &disk, d_c, p, RowKind::Collision(d)));
                 }

@@ -78,17 +78,23 @@ test("pause and resume from the toolbar", async () => {
   });
 });
 
+/** Holds the fleet until `id` hovers, then selects it with a real click; returns its snapshot. */
+async function selectHovering(page, url, id) {
+  await api(url, "POST", "/api/fleet/pause");
+  const uav = await until(`${id} to hover`, async () => {
+    const s = await snapshot(page);
+    const u = s.uavs.find((u) => u.id === id);
+    return s.paused && Math.hypot(...u.v) < 0.02 && u;
+  });
+  await clickWorld(page, uav.p[0], uav.p[1]);
+  assert.deepEqual(await page.evaluate(() => window.__airroads.selection), [id]);
+  return uav;
+}
+
 test("select a UAV by clicking it, click a goal on the road, and it arrives", async () => {
   await withDashboard("goal", [], async (page, { url }) => {
     // Hold the fleet so that the UAV sits still under the pointer while it is clicked.
-    await api(url, "POST", "/api/fleet/pause");
-    const uav = await until("uav1 to hover", async () => {
-      const s = await snapshot(page);
-      const u = s.uavs.find((u) => u.id === "uav1");
-      return s.paused && Math.hypot(...u.v) < 0.02 && u;
-    });
-    await clickWorld(page, uav.p[0], uav.p[1]);
-    assert.deepEqual(await page.evaluate(() => window.__airroads.selection), ["uav1"]);
+    await selectHovering(page, url, "uav1");
     await api(url, "POST", "/api/fleet/resume");
 
     // A point on the centre line, 60% along the road, away from every UAV.
@@ -274,14 +280,7 @@ test("insert and delete segments, export the layout and import it again", async 
 
 test("land a selected UAV, then the emergency stop cuts every UAV", async () => {
   await withDashboard("land", [], async (page, { url }) => {
-    await api(url, "POST", "/api/fleet/pause");
-    const uav = await until("uav2 to hover", async () => {
-      const s = await snapshot(page);
-      const u = s.uavs.find((u) => u.id === "uav2");
-      return s.paused && Math.hypot(...u.v) < 0.02 && u;
-    });
-    await clickWorld(page, uav.p[0], uav.p[1]);
-    assert.deepEqual(await page.evaluate(() => window.__airroads.selection), ["uav2"]);
+    await selectHovering(page, url, "uav2");
     await page.click("#land");
     await until("uav2 to land (GET /api/uavs/uav2)", async () => {
       const u = await api(url, "GET", "/api/uavs/uav2");

@@ -140,11 +140,10 @@ impl Snapshot {
             .map(|(k, u)| {
                 let l = &u.last;
                 // UAVs on the ground (landed, stopped, not yet up) are not in each other's airspace.
-                let in_air = |u: &Uav| u.phase.airborne() || u.last.lost;
-                let collision = lists.get(k).filter(|_| in_air(u)).and_then(|list| {
+                let collision = lists.get(k).filter(|_| u.in_the_air()).and_then(|list| {
                     list.iter()
                         .filter_map(|&d| all.get(d))
-                        .filter(|d| in_air(d))
+                        .filter(|d| d.in_the_air())
                         .map(|d| collision_margin(&u.state, &d.state, 2.0 * p.delta))
                         .min_by(f64::total_cmp)
                 });
