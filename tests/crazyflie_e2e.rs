@@ -190,7 +190,7 @@ async fn motion_capture_poses_reach_their_crazyflie_as_external_positions() {
     let socket = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
     let mocap_addr = socket.local_addr().unwrap();
     let counters = Arc::new(MocapCounters::default());
-    tokio::spawn(ingest(socket, server.mocap.clone(), counters.clone()));
+    tokio::spawn(ingest(socket, server.mocap.clone(), counters.clone(), Vec::new()));
     // The Crazyflie links register once created; wait until cf2 is connected.
     let deadline = Instant::now() + Duration::from_secs(10);
     while server.state().snapshots.borrow().uavs.iter().any(|u| u.phase == "connecting") {

@@ -42,7 +42,9 @@ export class Api {
     for (let attempt = 0; ; attempt++) {
       const headers = {};
       const sent = this.token;
-      if (body !== undefined) headers["Content-Type"] = "application/json";
+      // Every change says it is JSON, also without a body: the server refuses others (a page on
+      // another origin can only send those without asking the server first).
+      if (body !== undefined || change) headers["Content-Type"] = "application/json";
       if (change && sent) headers["Authorization"] = `Bearer ${sent}`;
       const text = typeof body === "string" ? body : JSON.stringify(body);
       const res = await fetch(path, { method, headers, body: body === undefined ? undefined : text });

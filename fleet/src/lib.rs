@@ -13,6 +13,7 @@ mod neighbours;
 mod run;
 mod scenario;
 pub mod stress;
+mod undo;
 mod yielding;
 
 pub use edit::EditError;
@@ -22,3 +23,4 @@ pub use margins::{collision_margin, road_margin};
 pub use metrics::{MetricsRecorder, QpMetrics, RunMetrics};
 pub use run::{RunOptions, RunOutcome, TAKEOFF_TIMEOUT_S, TRAJECTORY_HEADER, run_scenario, run_scenario_on};
 pub use scenario::{Scenario, ScenarioError, ScenarioUav, UavSpec, ValidScenario};
+pub use undo::Undo;

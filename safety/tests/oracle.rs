@@ -1,5 +1,5 @@
 //! Proves that `safety::paper`, `safety::barrier` and `safety::QpSolver` reproduce every value of the
-//! shared oracle `shared/data/cbf_test_vectors.json` (30 states, 6 end-point walls, 12 QP cases).
+//! oracle `tests/data/cbf_test_vectors.json` (30 states, 6 end-point walls, 12 QP cases).
 
 use roads::{Quad, Wall, WallKind, nearest_on_segment};
 use safety::barrier::{collision_row, line_row, point_row};
@@ -8,7 +8,7 @@ use safety::{ConstraintRow, QpSolver, RowKind};
 use serde_json::Value;
 use uav::Vec2;
 
-const VECTORS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data/cbf_test_vectors.json");
+const VECTORS: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/data/cbf_test_vectors.json");
 /// Barrier and row values: |x − y| ≤ REL·max(|y|, 1).
 const REL: f64 = 1e-9;
 /// QP solutions (interior-point tolerances 1e-9, compared loosely).

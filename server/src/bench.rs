@@ -15,6 +15,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         BenchTarget::Filter => bench_filter(args.iterations),
         BenchTarget::Server => return crate::bench_server::main(&args),
         BenchTarget::Crazyflie => return crate::bench_crazyflie::main(&args),
+        BenchTarget::Durability => return crate::bench_durability::main(&args),
     }
     ExitCode::SUCCESS
 }

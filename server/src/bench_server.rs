@@ -47,16 +47,10 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     };
     let policies = policies::PolicyRegistry::standard(initial.params.delta)?;
     let uavs = initial.uavs.len();
-    let config = ServeConfig {
-        fleet: fleet::FleetConfig::default(),
-        policies,
-        default_policy: policies::SHIPPED_MODEL.into(),
-        token: None,
-        data_dir: None,
-        initial,
-        relay: Default::default(),
-        resume: false,
-    };
+    let mut config =
+        ServeConfig::new(fleet::FleetConfig::default(), policies, policies::SHIPPED_MODEL.into(), initial);
+    config.resume = false;
+    config.max_uavs = config.max_uavs.max(uavs);
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await?;
     let addr = listener.local_addr()?;
     let server = Server::start(config)?;

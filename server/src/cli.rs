@@ -118,9 +118,23 @@ pub struct ServeArgs {
     /// and forward each to its Crazyflie as an external position.
     #[arg(long, value_name = "ADDR")]
     pub mocap: Option<std::net::SocketAddr>,
+    /// Accept motion-capture datagrams from this address (repeatable). Without it only loopback
+    /// senders are accepted, and a non-loopback --mocap address is refused.
+    #[arg(long = "mocap-allow", value_name = "IP")]
+    pub mocap_allow: Vec<std::net::IpAddr>,
     /// Crazyflie flight altitude (m).
     #[arg(long, default_value_t = 1.0, value_name = "M")]
     pub altitude: f64,
+    /// Most UAVs the fleet may have; adding more (or a larger scenario) is refused with 422.
+    #[arg(long, value_name = "N", default_value_t = airroads::serve::DEFAULT_MAX_UAVS)]
+    pub max_uavs: usize,
+    /// Also accept this `Host` header (repeatable): `name` or `name:port`, e.g. a reverse proxy's.
+    #[arg(long = "allow-host", value_name = "HOST")]
+    pub allow_hosts: Vec<String>,
+    /// Also let pages of this origin make changes and open /ws (repeatable), e.g.
+    /// `https://ops.example.com`.
+    #[arg(long = "allow-origin", value_name = "ORIGIN")]
+    pub allow_origins: Vec<String>,
     /// Flight options (`--policy` is the policy of UAVs added without one).
     #[command(flatten)]
     pub flight: FlightArgs,
@@ -208,6 +222,8 @@ pub enum BenchTarget {
     /// Crazyflie relay: setpoint latency from tick to the simulated Crazyflie, and how many
     /// Crazyflies one server's link tasks keep at 20 Hz.
     Crazyflie,
+    /// Changes per second the server acknowledges on disk (fsync, group commit) and in memory.
+    Durability,
 }
 
 impl FlightArgs {

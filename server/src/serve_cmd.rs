@@ -9,6 +9,7 @@ use std::process::ExitCode;
 
 /// Runs the subcommand: exit 0 after a clean shutdown, 1 on a runtime failure, 2 for invalid flags.
 pub fn main(args: ServeArgs) -> ExitCode {
+    init_logging();
     let config = match config(&args) {
         Ok(c) => c,
         Err(message) => {
@@ -30,6 +31,18 @@ pub fn main(args: ServeArgs) -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// The server's own log: `tracing` to stderr, `info` and above unless `RUST_LOG` says otherwise.
+fn init_logging() {
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info"));
+    let colours = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_ansi(colours)
+        .with_writer(std::io::stderr)
+        .try_init();
 }
 
 /// `airroads health`: exit 0 when `url` answers 200, 1 otherwise, 2 for an invalid URL.
@@ -64,7 +77,15 @@ pub fn health(url: &str) -> ExitCode {
 
 /// The server configuration the flags select; the error names the flag or file.
 fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
+    let from_env = args.token.is_none();
     let token = args.token.clone().or_else(|| std::env::var("AIRROADS_TOKEN").ok()).filter(|t| !t.is_empty());
+    if let Some(t) = &token {
+        let source = if from_env { "AIRROADS_TOKEN" } else { "--token" };
+        serve::auth::check_token(t).map_err(|reason| format!("{source}: {reason}"))?;
+        if t.len() < 16 {
+            tracing::warn!("{source} is {} characters; use at least 16 random ones", t.len());
+        }
+    }
     if token.is_none() && !args.addr.ip().is_loopback() {
         return Err(format!(
             "--addr {}: refusing to listen on a non-loopback address without a token (--token or AIRROADS_TOKEN)",
@@ -82,23 +103,53 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
     if !(args.altitude.is_finite() && (0.2..=10.0).contains(&args.altitude)) {
         return Err(format!("--altitude {}: must be between 0.2 and 10 m", args.altitude));
     }
+    if let Some(at) = args.mocap
+        && !at.ip().is_loopback()
+        && args.mocap_allow.is_empty()
+    {
+        return Err(format!(
+            "--mocap {at}: a non-loopback address needs --mocap-allow IP (the motion-capture senders)"
+        ));
+    }
+    if args.max_uavs == 0 {
+        return Err("--max-uavs: must be at least 1".into());
+    }
+    if initial.uavs.len() > args.max_uavs {
+        return Err(format!("--max-uavs {}: the scenario has {} UAVs", args.max_uavs, initial.uavs.len()));
+    }
+    for origin in &args.allow_origins {
+        let ok = ["http://", "https://"].iter().any(|s| origin.starts_with(s) && origin.len() > s.len())
+            && !origin.ends_with('/');
+        if !ok {
+            return Err(format!(
+                "--allow-origin {origin}: expected scheme://host[:port], e.g. https://ops.example.com"
+            ));
+        }
+    }
     let data_dir = if args.ephemeral {
         None
     } else {
         Some(args.data_dir.clone().unwrap_or_else(serve::persist::default_dir))
     };
-    Ok(ServeConfig {
-        fleet: args.flight.fleet_config(),
-        policies,
-        default_policy: args.flight.policy.clone(),
-        token,
-        data_dir,
-        initial,
-        relay: crazyflie::RelayConfig { altitude: args.altitude, ..Default::default() },
-        // An explicit scenario (or --cfsim) starts over; the state is then saved as it flies. The
-        // old state file stays until the first save replaces it, so a failed start loses nothing.
-        resume: args.scenario.is_none() && args.cfsim == 0,
-    })
+    // A data directory that cannot be written is refused now, not discovered at the first change.
+    if let Some(dir) = &data_dir {
+        serve::open_store(Some(dir)).map_err(|e| format!("--data-dir {}: {e}", dir.display()))?;
+    }
+    let open_files = serve::listener::raise_open_files_limit();
+    let mut config =
+        ServeConfig::new(args.flight.fleet_config(), policies, args.flight.policy.clone(), initial);
+    config.token = token;
+    config.data_dir = data_dir;
+    config.relay = crazyflie::RelayConfig { altitude: args.altitude, ..Default::default() };
+    // An explicit scenario (or --cfsim) starts over; the database is replaced when the server has
+    // started, so a failed start loses nothing.
+    config.resume = args.scenario.is_none() && args.cfsim == 0;
+    config.max_uavs = args.max_uavs;
+    config.allow_hosts = args.allow_hosts.clone();
+    config.allow_origins = args.allow_origins.clone();
+    config.limits = serve::listener::Limits::fitted(open_files);
+    config.max_stream_clients = serve::ws::fitted_max_clients(open_files);
+    Ok(config)
 }
 
 async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
@@ -112,7 +163,8 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
         Some(at) => {
             let socket = tokio::net::UdpSocket::bind(at).await.with_context(|| format!("--mocap {at}"))?;
             let counters = std::sync::Arc::new(serve::mocap::MocapCounters::default());
-            tokio::spawn(serve::mocap::ingest(socket, server.mocap.clone(), counters));
+            let senders = args.mocap_allow.clone();
+            tokio::spawn(serve::mocap::ingest(socket, server.mocap.clone(), counters, senders));
             Some(at)
         }
         None => None,
@@ -142,7 +194,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
             sink
         }
         Err(e) => {
-            eprintln!("warning: --rerun {rerun}: {e:#}; running without Rerun");
+            tracing::warn!("--rerun {rerun}: {e:#}; running without Rerun");
             None
         }
     };
@@ -150,7 +202,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     if let Some(sink) = sink
         && let Ok(None) = tokio::task::spawn_blocking(move || sink.finish()).await
     {
-        eprintln!("warning: rerun: the log was not flushed within {:?}", rerun_sink::FINISH_TIMEOUT);
+        tracing::warn!("rerun: the log was not flushed within {:?}", rerun_sink::FINISH_TIMEOUT);
     }
     for sim in sims {
         sim.shutdown().await;

@@ -48,16 +48,7 @@ pub struct Running {
 /// The configuration of a test server flying `initial` with the PD policy by default.
 pub fn config(initial: &Value) -> ServeConfig {
     let policies = policies::PolicyRegistry::standard(5.0).unwrap();
-    ServeConfig {
-        fleet: fleet::FleetConfig::default(),
-        policies,
-        default_policy: "pd".into(),
-        token: None,
-        data_dir: None,
-        initial: scenario(initial),
-        relay: Default::default(),
-        resume: true,
-    }
+    ServeConfig::new(fleet::FleetConfig::default(), policies, "pd".into(), scenario(initial))
 }
 
 /// Starts the real server on 127.0.0.1:0.
@@ -130,4 +121,70 @@ pub async fn raw(
     headers: &[(&str, &str)],
 ) -> (u16, String) {
     airroads::serve::client::request(addr, method, path, body, headers).await.unwrap()
+}
+
+/// A response read off the wire: status, headers (names lower-cased) and body.
+#[derive(Debug)]
+pub struct Wire {
+    /// Status code (0 when the server closed without answering).
+    pub status: u16,
+    /// Header lines as (lower-cased name, value).
+    pub headers: Vec<(String, String)>,
+    /// The body text.
+    pub body: String,
+}
+
+impl Wire {
+    /// The first value of header `name` (lower case).
+    pub fn header(&self, name: &str) -> Option<&str> {
+        self.headers.iter().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
+    }
+
+    /// The body as JSON (Null when empty or not JSON).
+    pub fn json(&self) -> Value {
+        serde_json::from_str(&self.body).unwrap_or(Value::Null)
+    }
+}
+
+/// Sends `request` (a whole HTTP/1.1 request, `Connection: close` expected) byte for byte and reads
+/// the answer until the server closes (at most 10 s).
+pub async fn exchange(addr: SocketAddr, request: &[u8]) -> Wire {
+    use tokio::io::{AsyncReadExt, AsyncWriteExt};
+    let mut stream = tokio::net::TcpStream::connect(addr).await.unwrap();
+    stream.write_all(request).await.unwrap();
+    let mut response = Vec::new();
+    let read =
+        tokio::time::timeout(std::time::Duration::from_secs(10), stream.read_to_end(&mut response)).await;
+    assert!(read.is_ok(), "no complete answer within 10 s: {}", String::from_utf8_lossy(&response));
+    let text = String::from_utf8_lossy(&response).into_owned();
+    let Some((head, body)) = text.split_once("\r\n\r\n") else {
+        return Wire { status: 0, headers: Vec::new(), body: text };
+    };
+    let mut lines = head.lines();
+    let status = lines.next().and_then(|l| l.split(' ').nth(1)).and_then(|s| s.parse().ok()).unwrap_or(0);
+    let headers = lines
+        .filter_map(|l| l.split_once(':'))
+        .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim().to_string()))
+        .collect();
+    Wire { status, headers, body: body.to_string() }
+}
+
+/// A request text with the given method, path, extra header lines and body (`Connection: close`).
+pub fn request_text(method: &str, path: &str, headers: &[&str], body: &str) -> String {
+    let mut text =
+        format!("{method} {path} HTTP/1.1\r\nConnection: close\r\nContent-Length: {}\r\n", body.len());
+    for h in headers {
+        text.push_str(h);
+        text.push_str("\r\n");
+    }
+    text.push_str("\r\n");
+    text.push_str(body);
+    text
+}
+
+/// Starts the real server with `config` changed by `change`.
+pub async fn start_with(initial: &Value, change: impl FnOnce(&mut ServeConfig)) -> Running {
+    let mut c = config(initial);
+    change(&mut c);
+    start(c).await
 }

@@ -2,7 +2,7 @@
 //! snapshot; changes go to the fleet loop as commands and are answered once it applied them.
 
 use super::command::{Command, Outcome};
-use super::error::{ApiError, ApiJson};
+use super::error::{ApiError, ApiJson, NoBody};
 use super::snapshot::UavSnapshot;
 use super::state::AppState;
 use axum::extract::{Path, State};
@@ -35,15 +35,35 @@ pub fn router() -> Router<AppState> {
         .route("/api/fleet/stop", routing::post(stop_fleet))
         .route("/api/state", routing::get(get_state))
         .route("/api/metrics", routing::get(get_metrics))
+        .route("/api/audit", routing::get(super::audit::list))
 }
 
+/// A loop that has not finished a tick for this long is reported stalled.
+pub const STALLED_AFTER: std::time::Duration = std::time::Duration::from_secs(1);
+
+/// `ok`; `degraded` (200: flying, but changes are refused because they cannot be saved);
+/// `stalled` (503: no tick for [`STALLED_AFTER`]); `loop_stopped` (503).
 async fn healthz(State(app): State<AppState>) -> Response {
     let tick = app.snapshots.borrow().tick;
-    if app.commands.is_closed() {
-        let body = json!({"status": "loop_stopped", "tick": tick});
-        return (StatusCode::SERVICE_UNAVAILABLE, Json(body)).into_response();
-    }
-    Json(json!({"status": "ok", "tick": tick})).into_response()
+    let age = app.clock.tick_age();
+    let tick_age_ms = age.as_secs_f64() * 1e3;
+    let mut problems = Vec::new();
+    let status = if app.commands.is_closed() {
+        problems.push("the fleet loop has stopped".to_string());
+        "loop_stopped"
+    } else if age > STALLED_AFTER {
+        problems.push(format!("no tick for {:.1} s", age.as_secs_f64()));
+        "stalled"
+    } else if let Some(reason) = app.storage.refusal() {
+        problems.push(format!("changes cannot be saved: {reason}"));
+        "degraded"
+    } else {
+        "ok"
+    };
+    let code =
+        if matches!(status, "ok" | "degraded") { StatusCode::OK } else { StatusCode::SERVICE_UNAVAILABLE };
+    let body = json!({"status": status, "tick": tick, "tick_age_ms": tick_age_ms, "problems": problems});
+    (code, Json(body)).into_response()
 }
 
 async fn openapi() -> Response {
@@ -62,16 +82,7 @@ async fn put_road(
     State(app): State<AppState>,
     ApiJson(layout): ApiJson<RoadLayout>,
 ) -> Result<Response, ApiError> {
-    let road = Road::new(layout).map_err(|e| {
-        let field = e.segment.map_or_else(|| "segments".to_string(), |i| format!("segments[{i}]"));
-        let mut err =
-            ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_road", e.message.clone()).field(field);
-        let mut extra = serde_json::Map::new();
-        extra.insert("segment".into(), json!(e.segment));
-        extra.insert("rule".into(), json!(e.rule.name()));
-        err.extra = Some(extra);
-        err
-    })?;
+    let road = app.validate(move || road_of(layout)).await?;
     match app.apply(Command::SetRoad(road)).await {
         Ok(Outcome::RoadReplaced { cleared_goals }) => {
             let version = app.road.borrow().version;
@@ -81,6 +92,20 @@ async fn put_road(
         // A UAV that would be outside or too close to a wall is a 409 (EditError::RoadConflict).
         Err(e) => Err(e),
     }
+}
+
+/// A validated road, or the 422 naming the segment and the rule.
+fn road_of(layout: RoadLayout) -> Result<Road, ApiError> {
+    Road::new(layout).map_err(|e| {
+        let field = e.segment.map_or_else(|| "segments".to_string(), |i| format!("segments[{i}]"));
+        let mut err =
+            ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_road", e.message.clone()).field(field);
+        let mut extra = serde_json::Map::new();
+        extra.insert("segment".into(), json!(e.segment));
+        extra.insert("rule".into(), json!(e.rule.name()));
+        err.extra = Some(extra);
+        err
+    })
 }
 
 async fn list_uavs(State(app): State<AppState>) -> Json<Vec<UavSnapshot>> {
@@ -141,7 +166,11 @@ async fn add_uav(State(app): State<AppState>, ApiJson(new): ApiJson<NewUav>) -> 
     Ok((StatusCode::CREATED, [(header::LOCATION, format!("/api/uavs/{id}"))], Json(body)).into_response())
 }
 
-async fn remove_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+async fn remove_uav(
+    State(app): State<AppState>,
+    Path(id): Path<String>,
+    NoBody: NoBody,
+) -> Result<StatusCode, ApiError> {
     app.apply(Command::RemoveUav(id)).await?;
     Ok(StatusCode::NO_CONTENT)
 }
@@ -163,7 +192,11 @@ async fn set_goal(
     Ok(Json(json!({"id": id, "goal": body.goal})))
 }
 
-async fn clear_goal(State(app): State<AppState>, Path(id): Path<String>) -> Result<StatusCode, ApiError> {
+async fn clear_goal(
+    State(app): State<AppState>,
+    Path(id): Path<String>,
+    NoBody: NoBody,
+) -> Result<StatusCode, ApiError> {
     app.apply(Command::SetGoal(id, None)).await?;
     Ok(StatusCode::NO_CONTENT)
 }
@@ -192,10 +225,19 @@ async fn load_scenario(
     State(app): State<AppState>,
     ApiJson(scenario): ApiJson<Scenario>,
 ) -> Result<Json<Value>, ApiError> {
-    let valid = scenario.validate().map_err(|e| match e {
-        fleet::ScenarioError::Invalid { field, reason } => ApiError::invalid(field, reason),
-        other => ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", other.to_string()),
-    })?;
+    // Refused before any validation work: the loop must be able to tick the fleet in dt.
+    if scenario.uavs.len() > app.max_uavs {
+        let full = super::command::ChangeError::FleetFull { wanted: scenario.uavs.len(), max: app.max_uavs };
+        return Err(full.into());
+    }
+    let valid = app
+        .validate(move || {
+            scenario.validate().map_err(|e| match e {
+                fleet::ScenarioError::Invalid { field, reason } => ApiError::invalid(field, reason),
+                other => ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", other.to_string()),
+            })
+        })
+        .await?;
     let (name, count) = (valid.name.clone(), valid.uavs.len());
     let tick = match app.apply(Command::LoadScenario(Box::new(valid))).await? {
         Outcome::ScenarioLoaded { tick } => tick,
@@ -204,34 +246,45 @@ async fn load_scenario(
     Ok(Json(json!({"name": name, "uavs": count, "loaded_after_tick": tick})))
 }
 
-async fn pause(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+async fn pause(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
     app.apply(Command::Hold(true)).await?;
     Ok(Json(json!({"paused": true})))
 }
 
-async fn resume(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+async fn resume(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
     app.apply(Command::Hold(false)).await?;
     Ok(Json(json!({"paused": false})))
 }
 
-async fn land_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<Json<Value>, ApiError> {
+async fn land_uav(
+    State(app): State<AppState>,
+    Path(id): Path<String>,
+    NoBody: NoBody,
+) -> Result<Json<Value>, ApiError> {
     app.apply_urgent(Command::Land(Some(id.clone()))).await?;
     Ok(Json(json!({"landing": [id]})))
 }
 
-async fn land_fleet(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+async fn land_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
     app.apply_urgent(Command::Land(None)).await?;
     Ok(Json(json!({"landing": "all"})))
 }
 
-async fn stop_fleet(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+async fn stop_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
     app.apply_urgent(Command::EmergencyStop).await?;
     Ok(Json(json!({"stopped": "all"})))
 }
 
 async fn get_state(State(app): State<AppState>) -> Response {
     let frame = app.frames.borrow().clone();
-    ([(header::CONTENT_TYPE, "application/json")], frame.text.as_str().to_owned()).into_response()
+    let snapshot = app.snapshots.borrow().clone();
+    // The serialiser may still be on the previous tick: an answered change must show at once.
+    let text = if frame.tick == snapshot.tick {
+        frame.text.as_str().to_owned()
+    } else {
+        serde_json::to_string(&*snapshot).unwrap_or_else(|_| frame.text.as_str().to_owned())
+    };
+    ([(header::CONTENT_TYPE, "application/json")], text).into_response()
 }
 
 async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
@@ -244,6 +297,24 @@ async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
         "frames_sent": s.frames_sent.load(Relaxed),
         "frames_skipped": s.frames_skipped.load(Relaxed),
         "clients_dropped": s.clients_dropped.load(Relaxed),
+        "clients_refused": s.clients_refused.load(Relaxed),
+        "max_clients": app.max_stream_clients,
     });
+    let c = &app.connections;
+    doc["connections"] = json!({
+        "open": c.open.load(Relaxed),
+        "limit": c.limit.load(Relaxed),
+        "accepted": c.accepted.load(Relaxed),
+        "evicted": c.evicted.load(Relaxed),
+        "refused": c.refused.load(Relaxed),
+        "accept_errors": c.accept_errors.load(Relaxed),
+    });
+    doc["auth"] = json!({
+        "refused": app.auth_failures.refused.load(Relaxed),
+        "rate_limited": app.auth_failures.rate_limited.load(Relaxed),
+    });
+    doc["storage"] = serde_json::to_value(app.storage.report()).unwrap_or(Value::Null);
+    doc["tick_age_ms"] = json!(app.clock.tick_age().as_secs_f64() * 1e3);
+    doc["max_uavs"] = json!(app.max_uavs);
     Json(doc)
 }

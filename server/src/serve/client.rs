@@ -4,8 +4,9 @@
 use std::net::SocketAddr;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 
-/// One exchange: the status code and the body text. A JSON body gets `Content-Type: application/json`
-/// unless `headers` set a content type.
+/// One exchange: the status code and the body text. A request with a body, and every change (any
+/// method but GET and HEAD), says `Content-Type: application/json` unless `headers` set a content
+/// type.
 pub async fn request(
     addr: SocketAddr,
     method: &str,
@@ -21,7 +22,8 @@ pub async fn request(
         head.push_str(&format!("{k}: {v}\r\n"));
     }
     let body = body.unwrap_or("");
-    if !body.is_empty() && !has_type {
+    let change = !matches!(method, "GET" | "HEAD");
+    if (change || !body.is_empty()) && !has_type {
         head.push_str("Content-Type: application/json\r\n");
     }
     head.push_str(&format!("Content-Length: {}\r\n\r\n", body.len()));

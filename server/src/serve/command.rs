@@ -1,8 +1,11 @@
 //! Changes requested by REST handlers, applied by the fleet loop between two ticks, each answered
-//! through a one-shot channel.
+//! through a one-shot channel once it is applied and durable (or refused, having changed nothing).
 
+use super::store::AuditRecord;
 use fleet::{EditError, ValidScenario};
 use roads::Road;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU8, Ordering};
 use tokio::sync::oneshot;
 use uav::Vec2;
 
@@ -34,10 +37,41 @@ pub enum Command {
     LoadScenario(Box<ValidScenario>),
     /// Hold (true: every UAV brakes to a hover) or resume (false).
     Hold(bool),
-    /// Land one UAV (Some) or all (None). Sent on the urgent channel.
+    /// Land one UAV (Some) or all (None). Sent on the urgent channel, never persisted.
     Land(Option<String>),
-    /// Emergency stop of every UAV: motors off. Sent on the urgent channel.
+    /// Emergency stop of every UAV: motors off. Sent on the urgent channel, never persisted.
     EmergencyStop,
+}
+
+impl Command {
+    /// The HTTP status of its success (for the audit entry written with the change).
+    pub fn success_status(&self) -> u16 {
+        match self {
+            Command::AddUav { .. } => 201,
+            Command::RemoveUav(_) | Command::SetGoal(_, None) => 204,
+            _ => 200,
+        }
+    }
+
+    /// One line saying what it changes (the audit entry's detail).
+    pub fn describe(&self) -> String {
+        match self {
+            Command::SetRoad(road) => format!("road of {} segments", road.quads().len()),
+            Command::AddUav { id, position, .. } => {
+                format!("added `{id}` at [{}, {}]", position.x, position.y)
+            }
+            Command::RemoveUav(id) => format!("removed `{id}`"),
+            Command::SetGoal(id, Some(g)) => format!("goal of `{id}` set to [{}, {}]", g.x, g.y),
+            Command::SetGoal(id, None) => format!("goal of `{id}` cleared"),
+            Command::SetPolicy(id, policy) => format!("policy of `{id}` set to `{policy}`"),
+            Command::LoadScenario(s) => format!("scenario `{}` with {} UAVs", s.name, s.uavs.len()),
+            Command::Hold(true) => "fleet paused".into(),
+            Command::Hold(false) => "fleet resumed".into(),
+            Command::Land(Some(id)) => format!("land `{id}`"),
+            Command::Land(None) => "land all".into(),
+            Command::EmergencyStop => "emergency stop".into(),
+        }
+    }
 }
 
 /// What a command did.
@@ -57,11 +91,67 @@ pub enum Outcome {
     },
 }
 
+/// Why a command was not applied; in every case nothing changed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum ChangeError {
+    /// The fleet refused it.
+    #[error(transparent)]
+    Edit(#[from] EditError),
+    /// It could not be made durable (the reason says why); it was taken back.
+    #[error("the change could not be saved: {0}")]
+    NotDurable(String),
+    /// The fleet would exceed the configured maximum.
+    #[error("the fleet would have {wanted} UAVs, more than the maximum of {max} (--max-uavs)")]
+    FleetFull {
+        /// UAVs the change would make.
+        wanted: usize,
+        /// The configured maximum.
+        max: usize,
+    },
+    /// The client gave up before the loop took it.
+    #[error("the request was withdrawn before it was applied")]
+    Withdrawn,
+}
+
+/// Where a queued request is: the handler and the loop race to claim it exactly once.
+#[derive(Debug, Default)]
+pub struct Claim(AtomicU8);
+
+const QUEUED: u8 = 0;
+const TAKEN: u8 = 1;
+const WITHDRAWN: u8 = 2;
+
+impl Claim {
+    /// The loop takes it; false when the handler withdrew it first (then it must not be applied).
+    pub fn take(&self) -> bool {
+        self.0.compare_exchange(QUEUED, TAKEN, Ordering::AcqRel, Ordering::Acquire).is_ok()
+    }
+
+    /// The handler withdraws it; false when the loop took it already (then its outcome will come).
+    pub fn withdraw(&self) -> bool {
+        self.0.compare_exchange(QUEUED, WITHDRAWN, Ordering::AcqRel, Ordering::Acquire).is_ok()
+    }
+}
+
+/// The answer to a request.
+pub type Reply = oneshot::Sender<Result<Outcome, ChangeError>>;
+
 /// A command and where its answer goes.
 #[derive(Debug)]
 pub struct Request {
     /// The change.
     pub command: Command,
     /// Receives the outcome (dropped if the client went away: the change still applies).
-    pub reply: oneshot::Sender<Result<Outcome, EditError>>,
+    pub reply: Reply,
+    /// Who asked, for the audit entry committed with the change (None: not audited, e.g. tests).
+    pub audit: Option<AuditRecord>,
+    /// Taken by the loop or withdrawn by the handler, exactly once.
+    pub claim: Arc<Claim>,
+}
+
+impl Request {
+    /// A request without audit information.
+    pub fn new(command: Command, reply: Reply) -> Self {
+        Self { command, reply, audit: None, claim: Arc::default() }
+    }
 }

@@ -1,28 +1,33 @@
 //! The fleet loop: a dedicated OS thread that ticks the fleet every dt (`shared/design/layout.md`,
-//! one tick). Commands from REST handlers are applied between ticks, never during one; after each
-//! tick an immutable snapshot, the metrics and the state to persist are published on `watch`
-//! channels. The thread never waits on a client, a disk or a radio: it only `try_recv`s commands and
-//! `send`s to watches (which never block); late ticks are counted and skipped, never bunched.
+//! one tick). Commands from REST handlers are applied between ticks, never during one; land and
+//! stop requests the moment they arrive (the loop sleeps in `park_timeout` and the handler unparks
+//! it). After each tick an immutable snapshot and the metrics are published on `watch` channels, then
+//! the gap's changes go to the state writer ([`super::durable`]). The thread never waits on a
+//! client, a disk or a radio: it only `try_recv`s and `try_send`s; late ticks are counted and
+//! skipped, never bunched.
 
-use super::command::{Command, Outcome, Request};
+use super::command::{ChangeError, Outcome, Reply, Request};
+use super::durable::{FromWriter, StorageStatus, ToWriter};
 use super::linking::LinkFactory;
-use super::persist::SavedState;
 use super::snapshot::Snapshot;
 use super::stats::{LoopMetrics, TickStats};
-use fleet::{EditError, Fleet};
+use fleet::{Fleet, Undo};
 use roads::{Road, RoadLayout};
 use serde::Serialize;
+use std::collections::VecDeque;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, watch};
-use uav::UavState;
 
 /// Most commands applied between two ticks (the rest wait for the next gap).
 pub const MAX_COMMANDS_PER_TICK: usize = 64;
 
-/// Ticks between two publications of the state to persist while nothing else changes.
-const SAVE_EVERY_TICKS: u64 = 20;
+/// Ticks between two writes of the UAVs' positions.
+const POSITIONS_EVERY_TICKS: u64 = 20;
+
+/// A change not on disk after this long marks the storage degraded (new changes are refused).
+pub const STORAGE_STALL: Duration = Duration::from_secs(5);
 
 /// The road as published to readers: the layout plus its drawable geometry.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -49,39 +54,109 @@ impl RoadView {
     }
 }
 
+/// When the loop last finished a tick, for `/healthz` (a stalled loop publishes nothing else).
+#[derive(Debug)]
+pub struct LoopClock {
+    start: Instant,
+    last_tick_us: AtomicU64,
+}
+
+impl Default for LoopClock {
+    fn default() -> Self {
+        Self { start: Instant::now(), last_tick_us: AtomicU64::new(0) }
+    }
+}
+
+impl LoopClock {
+    /// Records a tick finished now.
+    pub fn ticked(&self) {
+        let us = u64::try_from(self.start.elapsed().as_micros()).unwrap_or(u64::MAX);
+        self.last_tick_us.store(us, Ordering::Relaxed);
+    }
+
+    /// Time since the last finished tick (since the start before the first one).
+    pub fn tick_age(&self) -> Duration {
+        let last = Duration::from_micros(self.last_tick_us.load(Ordering::Relaxed));
+        self.start.elapsed().saturating_sub(last)
+    }
+}
+
 /// The ends of the loop's channels.
 pub struct LoopChannels {
     /// Commands from the REST handlers.
     pub requests: mpsc::Receiver<Request>,
-    /// Land and stop requests, applied before any other command.
+    /// Land and stop requests, applied as soon as they arrive.
     pub urgent: mpsc::UnboundedReceiver<Request>,
     /// The snapshot after each tick.
     pub snapshots: watch::Sender<Arc<Snapshot>>,
     /// Loop statistics after each tick.
     pub metrics: watch::Sender<Arc<LoopMetrics>>,
-    /// The state to persist, after each change and every second.
-    pub saved: watch::Sender<Arc<SavedState>>,
     /// The road, after each change.
     pub road: watch::Sender<Arc<RoadView>>,
+    /// Work for the state writer.
+    pub writer: mpsc::Sender<ToWriter>,
+    /// The writer's answers.
+    pub written: std::sync::mpsc::Receiver<FromWriter>,
+    /// The storage's health.
+    pub storage: Arc<StorageStatus>,
+    /// When the last tick finished.
+    pub clock: Arc<LoopClock>,
+}
+
+/// A gap's changes on their way to the disk, with what takes them back.
+pub(crate) struct PendingBatch {
+    pub(crate) seq: u64,
+    pub(crate) undo: Vec<Undo>,
+    pub(crate) sent: Instant,
 }
 
 /// The fleet loop's own state.
 pub struct Engine {
-    fleet: Fleet,
-    default_policy: String,
-    links: LinkFactory,
-    channels: LoopChannels,
-    stats: TickStats,
-    road_version: u64,
-    ticks: u64,
+    pub(crate) fleet: Fleet,
+    pub(crate) default_policy: String,
+    pub(crate) links: LinkFactory,
+    pub(crate) channels: LoopChannels,
+    pub(crate) stats: TickStats,
+    pub(crate) road_version: u64,
+    pub(crate) ticks: u64,
     time: f64,
+    /// Most UAVs the fleet may have (`--max-uavs`).
+    pub(crate) max_uavs: usize,
+    /// Batches sent to the writer and not yet confirmed, oldest first.
+    pub(crate) pending: VecDeque<PendingBatch>,
+    pub(crate) next_seq: u64,
+    /// The current gap's applied changes: undo records, writes, clients.
+    pub(crate) gap: super::changes::Gap,
+    /// Answers held until the next snapshot shows what they say.
+    pub(crate) after_publish: Vec<(Reply, Result<Outcome, ChangeError>)>,
 }
 
 impl Engine {
-    /// A loop over `fleet`; UAVs added without a policy fly `default_policy`, links come from `links`.
-    pub fn new(fleet: Fleet, default_policy: String, links: LinkFactory, channels: LoopChannels) -> Self {
+    /// A loop over `fleet` (at most `max_uavs` UAVs); UAVs added without a policy fly
+    /// `default_policy`, links come from `links`.
+    pub fn new(
+        fleet: Fleet,
+        default_policy: String,
+        links: LinkFactory,
+        channels: LoopChannels,
+        max_uavs: usize,
+    ) -> Self {
         let stats = TickStats::new(fleet.config.params.dt);
-        Self { fleet, default_policy, links, channels, stats, road_version: 0, ticks: 0, time: 0.0 }
+        Self {
+            fleet,
+            default_policy,
+            links,
+            channels,
+            stats,
+            road_version: 0,
+            ticks: 0,
+            time: 0.0,
+            max_uavs,
+            pending: VecDeque::new(),
+            next_seq: 0,
+            gap: Default::default(),
+            after_publish: Vec::new(),
+        }
     }
 
     /// Runs the loop on a new thread until `stop` is set or every command sender is gone.
@@ -91,12 +166,17 @@ impl Engine {
 
     fn run(&mut self, stop: &AtomicBool) {
         self.publish_road();
-        self.publish_saved();
         let mut next = Instant::now();
         while !stop.load(Ordering::Relaxed) {
-            let now = Instant::now();
-            if now < next {
-                std::thread::sleep(next - now);
+            // Sleep until the tick instant; land and stop requests unpark the thread and are
+            // applied at once (this is between two ticks).
+            loop {
+                self.apply_urgent();
+                let now = Instant::now();
+                if now >= next || stop.load(Ordering::Relaxed) {
+                    break;
+                }
+                std::thread::park_timeout(next - now);
             }
             let period = Duration::from_secs_f64(self.fleet.config.params.dt);
             let started = Instant::now();
@@ -107,81 +187,56 @@ impl Engine {
                 self.stats.missed(u64::from(missed));
                 next += period * missed;
             }
+            self.read_writer();
             if !self.apply_commands() {
                 break;
             }
             self.tick(started);
+            self.send_gap();
             next += period;
         }
-        self.publish_saved();
+        // Answer what is still held; the writer commits what it has (and the last positions).
+        self.read_writer();
+        self.send_positions();
+        self.answer_held();
+    }
+
+    /// Sends the answers held until a snapshot shows them.
+    pub(crate) fn answer_held(&mut self) {
+        for (reply, answer) in self.after_publish.drain(..) {
+            let _ = reply.send(answer);
+        }
     }
 
     /// Applies queued commands; false when every sender is gone (the server shut down).
-    fn apply_commands(&mut self) -> bool {
-        // Land and stop go out ahead of anything queued (the urgent channel only carries those),
-        // outside the cap on other changes.
-        let mut urgent = 0;
-        while let Ok(request) = self.channels.urgent.try_recv() {
-            let outcome = self.apply(request.command);
-            let _ = request.reply.send(outcome);
-            urgent += 1;
-        }
+    pub(crate) fn apply_commands(&mut self) -> bool {
         let mut applied = 0;
         while applied < MAX_COMMANDS_PER_TICK {
             match self.channels.requests.try_recv() {
                 Ok(request) => {
-                    let outcome = self.apply(request.command);
-                    // The client may have gone away; the change stands either way.
-                    let _ = request.reply.send(outcome);
                     applied += 1;
+                    self.apply_request(request);
                 }
                 Err(mpsc::error::TryRecvError::Empty) => break,
                 Err(mpsc::error::TryRecvError::Disconnected) => return false,
             }
         }
-        let applied = applied + urgent;
         if applied > 0 {
             self.stats.commands(applied as u64);
-            self.publish_saved();
         }
         true
     }
 
-    /// Applies one command to the fleet.
-    pub fn apply(&mut self, command: Command) -> Result<Outcome, EditError> {
-        let dt = self.fleet.config.params.dt;
-        match command {
-            Command::SetRoad(road) => {
-                let cleared_goals = self.fleet.replace_road(road)?;
-                self.road_changed();
-                return Ok(Outcome::RoadReplaced { cleared_goals });
-            }
-            Command::AddUav { id, position, policy, goal, link } => {
-                let state = UavState::at_rest(position);
-                let policy = policy.unwrap_or_else(|| self.default_policy.clone());
-                // Checked before the link exists: a refused UAV never starts a radio session.
-                self.fleet.check_new(&id, &policy, &state, goal)?;
-                let link = self.links.make(&id, link.as_deref(), state, dt);
-                self.fleet.try_add(id, policy, link, state, goal)?;
-            }
-            Command::Land(Some(id)) => self.fleet.land(&id)?,
-            Command::Land(None) => self.fleet.land_all(),
-            Command::EmergencyStop => self.fleet.emergency_stop_all(),
-            Command::RemoveUav(id) => drop(self.fleet.remove(&id)?),
-            Command::SetGoal(id, goal) => self.fleet.set_goal(&id, goal)?,
-            Command::SetPolicy(id, policy) => self.fleet.set_policy(&id, &policy)?,
-            Command::LoadScenario(scenario) => {
-                let policy = self.default_policy.clone();
-                load_scenario(&mut self.fleet, &scenario, &policy, &self.links)?;
-                self.road_changed();
-                return Ok(Outcome::ScenarioLoaded { tick: self.ticks });
-            }
-            Command::Hold(hold) => self.fleet.set_hold(hold),
+    /// Applies every queued land and stop request and answers it (they are never persisted).
+    pub(crate) fn apply_urgent(&mut self) {
+        while let Ok(request) = self.channels.urgent.try_recv() {
+            let outcome = self.apply(request.command).map(|applied| applied.outcome);
+            let _ = request.reply.send(outcome);
+            self.stats.commands(1);
         }
-        Ok(Outcome::Done)
     }
 
-    fn road_changed(&mut self) {
+    pub(crate) fn road_changed(&mut self) {
         self.road_version += 1;
         self.stats.fleet_reloaded(self.fleet.config.params.dt);
         self.publish_road();
@@ -198,83 +253,25 @@ impl Engine {
         self.stats.record(duration_us, &self.fleet, &snapshot);
         self.channels.snapshots.send_replace(Arc::new(snapshot));
         self.channels.metrics.send_replace(Arc::new(self.stats.metrics()));
-        if self.ticks.is_multiple_of(SAVE_EVERY_TICKS) {
-            self.publish_saved();
+        self.channels.clock.ticked();
+        // The snapshot now shows every held answer's effect (or its absence, when taken back).
+        self.answer_held();
+        if self.ticks.is_multiple_of(POSITIONS_EVERY_TICKS) {
+            self.send_positions();
         }
     }
 
-    fn publish_road(&self) {
+    /// Queues the UAVs' positions for the writer (best effort: a full queue skips them).
+    fn send_positions(&self) {
+        if self.fleet.uavs().is_empty() {
+            return;
+        }
+        let positions =
+            self.fleet.uavs().iter().map(|u| (u.id.clone(), [u.state.p.x, u.state.p.y])).collect();
+        let _ = self.channels.writer.try_send(ToWriter::Positions(positions));
+    }
+
+    pub(crate) fn publish_road(&self) {
         self.channels.road.send_replace(Arc::new(RoadView::of(self.fleet.road(), self.road_version)));
-    }
-
-    fn publish_saved(&self) {
-        self.channels.saved.send_replace(Arc::new(SavedState::of(&self.fleet)));
-    }
-}
-
-/// Replaces road, parameters and UAVs of `fleet` by those of `scenario`, every UAV flying `policy`.
-pub fn load_scenario(
-    fleet: &mut Fleet,
-    scenario: &fleet::ValidScenario,
-    policy: &str,
-    links: &LinkFactory,
-) -> Result<(), EditError> {
-    // Checked before anything changes; the scenario's starts and goals were validated with it.
-    if !fleet.policy_names().any(|n| n == policy) {
-        return Err(EditError::UnknownPolicy(format!("policy `{policy}` is not loaded")));
-    }
-    fleet.reset(scenario.params, scenario.road.clone());
-    for u in &scenario.uavs {
-        let state = UavState::at_rest(u.start);
-        let link = links.make(&u.id, u.link.as_deref(), state, scenario.params.dt);
-        fleet.add(u.id.clone(), policy.to_string(), link, state, Some(u.goal));
-    }
-    Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use links::LinkPhase;
-    use tokio::sync::oneshot;
-
-    #[test]
-    fn land_goes_out_ahead_of_queued_changes_and_changes_are_capped_per_gap() {
-        let runtime = tokio::runtime::Builder::new_current_thread().build().unwrap();
-        let scenario = super::super::demo_scenario().unwrap();
-        let policies = policies::PolicyRegistry::with_pd(scenario.params.delta);
-        let config = fleet::FleetConfig { params: scenario.params, ..Default::default() };
-        let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
-        let factory = LinkFactory::new(runtime.handle().clone(), crazyflie::RelayConfig::default());
-        load_scenario(&mut fleet, &scenario, "pd", &factory).unwrap();
-        let first = fleet.uavs()[0].id.clone();
-        let goal = scenario.uavs[1].goal;
-
-        let (commands, requests) = mpsc::channel(1024);
-        let (urgent, urgent_requests) = mpsc::unbounded_channel();
-        let snapshots = watch::channel(Arc::new(Snapshot::of(&fleet, 0, 0.0, 0))).0;
-        let metrics = watch::channel(Arc::new(LoopMetrics::default())).0;
-        let saved = watch::channel(Arc::new(SavedState::of(&fleet))).0;
-        let road = watch::channel(Arc::new(RoadView::of(fleet.road(), 0))).0;
-        let channels = LoopChannels { requests, urgent: urgent_requests, snapshots, metrics, saved, road };
-        let mut engine = Engine::new(fleet, "pd".into(), factory, channels);
-
-        // 100 goal changes queued first, then a land request on the urgent channel.
-        let mut answers = Vec::new();
-        for _ in 0..100 {
-            let (reply, answer) = oneshot::channel();
-            commands
-                .try_send(Request { command: Command::SetGoal(first.clone(), Some(goal)), reply })
-                .unwrap();
-            answers.push(answer);
-        }
-        let (reply, mut landed) = oneshot::channel();
-        urgent.send(Request { command: Command::Land(Some(first.clone())), reply }).unwrap();
-
-        assert!(engine.apply_commands());
-        assert_eq!(landed.try_recv().unwrap(), Ok(Outcome::Done), "the land request was applied");
-        assert_eq!(engine.fleet.uavs()[0].link.phase(), LinkPhase::Landing);
-        let applied = answers.iter_mut().map(|a| a.try_recv().is_ok()).filter(|done| *done).count();
-        assert_eq!(applied, MAX_COMMANDS_PER_TICK, "the rest wait for the next gap between ticks");
     }
 }

@@ -1,8 +1,9 @@
 //! The API's errors: `{"error": {"code", "message", "field"?}}` with a 4xx status (5xx only when
 //! the fleet loop is gone), and a JSON body extractor whose rejections use the same shape.
 
+use super::command::ChangeError;
 use axum::extract::{FromRequest, Request};
-use axum::http::{StatusCode, header};
+use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use fleet::EditError;
 use serde::de::DeserializeOwned;
@@ -45,6 +46,11 @@ impl ApiError {
         Self::new(StatusCode::NOT_FOUND, "unknown_uav", format!("no UAV with id `{id}`")).field("id")
     }
 
+    /// 503 when a bounded resource is exhausted; nothing changed and the client may retry.
+    pub fn busy(message: impl Into<String>) -> Self {
+        Self::new(StatusCode::SERVICE_UNAVAILABLE, "busy", message)
+    }
+
     /// 503 when the fleet loop does not answer.
     pub fn loop_unavailable() -> Self {
         Self::new(StatusCode::SERVICE_UNAVAILABLE, "loop_unavailable", "the fleet loop is not running")
@@ -74,57 +80,148 @@ impl From<EditError> for ApiError {
     }
 }
 
+impl From<ChangeError> for ApiError {
+    fn from(e: ChangeError) -> Self {
+        match e {
+            ChangeError::Edit(e) => e.into(),
+            ChangeError::NotDurable(reason) => Self::new(
+                StatusCode::SERVICE_UNAVAILABLE,
+                "not_durable",
+                format!("the change could not be saved to disk and was not applied: {reason}"),
+            ),
+            e @ ChangeError::FleetFull { .. } => {
+                Self::new(StatusCode::UNPROCESSABLE_ENTITY, "fleet_full", e.to_string()).field("uavs")
+            }
+            ChangeError::Withdrawn => {
+                Self::busy("the fleet loop did not take the change in time; nothing changed")
+            }
+        }
+    }
+}
+
+/// The code and message of an error answer, attached to its response for the audit log.
+#[derive(Debug, Clone)]
+pub struct ErrorInfo {
+    /// The error code.
+    pub code: &'static str,
+    /// The message.
+    pub message: String,
+}
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
+        let info = ErrorInfo { code: self.code, message: self.message.clone() };
         let mut error = self.extra.unwrap_or_default();
         error.insert("code".into(), json!(self.code));
         error.insert("message".into(), json!(self.message));
         if let Some(field) = self.field {
             error.insert("field".into(), json!(field));
         }
-        (self.status, axum::Json(json!({ "error": error }))).into_response()
+        let mut response = (self.status, axum::Json(json!({ "error": error }))).into_response();
+        response.extensions_mut().insert(info);
+        response
     }
 }
 
 /// Largest request body accepted (bytes): a road of 2,000 segments is about 300 kB.
 pub const MAX_BODY_BYTES: usize = 4 << 20;
 
-/// A JSON request body. Malformed JSON is a 400, a wrong type, missing or unknown key a 422 naming
-/// the field by its JSON path, a missing or wrong content type a 415.
+/// True when the request says `Content-Type: application/json` (or another `+json` type).
+pub fn is_json(headers: &HeaderMap) -> bool {
+    headers
+        .get(header::CONTENT_TYPE)
+        .and_then(|v| v.to_str().ok())
+        .and_then(|v| v.split(';').next())
+        .is_some_and(|m| {
+            let m = m.trim().to_ascii_lowercase();
+            m == "application/json" || (m.starts_with("application/") && m.ends_with("+json"))
+        })
+}
+
+/// How long a client may take to send its body.
+pub const BODY_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// Bodies above this size are parsed on the blocking pool, not on an async worker.
+const PARSE_INLINE_BYTES: usize = 16 << 10;
+
+/// Reads the whole body within [`BODY_TIMEOUT`] and the size limit.
+async fn read_body<S: Send + Sync>(req: Request, state: &S) -> Result<axum::body::Bytes, ApiError> {
+    let read = axum::body::Bytes::from_request(req, state);
+    match tokio::time::timeout(BODY_TIMEOUT, read).await {
+        Ok(Ok(bytes)) => Ok(bytes),
+        Ok(Err(e)) => Err(ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, "body_too_large", e.body_text())),
+        Err(_) => Err(ApiError::new(
+            StatusCode::REQUEST_TIMEOUT,
+            "body_timeout",
+            format!("the body did not arrive within {} s", BODY_TIMEOUT.as_secs()),
+        )),
+    }
+}
+
+/// A JSON request body. Malformed JSON (also trailing data after the document) is a 400, a wrong
+/// type, missing or unknown key a 422 naming the field by its JSON path, a missing or wrong content
+/// type a 415, a body slower than [`BODY_TIMEOUT`] a 408.
 pub struct ApiJson<T>(pub T);
 
-impl<S: Send + Sync, T: DeserializeOwned> FromRequest<S> for ApiJson<T> {
+impl<S: Send + Sync, T: DeserializeOwned + Send + 'static> FromRequest<S> for ApiJson<T> {
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &S) -> Result<Self, ApiError> {
-        let json_type = req
-            .headers()
-            .get(header::CONTENT_TYPE)
-            .and_then(|v| v.to_str().ok())
-            .and_then(|v| v.split(';').next())
-            .is_some_and(|m| {
-                let m = m.trim().to_ascii_lowercase();
-                m == "application/json" || (m.starts_with("application/") && m.ends_with("+json"))
-            });
-        if !json_type {
+        if !is_json(req.headers()) {
             return Err(ApiError::new(
                 StatusCode::UNSUPPORTED_MEDIA_TYPE,
                 "unsupported_media_type",
                 "the body must be JSON with `Content-Type: application/json`",
             ));
         }
-        let bytes = axum::body::Bytes::from_request(req, state)
-            .await
-            .map_err(|e| ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, "body_too_large", e.body_text()))?;
-        parse(&bytes).map(ApiJson)
+        let bytes = read_body(req, state).await?;
+        if bytes.len() <= PARSE_INLINE_BYTES {
+            return parse(&bytes).map(ApiJson);
+        }
+        match tokio::task::spawn_blocking(move || parse(&bytes)).await {
+            Ok(parsed) => parsed.map(ApiJson),
+            Err(_) => {
+                Err(ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal_error", "parsing failed"))
+            }
+        }
+    }
+}
+
+/// The body of a change that takes none: empty, or the empty JSON object `{}`.
+pub struct NoBody;
+
+impl<S: Send + Sync> FromRequest<S> for NoBody {
+    type Rejection = ApiError;
+
+    async fn from_request(req: Request, state: &S) -> Result<Self, ApiError> {
+        let bytes = read_body(req, state).await?;
+        if bytes.iter().all(u8::is_ascii_whitespace) {
+            return Ok(NoBody);
+        }
+        match parse::<serde_json::Map<String, serde_json::Value>>(&bytes) {
+            Ok(object) if object.is_empty() => Ok(NoBody),
+            Ok(_) => Err(ApiError::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid_body",
+                "this request takes no body (or the empty object `{}`)",
+            )),
+            Err(e) => Err(e),
+        }
     }
 }
 
 /// Parses a JSON body, naming the field at fault on error.
 pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     let de = &mut serde_json::Deserializer::from_slice(bytes);
-    match serde_path_to_error::deserialize(de) {
-        Ok(value) => Ok(value),
+    match serde_path_to_error::deserialize(&mut *de) {
+        Ok(value) => match de.end() {
+            Ok(()) => Ok(value),
+            Err(e) => Err(ApiError::new(
+                StatusCode::BAD_REQUEST,
+                "malformed_json",
+                format!("data after the JSON document: {e}"),
+            )),
+        },
         Err(e) => {
             let path = e.path().to_string();
             let inner = e.into_inner();
@@ -164,5 +261,10 @@ mod tests {
         // JSON has no NaN: a non-finite number is a syntax error, not a panic.
         let e = parse::<Body>(b"{\"goal\": [NaN, 1]}").unwrap_err();
         assert_eq!(e.status, StatusCode::BAD_REQUEST);
+        // One document per body: trailing data is malformed, trailing whitespace is not.
+        let e = parse::<Body>(b"{\"goal\": [1, 0]} xyz").unwrap_err();
+        assert_eq!((e.status, e.code), (StatusCode::BAD_REQUEST, "malformed_json"));
+        assert!(parse::<Body>(b"{\"goal\": [1, 0]} {}").is_err());
+        assert!(parse::<Body>(b"{\"goal\": [1, 0]}\n ").is_ok());
     }
 }

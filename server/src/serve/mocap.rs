@@ -32,6 +32,13 @@ pub struct MocapCounters {
     pub unrouted: AtomicU64,
     /// Datagrams that were not a valid pose.
     pub invalid: AtomicU64,
+    /// Datagrams from a sender that is not allowed (dropped unread).
+    pub rejected_sender: AtomicU64,
+}
+
+/// True when `sender` may send poses: a loopback address, or one of `allowed` (`--mocap-allow`).
+pub fn sender_allowed(sender: std::net::IpAddr, allowed: &[std::net::IpAddr]) -> bool {
+    sender.is_loopback() || allowed.contains(&sender)
 }
 
 /// Parses one datagram; positions must be finite and within roads' coordinate range.
@@ -44,14 +51,24 @@ pub fn parse(datagram: &[u8]) -> Result<Pose, String> {
     Ok(pose)
 }
 
-/// Receives poses on `socket` until it fails, forwarding each to its Crazyflie.
-pub async fn ingest(socket: UdpSocket, routes: MocapRoutes, counters: Arc<MocapCounters>) {
+/// Receives poses on `socket` until it fails, forwarding each to its Crazyflie; datagrams from
+/// senders other than loopback and `allowed` are dropped unread.
+pub async fn ingest(
+    socket: UdpSocket,
+    routes: MocapRoutes,
+    counters: Arc<MocapCounters>,
+    allowed: Vec<std::net::IpAddr>,
+) {
     let mut buf = vec![0u8; 2048];
     loop {
         let n = match socket.recv_from(&mut buf).await {
+            Ok((_, from)) if !sender_allowed(from.ip(), &allowed) => {
+                counters.rejected_sender.fetch_add(1, Relaxed);
+                continue;
+            }
             Ok((n, _)) => n,
             Err(e) => {
-                eprintln!("airroads: motion capture socket failed: {e}");
+                tracing::error!("motion capture socket failed: {e}");
                 return;
             }
         };
@@ -87,5 +104,15 @@ mod tests {
         ] {
             assert!(parse(bad).is_err(), "{}", String::from_utf8_lossy(bad));
         }
+    }
+
+    #[test]
+    fn only_loopback_and_listed_senders_may_send_poses() {
+        let lab: std::net::IpAddr = "192.168.1.7".parse().unwrap();
+        assert!(sender_allowed("127.0.0.1".parse().unwrap(), &[]));
+        assert!(sender_allowed("::1".parse().unwrap(), &[]));
+        assert!(!sender_allowed(lab, &[]));
+        assert!(sender_allowed(lab, &[lab]));
+        assert!(!sender_allowed("192.168.1.8".parse().unwrap(), &[lab]));
     }
 }

@@ -3,12 +3,17 @@
 //! already-bound listener until a shutdown future completes (tests bind 127.0.0.1:0).
 
 mod api;
-mod auth;
+pub mod audit;
+pub mod auth;
+mod changes;
 pub mod client;
 pub mod command;
+pub mod durable;
 pub mod engine;
 pub mod error;
+pub mod guard;
 pub mod linking;
+pub mod listener;
 pub mod mocap;
 pub mod openapi;
 pub mod persist;
@@ -17,13 +22,14 @@ pub mod rerun_sink;
 pub mod snapshot;
 pub mod state;
 pub mod stats;
+pub mod store;
 mod web;
-mod ws;
+pub mod ws;
 
 use anyhow::Context as _;
 use axum::Router;
 use axum::extract::ws::Utf8Bytes;
-use engine::{Engine, LoopChannels, RoadView};
+use engine::{Engine, LoopChannels, LoopClock, RoadView};
 use fleet::{Fleet, FleetConfig, ValidScenario};
 use linking::{LinkFactory, MocapRoutes};
 use persist::SavedState;
@@ -34,8 +40,14 @@ use stats::LoopMetrics;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Duration;
+use store::{Store, Write};
 use tokio::sync::{mpsc, watch};
 use uav::{UavState, Vec2};
+
+/// Most UAVs by default: what the fleet loop ticks within dt on the development machine with the
+/// default policy in a dense crowd, with room to spare (BENCHMARKS.md, "Admission").
+pub const DEFAULT_MAX_UAVS: usize = 300;
 
 /// The scenario `airroads serve` flies when it has no saved state and no `--scenario`.
 pub const DEMO_SCENARIO: &str = include_str!("../../../scenarios/demo.json");
@@ -58,6 +70,42 @@ pub struct ServeConfig {
     pub relay: crazyflie::RelayConfig,
     /// Resume the saved state of `data_dir` when there is one (false: start from `initial`).
     pub resume: bool,
+    /// Most UAVs the fleet may have (changes beyond are refused with 422).
+    pub max_uavs: usize,
+    /// Extra `Host` values accepted (`--allow-host`).
+    pub allow_hosts: Vec<String>,
+    /// Extra origins allowed to make changes and open `/ws` (`--allow-origin`).
+    pub allow_origins: Vec<String>,
+    /// Connection and request-head limits of the HTTP side.
+    pub limits: listener::Limits,
+    /// Most WebSocket clients at once.
+    pub max_stream_clients: usize,
+}
+
+impl ServeConfig {
+    /// A configuration with the defaults for everything but the fleet, its policies and start.
+    pub fn new(
+        fleet: FleetConfig,
+        policies: PolicyRegistry,
+        default_policy: String,
+        initial: ValidScenario,
+    ) -> Self {
+        Self {
+            fleet,
+            policies,
+            default_policy,
+            token: None,
+            data_dir: None,
+            initial,
+            relay: crazyflie::RelayConfig::default(),
+            resume: true,
+            max_uavs: DEFAULT_MAX_UAVS,
+            allow_hosts: Vec::new(),
+            allow_origins: Vec::new(),
+            limits: listener::Limits::default(),
+            max_stream_clients: ws::MAX_CLIENTS,
+        }
+    }
 }
 
 /// A running server: the fleet loop thread and the shared handler state.
@@ -65,7 +113,10 @@ pub struct Server {
     app: AppState,
     stop: Arc<AtomicBool>,
     fleet_loop: Option<std::thread::JoinHandle<()>>,
-    writer: Option<tokio::task::JoinHandle<()>>,
+    writer: Option<std::thread::JoinHandle<()>>,
+    allow_hosts: Vec<String>,
+    allow_origins: Vec<String>,
+    limits: listener::Limits,
     /// Where the initial fleet came from (`saved state` or the scenario's name), for the banner.
     pub resumed_from: String,
     /// Where motion-capture poses of each Crazyflie go.
@@ -78,17 +129,27 @@ pub fn demo_scenario() -> anyhow::Result<ValidScenario> {
     scenario.validate().context("embedded demo scenario")
 }
 
-/// Builds the fleet: the saved state of `data_dir` if there is one, else `initial`.
-fn initial_fleet(config: ServeConfig, factory: &LinkFactory) -> anyhow::Result<(Fleet, String)> {
-    let saved = match &config.data_dir {
-        Some(dir) if config.resume => persist::load(dir)?,
-        _ => None,
-    };
+/// Opens the data directory's database (an in-memory one without a directory); the error names the
+/// directory and why it cannot be written.
+pub fn open_store(data_dir: Option<&std::path::Path>) -> Result<Store, store::StoreError> {
+    match data_dir {
+        Some(dir) => Store::open(dir),
+        None => Store::in_memory(),
+    }
+}
+
+/// Builds the fleet: the saved state of the store if there is one (and `resume`), else `initial`.
+fn initial_fleet(
+    config: ServeConfig,
+    store: &Store,
+    factory: &LinkFactory,
+) -> anyhow::Result<(Fleet, String)> {
+    let saved = if config.resume { store.load()? } else { None };
     let mut fleet_config = config.fleet;
     let Some(saved) = saved else {
         fleet_config.params = config.initial.params;
         let mut fleet = Fleet::new(fleet_config, config.initial.road.clone(), config.policies);
-        engine::load_scenario(&mut fleet, &config.initial, &config.default_policy, factory)?;
+        changes::load_scenario(&mut fleet, &config.initial, &config.default_policy, factory)?;
         return Ok((fleet, format!("scenario `{}`", config.initial.name)));
     };
     saved.params.validate()?;
@@ -100,16 +161,16 @@ fn initial_fleet(config: ServeConfig, factory: &LinkFactory) -> anyhow::Result<(
         let state = UavState::at_rest(Vec2::new(u.position[0], u.position[1]));
         let goal = u.goal.map(|g| Vec2::new(g[0], g[1]));
         if let Some(Err(e)) = u.link.as_deref().map(links::check_link) {
-            eprintln!("airroads: saved UAV `{}` not resumed: link: {e}", u.id);
+            tracing::warn!("saved UAV `{}` not resumed: link: {e}", u.id);
             continue;
         }
         if let Err(e) = fleet.check_new(&u.id, policy, &state, goal) {
-            eprintln!("airroads: saved UAV `{}` not resumed: {e}", u.id);
+            tracing::warn!("saved UAV `{}` not resumed: {e}", u.id);
             continue;
         }
         let link = factory.make(&u.id, u.link.as_deref(), state, saved.params.dt);
         if let Err(e) = fleet.try_add(u.id.clone(), policy.clone(), link, state, goal) {
-            eprintln!("airroads: saved UAV `{}` not resumed: {e}", u.id);
+            tracing::warn!("saved UAV `{}` not resumed: {e}", u.id);
         }
     }
     fleet.set_hold(saved.paused);
@@ -121,51 +182,86 @@ impl Server {
     pub fn start(config: ServeConfig) -> anyhow::Result<Self> {
         let token = config.token.clone().map(Arc::from);
         let default_policy: Arc<str> = Arc::from(config.default_policy.as_str());
-        let data_dir = config.data_dir.clone();
         let policies: Arc<[String]> = config.policies.names().map(str::to_string).collect();
         anyhow::ensure!(
             policies.iter().any(|p| **p == *default_policy),
             "default policy `{default_policy}` is not loaded (available: {})",
             policies.join(", ")
         );
+        let (max_uavs, max_stream_clients, limits) =
+            (config.max_uavs, config.max_stream_clients, config.limits);
+        let (allow_hosts, allow_origins) = (config.allow_hosts.clone(), config.allow_origins.clone());
+        let mut store = open_store(config.data_dir.as_deref())
+            .with_context(|| format!("data directory {}", display_dir(config.data_dir.as_deref())))?;
         let factory = LinkFactory::new(tokio::runtime::Handle::current(), config.relay);
-        let (fleet, resumed_from) = initial_fleet(config, &factory)?;
+        let (fleet, resumed_from) = initial_fleet(config, &store, &factory)?;
+        anyhow::ensure!(
+            fleet.uavs().len() <= max_uavs,
+            "the fleet has {} UAVs, more than the maximum of {max_uavs} (--max-uavs)",
+            fleet.uavs().len()
+        );
+        // The database holds exactly what flies from the first tick on.
+        store.commit([&Write::Replace(SavedState::of(&fleet))]).context("saving the initial state")?;
+        let writer = durable::Writer::spawn(store)?;
         let (commands, requests) = mpsc::channel(1024);
         let (urgent, urgent_requests) = mpsc::unbounded_channel();
         let first = Snapshot::of(&fleet, 0, 0.0, 0);
         let first_frame = Frame { tick: 0, text: Utf8Bytes::from(serde_json::to_string(&first)?) };
         let (snapshots_tx, snapshots) = watch::channel(Arc::new(first));
         let (metrics_tx, metrics) = watch::channel(Arc::new(LoopMetrics::default()));
-        let (saved_tx, saved) = watch::channel(Arc::new(SavedState::of(&fleet)));
         let (road_tx, road) = watch::channel(Arc::new(RoadView::of(fleet.road(), 0)));
         let (frames_tx, frames) = watch::channel(first_frame);
+        let clock = Arc::new(LoopClock::default());
         let channels = LoopChannels {
             requests,
             urgent: urgent_requests,
             snapshots: snapshots_tx,
             metrics: metrics_tx,
-            saved: saved_tx,
             road: road_tx,
+            writer: writer.queue.clone(),
+            written: writer.answers,
+            storage: writer.status.clone(),
+            clock: clock.clone(),
         };
         let stop = Arc::new(AtomicBool::new(false));
         let mocap = factory.mocap.clone();
-        let fleet_loop =
-            Engine::new(fleet, default_policy.to_string(), factory, channels).spawn(stop.clone())?;
+        let engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
+        let fleet_loop = engine.spawn(stop.clone())?;
         tokio::spawn(serialise(snapshots.clone(), frames_tx));
-        let writer = data_dir.map(|dir| tokio::spawn(persist::writer(dir, saved)));
         let app = AppState {
             commands,
             urgent,
+            loop_thread: Some(fleet_loop.thread().clone()),
             snapshots,
             frames,
             road,
             metrics,
+            clock,
+            writer: writer.queue,
+            storage: writer.status,
             token,
+            auth_failures: Arc::default(),
+            access: Arc::default(),
             policies,
             default_policy,
+            max_uavs,
+            max_stream_clients,
             stream: Arc::new(StreamCounters::default()),
+            connections: Arc::default(),
+            body_budget: state::body_budget(),
+            validation: Arc::new(tokio::sync::Semaphore::new(1)),
         };
-        Ok(Self { app, stop, fleet_loop: Some(fleet_loop), writer, resumed_from, mocap })
+        Ok(Self {
+            app,
+            stop,
+            fleet_loop: Some(fleet_loop),
+            writer: Some(writer.thread),
+            allow_hosts,
+            allow_origins,
+            limits,
+            resumed_from,
+            mocap,
+        })
     }
 
     /// The shared handler state (for tests and other sinks such as Rerun).
@@ -173,29 +269,51 @@ impl Server {
         &self.app
     }
 
-    /// The HTTP application: REST API, `/ws`, the dashboard at `/`, with the token check on changes.
+    /// The HTTP application: REST API, `/ws`, the dashboard at `/`, behind the request guard, the
+    /// token check and the audit log (see [`guard`]). Requests are refused until
+    /// [`Server::listening_on`] set the address.
     pub fn router(&self) -> Router {
+        let app = self.app.clone();
         api::router()
             .merge(web::router())
             .route("/ws", axum::routing::get(ws::handler))
             .fallback(not_found)
-            .layer(axum::middleware::from_fn_with_state(self.app.clone(), auth::require_token))
+            .layer(axum::middleware::from_fn_with_state(app.clone(), auth::require_token))
+            .layer(axum::middleware::from_fn_with_state(app.clone(), guard::check))
+            .layer(axum::middleware::from_fn_with_state(app.clone(), audit::record))
+            .layer(axum::middleware::from_fn(guard::finish))
             .layer(axum::extract::DefaultBodyLimit::max(error::MAX_BODY_BYTES))
-            .with_state(self.app.clone())
+            .with_state(app)
     }
 
-    /// Stops the fleet loop after its current tick and writes the final state.
+    /// Sets the address the server listens on (which `Host` and `Origin` values are its own).
+    pub fn listening_on(&self, listen: std::net::SocketAddr) {
+        let rules = guard::AccessRules::new(listen, &self.allow_hosts, &self.allow_origins);
+        if self.app.access.set(rules).is_err() {
+            tracing::warn!("the listening address was set twice; keeping the first");
+        }
+    }
+
+    /// Stops the fleet loop after its current tick and waits until the state writer committed
+    /// everything queued (the last positions included).
     pub async fn shutdown(mut self) {
         self.stop.store(true, Ordering::Relaxed);
         if let Some(thread) = self.fleet_loop.take() {
+            thread.thread().unpark();
             // Joining a thread blocks: do it on the blocking pool.
             let _ = tokio::task::spawn_blocking(move || thread.join()).await;
         }
-        // The loop's channel ends are gone with its thread; the writer flushes the last state and ends.
-        if let Some(writer) = self.writer.take() {
-            let _ = writer.await;
+        let (done, flushed) = tokio::sync::oneshot::channel();
+        if self.app.writer.send(durable::ToWriter::Flush(done)).await.is_ok() {
+            let _ = tokio::time::timeout(Duration::from_secs(10), flushed).await;
         }
+        // The writer thread ends once the last queue sender (in handler state clones) is gone.
+        drop(self.writer.take());
     }
+}
+
+fn display_dir(dir: Option<&std::path::Path>) -> String {
+    dir.map_or_else(|| "(in memory)".into(), |d| d.display().to_string())
 }
 
 /// How long shutdown waits for the Crazyflies to land.
@@ -215,10 +333,10 @@ pub async fn land_crazyflies(state: &AppState) {
     if ids.is_empty() {
         return;
     }
-    eprintln!("airroads: landing {} Crazyflies before exiting", ids.len());
+    tracing::info!("landing {} Crazyflies before exiting", ids.len());
     for id in ids {
         if let Err(e) = state.apply_urgent(command::Command::Land(Some(id.clone()))).await {
-            eprintln!("airroads: {id} not landed: {}", e.message);
+            tracing::warn!("{id} not landed: {}", e.message);
         }
     }
     let mut snapshots = state.snapshots.clone();
@@ -230,7 +348,7 @@ pub async fn land_crazyflies(state: &AppState) {
         }
     };
     if tokio::time::timeout(LANDING_TIMEOUT, landed).await.is_err() {
-        eprintln!("airroads: not every Crazyflie reported landed within {LANDING_TIMEOUT:?}");
+        tracing::warn!("not every Crazyflie reported landed within {LANDING_TIMEOUT:?}");
     }
 }
 
@@ -246,28 +364,38 @@ async fn serialise(mut snapshots: watch::Receiver<Arc<Snapshot>>, frames: watch:
             Ok(text) => {
                 frames.send_replace(Frame { tick: snapshot.tick, text: Utf8Bytes::from(text) });
             }
-            Err(e) => eprintln!("airroads: snapshot not serialised: {e}"),
+            Err(e) => tracing::error!("snapshot not serialised: {e}"),
         }
     }
 }
 
-/// Serves `server` on `listener` until `shutdown` completes, then stops the loop and saves.
+/// How long open requests may finish after the shutdown began.
+pub const DRAIN: Duration = Duration::from_secs(5);
+
+/// Serves `server` on `listener` until `shutdown` completes, then lands the Crazyflies, stops the
+/// loop, lets open requests finish and saves.
 pub async fn serve(
     listener: tokio::net::TcpListener,
     server: Server,
     shutdown: impl std::future::Future<Output = ()> + Send + 'static,
 ) -> anyhow::Result<()> {
+    server.listening_on(listener.local_addr().context("the listener's address")?);
     let app = server.router();
     // Crazyflies land before the loop stops (it keeps flying the others meanwhile); then stopping
-    // the loop ends every WebSocket stream, so the graceful shutdown does not wait on them.
+    // the loop ends every WebSocket stream, and the accept loop stops and drains.
     let stop = server.stop.clone();
     let state = server.app.clone();
-    let shutdown = async move {
+    let (closing, closed) = watch::channel(false);
+    tokio::spawn(async move {
         shutdown.await;
         land_crazyflies(&state).await;
         stop.store(true, Ordering::Relaxed);
-    };
-    axum::serve(listener, app).with_graceful_shutdown(shutdown).await.context("HTTP server")?;
+        if let Some(thread) = &state.loop_thread {
+            thread.unpark();
+        }
+        closing.send_replace(true);
+    });
+    listener::run(listener, app, server.limits, server.app.connections.clone(), closed, DRAIN).await;
     server.shutdown().await;
     Ok(())
 }

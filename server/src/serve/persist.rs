@@ -1,14 +1,12 @@
-//! The data directory: road, parameters, fleet and goals in `state.json`, written atomically (temp
-//! file, fsync, rename, fsync of the directory), so a restart, even after kill -9, resumes the last
-//! complete state and never a half-written one.
+//! What is persisted of the fleet ([`SavedState`]: parameters, road, hold, and per UAV its policy,
+//! goal, link and last position), the default data directory, and the reader of the JSON state file
+//! of earlier versions (`state.json`), which [`super::store`] imports once into its database.
 
 use anyhow::Context as _;
 use fleet::Fleet;
 use roads::{Road, RoadLayout};
 use serde::{Deserialize, Serialize};
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
-use tokio::sync::watch;
 use uav::Params;
 
 /// Name of the state file inside the data directory.
@@ -47,6 +45,19 @@ pub struct SavedUav {
     pub link: Option<String>,
 }
 
+impl SavedUav {
+    /// The record of one UAV of the fleet.
+    pub fn of(u: &fleet::Uav) -> Self {
+        Self {
+            id: u.id.clone(),
+            policy: u.policy.clone(),
+            position: [u.state.p.x, u.state.p.y],
+            goal: u.nav.goal().map(|g| [g.x, g.y]),
+            link: Some(u.link.describe()).filter(|l| *l != links::SIM_LINK).map(str::to_string),
+        }
+    }
+}
+
 /// The format tag written into every state file.
 pub const FORMAT: &str = "airroads-state/1";
 
@@ -58,17 +69,7 @@ impl SavedState {
             params: fleet.config.params,
             segments: fleet.road().layout().segments.clone(),
             paused: fleet.holding(),
-            uavs: fleet
-                .uavs()
-                .iter()
-                .map(|u| SavedUav {
-                    id: u.id.clone(),
-                    policy: u.policy.clone(),
-                    position: [u.state.p.x, u.state.p.y],
-                    goal: u.nav.goal().map(|g| [g.x, g.y]),
-                    link: Some(u.link.describe()).filter(|l| *l != links::SIM_LINK).map(str::to_string),
-                })
-                .collect(),
+            uavs: fleet.uavs().iter().map(SavedUav::of).collect(),
         }
     }
 
@@ -92,21 +93,6 @@ pub fn load(dir: &Path) -> anyhow::Result<Option<SavedState>> {
     Ok(Some(state))
 }
 
-/// Writes `state` to `dir/state.json` atomically.
-pub fn save(dir: &Path, state: &SavedState) -> anyhow::Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let path = dir.join(STATE_FILE);
-    let tmp = dir.join(format!("{STATE_FILE}.tmp"));
-    let mut file = std::fs::File::create(&tmp).with_context(|| format!("creating {}", tmp.display()))?;
-    file.write_all(&serde_json::to_vec_pretty(state)?)?;
-    file.sync_all()?;
-    drop(file);
-    std::fs::rename(&tmp, &path).with_context(|| format!("renaming to {}", path.display()))?;
-    // The rename is durable only once the directory entry is on disk.
-    std::fs::File::open(dir)?.sync_all()?;
-    Ok(())
-}
-
 /// The default data directory: `$XDG_DATA_HOME/airroads` or `~/.local/share/airroads`.
 pub fn default_dir() -> PathBuf {
     match std::env::var_os("XDG_DATA_HOME").filter(|d| !d.is_empty()) {
@@ -118,66 +104,31 @@ pub fn default_dir() -> PathBuf {
     }
 }
 
-/// Writes every new state published on `states` until the sender is gone (then writes the last one).
-/// Runs on tokio's blocking pool, never in the fleet loop; a failed write is reported and retried
-/// with the next state.
-pub async fn writer(dir: PathBuf, mut states: watch::Receiver<std::sync::Arc<SavedState>>) {
-    let mut last_written: Option<std::sync::Arc<SavedState>> = None;
-    loop {
-        let closed = states.changed().await.is_err();
-        let state = states.borrow_and_update().clone();
-        if last_written.as_ref().is_none_or(|w| **w != *state) {
-            let dir = dir.clone();
-            let to_write = state.clone();
-            match tokio::task::spawn_blocking(move || save(&dir, &to_write)).await {
-                Ok(Ok(())) => last_written = Some(state),
-                Ok(Err(e)) => eprintln!("airroads: could not save the fleet state: {e:#}"),
-                Err(e) => eprintln!("airroads: state writer failed: {e}"),
-            }
-        }
-        if closed {
-            return;
-        }
-        // At most a few writes per second, whatever the rate of changes.
-        tokio::time::sleep(std::time::Duration::from_millis(200)).await;
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
-    fn save_then_load_round_trips_and_leaves_no_temp_file() {
+    fn a_legacy_state_file_loads_and_a_broken_one_is_named() {
         let dir = std::env::temp_dir().join(format!("airroads-persist-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
         assert!(load(&dir).unwrap().is_none());
         let state = SavedState {
             format: FORMAT.into(),
             params: Params::default(),
             segments: RoadLayout::straight(0.0, 10.0, 4.0, 2).segments,
             paused: true,
-            uavs: vec![
-                SavedUav {
-                    id: "a".into(),
-                    policy: "pd".into(),
-                    position: [1.0, 0.5],
-                    goal: None,
-                    link: None,
-                },
-                SavedUav {
-                    id: "cf1".into(),
-                    policy: "pd".into(),
-                    position: [3.0, -0.5],
-                    goal: Some([8.0, 0.0]),
-                    link: Some("radio://0/80/2M/E7E7E7E7E1".into()),
-                },
-            ],
+            uavs: vec![SavedUav {
+                id: "cf1".into(),
+                policy: "pd".into(),
+                position: [3.0, -0.5],
+                goal: Some([8.0, 0.0]),
+                link: Some("radio://0/80/2M/E7E7E7E7E1".into()),
+            }],
         };
-        save(&dir, &state).unwrap();
-        save(&dir, &state).unwrap();
+        std::fs::write(dir.join(STATE_FILE), serde_json::to_string(&state).unwrap()).unwrap();
         assert_eq!(load(&dir).unwrap(), Some(state));
-        assert!(!dir.join("state.json.tmp").exists());
         std::fs::write(dir.join(STATE_FILE), "{\"format\": \"airroads-state/1\"").unwrap();
         assert!(load(&dir).unwrap_err().to_string().contains("not a valid state file"));
         std::fs::remove_dir_all(&dir).unwrap();

@@ -103,7 +103,7 @@ impl Logger {
             Ok(()) => self.stats.logged += 1,
             Err(e) => {
                 if self.stats.errors == 0 {
-                    eprintln!("warning: rerun: logging tick {}: {e}", snapshot.tick);
+                    tracing::warn!("rerun: logging tick {}: {e}", snapshot.tick);
                 }
                 self.stats.errors += 1;
             }

@@ -202,7 +202,7 @@ fn run(
     let runtime = match tokio::runtime::Builder::new_current_thread().build() {
         Ok(r) => r,
         Err(e) => {
-            eprintln!("warning: rerun: no runtime for the sink thread ({e}); nothing is logged");
+            tracing::warn!("rerun: no runtime for the sink thread ({e}); nothing is logged");
             return logger.stats;
         }
     };
@@ -232,7 +232,7 @@ fn run(
     if let Some(rec) = output.stream()
         && let Err(e) = rec.flush_with_timeout(FINISH_TIMEOUT)
     {
-        eprintln!("warning: rerun: final flush: {e}");
+        tracing::warn!("rerun: final flush: {e}");
     }
     if let Output::Viewer(viewer) = output
         && !viewer.connected
@@ -312,15 +312,15 @@ impl Viewer {
         match self.sink.status() {
             GrpcSinkConnectionState::Connected => {
                 if !self.connected && self.warned {
-                    eprintln!("airroads: rerun: connected to the viewer at {}", self.url);
+                    tracing::info!("rerun: connected to the viewer at {}", self.url);
                 }
                 (self.connected, self.warned) = (true, false);
                 return Some(&self.rec);
             }
             GrpcSinkConnectionState::Connecting { started } => {
                 if !self.warned && started.elapsed() > Duration::from_secs(2) {
-                    eprintln!(
-                        "warning: rerun: no viewer at {} (start one with `rerun`); the server keeps running \
+                    tracing::warn!(
+                        "rerun: no viewer at {} (start one with `rerun`); the server keeps running \
                          and logging starts when a viewer listens",
                         self.url
                     );
@@ -329,7 +329,7 @@ impl Viewer {
             }
             GrpcSinkConnectionState::Disconnected(_) if self.opened.elapsed() > Duration::from_secs(1) => {
                 if self.connected {
-                    eprintln!("warning: rerun: the viewer at {} went away; reconnecting", self.url);
+                    tracing::warn!("rerun: the viewer at {} went away; reconnecting", self.url);
                 }
                 // The client makes no new attempts once disconnected: open a new one (same recording).
                 match Self::connect(&self.url, &self.recording_id) {
@@ -338,7 +338,7 @@ impl Viewer {
                             (std::mem::replace(&mut self.rec, rec), std::mem::replace(&mut self.sink, sink));
                         drop_in_background(old);
                     }
-                    Err(e) => eprintln!("warning: rerun: {e:#}"),
+                    Err(e) => tracing::warn!("rerun: {e:#}"),
                 }
                 (self.opened, self.connected) = (Instant::now(), false);
             }

@@ -1,19 +1,27 @@
-//! What every request handler shares: the command queue into the fleet loop and the latest
-//! published snapshot, road and metrics.
+//! What every request handler shares: the command queue into the fleet loop, the latest published
+//! snapshot, road and metrics, the state writer's queue, and the counters of bounded resources.
 
-use super::command::{Command, Outcome, Request};
-use super::engine::RoadView;
+use super::auth::AuthFailures;
+use super::command::{ChangeError, Claim, Command, Outcome, Request};
+use super::durable::{StorageStatus, ToWriter};
+use super::engine::{LoopClock, RoadView};
 use super::error::ApiError;
+use super::guard::{AccessRules, BODY_BUDGET_BYTES};
+use super::listener::ConnectionCounters;
 use super::snapshot::Snapshot;
 use super::stats::LoopMetrics;
 use axum::extract::ws::Utf8Bytes;
-use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, AtomicUsize};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
+use std::sync::{Arc, OnceLock};
 use std::time::Duration;
-use tokio::sync::{mpsc, oneshot, watch};
+use tokio::sync::{Semaphore, mpsc, oneshot, watch};
 
-/// How long a handler waits for the loop to apply its command before answering 503.
+/// How long a change may wait for the fleet loop to take it; then it is withdrawn (503, nothing
+/// changed).
 pub const COMMAND_TIMEOUT: Duration = Duration::from_secs(2);
+
+/// How long a change the loop took may wait for the disk before the client is told it is unknown.
+pub const DURABLE_TIMEOUT: Duration = Duration::from_secs(30);
 
 /// A snapshot serialised once for every reader.
 #[derive(Debug, Clone, Default)]
@@ -36,6 +44,8 @@ pub struct StreamCounters {
     pub frames_skipped: AtomicU64,
     /// Clients dropped because a send stalled.
     pub clients_dropped: AtomicU64,
+    /// Clients refused because [`AppState::max_stream_clients`] were connected.
+    pub clients_refused: AtomicU64,
 }
 
 /// Shared handler state (cheap to clone).
@@ -43,8 +53,10 @@ pub struct StreamCounters {
 pub struct AppState {
     /// Commands into the fleet loop.
     pub commands: mpsc::Sender<Request>,
-    /// Land and stop requests, which the loop applies before any other command.
+    /// Land and stop requests, which the loop applies as soon as they arrive.
     pub urgent: mpsc::UnboundedSender<Request>,
+    /// The fleet loop's thread (unparked for land and stop).
+    pub loop_thread: Option<std::thread::Thread>,
     /// The latest snapshot.
     pub snapshots: watch::Receiver<Arc<Snapshot>>,
     /// The latest snapshot as JSON text (serialised once, sent to every client).
@@ -53,45 +65,115 @@ pub struct AppState {
     pub road: watch::Receiver<Arc<RoadView>>,
     /// The latest loop statistics.
     pub metrics: watch::Receiver<Arc<LoopMetrics>>,
+    /// When the loop last finished a tick.
+    pub clock: Arc<LoopClock>,
+    /// The state writer's queue (audit entries and queries from the HTTP side).
+    pub writer: mpsc::Sender<ToWriter>,
+    /// The storage's health.
+    pub storage: Arc<StorageStatus>,
     /// The bearer token mutating requests need, if one is configured.
     pub token: Option<Arc<str>>,
+    /// Failed authentication attempts per client.
+    pub auth_failures: Arc<AuthFailures>,
+    /// Accepted `Host` and `Origin` values (set when the server starts listening).
+    pub access: Arc<OnceLock<AccessRules>>,
     /// Names of the loaded policies.
     pub policies: Arc<[String]>,
     /// The policy of UAVs added without one.
     pub default_policy: Arc<str>,
+    /// Most UAVs the fleet may have.
+    pub max_uavs: usize,
+    /// Most WebSocket clients at once.
+    pub max_stream_clients: usize,
     /// WebSocket counters.
     pub stream: Arc<StreamCounters>,
+    /// HTTP connection counters.
+    pub connections: Arc<ConnectionCounters>,
+    /// Request bodies in flight (permits of 1 KiB).
+    pub body_budget: Arc<Semaphore>,
+    /// Validations of large inputs (roads, scenarios) run one at a time, off the async workers.
+    pub validation: Arc<Semaphore>,
+}
+
+/// Permits of the body budget.
+pub fn body_budget() -> Arc<Semaphore> {
+    Arc::new(Semaphore::new(BODY_BUDGET_BYTES / 1024))
 }
 
 impl AppState {
-    /// Sends a land or stop `command` ahead of every queued change and waits for its outcome.
+    /// Sends a land or stop `command` ahead of every queued change, wakes the loop, and waits for
+    /// its outcome (land and stop are never persisted, so they never wait on the disk).
     pub async fn apply_urgent(&self, command: Command) -> Result<Outcome, ApiError> {
         let (reply, answer) = oneshot::channel();
-        self.urgent.send(Request { command, reply }).map_err(|_| ApiError::loop_unavailable())?;
+        self.urgent.send(Request::new(command, reply)).map_err(|_| ApiError::loop_unavailable())?;
+        if let Some(thread) = &self.loop_thread {
+            thread.unpark();
+        }
         match tokio::time::timeout(COMMAND_TIMEOUT, answer).await {
             Ok(Ok(outcome)) => outcome.map_err(ApiError::from),
             _ => Err(ApiError::loop_unavailable()),
         }
     }
 
-    /// Sends `command` to the fleet loop and waits (off the loop) for its outcome.
+    /// Sends `command` to the fleet loop and waits (off the loop) until it is applied and on disk.
+    /// A change the loop did not take within [`COMMAND_TIMEOUT`] is withdrawn (503, nothing changed);
+    /// one it took is answered with its real outcome, never with an error for an applied change.
     pub async fn apply(&self, command: Command) -> Result<Outcome, ApiError> {
-        let (reply, answer) = oneshot::channel();
-        let sent = tokio::time::timeout(COMMAND_TIMEOUT, self.commands.send(Request { command, reply }));
-        match sent.await {
+        let context = super::audit::current();
+        let (reply, mut answer) = oneshot::channel();
+        let claim = Arc::new(Claim::default());
+        let audit = context.as_ref().map(|c| c.record.clone());
+        let request = Request { command, reply, audit, claim: claim.clone() };
+        match tokio::time::timeout(COMMAND_TIMEOUT, self.commands.send(request)).await {
             Ok(Ok(())) => {}
             Ok(Err(_)) => return Err(ApiError::loop_unavailable()),
-            Err(_) => {
-                return Err(ApiError::new(
-                    axum::http::StatusCode::SERVICE_UNAVAILABLE,
-                    "busy",
-                    "too many changes queued; try again",
-                ));
-            }
+            Err(_) => return Err(ApiError::busy("too many changes queued; nothing changed; try again")),
         }
-        match tokio::time::timeout(COMMAND_TIMEOUT, answer).await {
-            Ok(Ok(outcome)) => outcome.map_err(ApiError::from),
-            _ => Err(ApiError::loop_unavailable()),
+        let outcome = match tokio::time::timeout(COMMAND_TIMEOUT, &mut answer).await {
+            Ok(answer) => answer,
+            Err(_) if claim.withdraw() => return Err(ChangeError::Withdrawn.into()),
+            // Taken: the outcome comes once it is on disk (or taken back).
+            Err(_) => match tokio::time::timeout(DURABLE_TIMEOUT, answer).await {
+                Ok(answer) => answer,
+                Err(_) => {
+                    return Err(ApiError::new(
+                        axum::http::StatusCode::SERVICE_UNAVAILABLE,
+                        "storage_timeout",
+                        "the change was applied but the disk has not confirmed it; check GET /healthz",
+                    ));
+                }
+            },
+        };
+        let outcome = outcome.map_err(|_| ApiError::loop_unavailable())?;
+        if outcome.is_ok()
+            && let Some(context) = context
+        {
+            context.committed.store(true, Relaxed);
         }
+        outcome.map_err(ApiError::from)
+    }
+
+    /// Runs `work` (a validation of a large input) on the blocking pool, one at a time: waits at
+    /// most 5 s for its turn (then 503), so no request holds an async worker or starves the loop.
+    pub async fn validate<T: Send + 'static>(
+        &self,
+        work: impl FnOnce() -> Result<T, ApiError> + Send + 'static,
+    ) -> Result<T, ApiError> {
+        let permit = tokio::time::timeout(Duration::from_secs(5), self.validation.clone().acquire_owned())
+            .await
+            .map_err(|_| ApiError::busy("another large input is being validated; try again"))?
+            .map_err(|_| ApiError::loop_unavailable())?;
+        let result = tokio::task::spawn_blocking(move || {
+            let _permit = permit;
+            work()
+        })
+        .await;
+        result.unwrap_or_else(|_| {
+            Err(ApiError::new(
+                axum::http::StatusCode::INTERNAL_SERVER_ERROR,
+                "internal_error",
+                "validation failed",
+            ))
+        })
     }
 }

@@ -44,8 +44,11 @@ pub struct LoopMetrics {
     pub tick: DurationStats,
     /// Duration of the last tick (µs).
     pub last_tick_us: f64,
-    /// Ticks whose work took longer than dt.
+    /// Ticks whose work took longer than dt (each counted, however long: a stall cannot hide in
+    /// the percentiles).
     pub overruns: u64,
+    /// The longest tick since the server started (µs).
+    pub longest_tick_us: f64,
     /// Tick instants skipped because the loop was late (counted, never bunched).
     pub missed_ticks: u64,
     /// Solver counters.
@@ -110,6 +113,7 @@ impl TickStats {
         m.ticks += 1;
         m.last_tick_us = duration_us;
         m.overruns += u64::from(duration_us > m.dt * 1e6);
+        m.longest_tick_us = m.longest_tick_us.max(duration_us);
         if self.window.len() == WINDOW_TICKS {
             self.window.pop_front();
         }

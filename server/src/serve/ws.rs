@@ -15,8 +15,31 @@ use std::time::{Duration, Instant};
 /// A client whose socket does not take a frame within this time is dropped.
 pub const SEND_TIMEOUT: Duration = Duration::from_secs(2);
 
-/// Most simultaneous WebSocket clients.
-pub const MAX_CLIENTS: usize = 4096;
+/// Most simultaneous WebSocket clients by default (fitted under the open-file limit at start).
+pub const MAX_CLIENTS: usize = 1024;
+
+/// Largest message or frame a client may send (the stream is one-way; clients send only control
+/// frames).
+pub const MAX_CLIENT_MESSAGE_BYTES: usize = 4 << 10;
+
+/// The client cap under an open-file limit (half of what is left after the runtime's own files).
+pub fn fitted_max_clients(open_files: Option<u64>) -> usize {
+    open_files.map_or(MAX_CLIENTS, |files| {
+        MAX_CLIENTS.min(usize::try_from(files.saturating_sub(64) / 2).unwrap_or(usize::MAX)).max(4)
+    })
+}
+
+/// The pause between two frames for a rate of `rate` frames per second: 0 < rate ≤ 1000, any finite
+/// positive value (a vanishing rate gets the longest pause a `Duration` holds, never a panic).
+pub fn frame_interval(rate: Option<f64>) -> Result<Duration, ApiError> {
+    match rate {
+        None => Ok(Duration::ZERO),
+        Some(r) if r.is_finite() && r > 0.0 && r <= 1000.0 => {
+            Ok(Duration::try_from_secs_f64(1.0 / r).unwrap_or(Duration::MAX))
+        }
+        Some(_) => Err(ApiError::invalid("rate", "must be a number of frames per second in (0, 1000]")),
+    }
+}
 
 /// Query of `GET /ws`.
 #[derive(Debug, Deserialize)]
@@ -32,20 +55,16 @@ pub async fn handler(
     upgrade: WebSocketUpgrade,
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|e| ApiError::invalid("rate", e.body_text()))?;
-    let min_interval = match query.rate {
-        None => Duration::ZERO,
-        Some(r) if r.is_finite() && r > 0.0 && r <= 1000.0 => Duration::from_secs_f64(1.0 / r),
-        Some(_) => {
-            return Err(ApiError::invalid("rate", "must be a number of frames per second in (0, 1000]"));
-        }
-    };
-    if app.stream.clients.load(Relaxed) >= MAX_CLIENTS {
+    let min_interval = frame_interval(query.rate)?;
+    if app.stream.clients.load(Relaxed) >= app.max_stream_clients {
+        app.stream.clients_refused.fetch_add(1, Relaxed);
         return Err(ApiError::new(
             axum::http::StatusCode::SERVICE_UNAVAILABLE,
             "too_many_clients",
-            format!("at most {MAX_CLIENTS} stream clients"),
+            format!("at most {} stream clients", app.max_stream_clients),
         ));
     }
+    let upgrade = upgrade.max_message_size(MAX_CLIENT_MESSAGE_BYTES).max_frame_size(MAX_CLIENT_MESSAGE_BYTES);
     Ok(upgrade.on_upgrade(move |socket| stream(app, socket, min_interval)))
 }
 
@@ -93,4 +112,20 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration) {
         }
     }
     counters.clients.fetch_sub(1, Relaxed);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_rate_in_range_gives_an_interval_and_others_an_error() {
+        assert_eq!(frame_interval(None).unwrap(), Duration::ZERO);
+        assert_eq!(frame_interval(Some(10.0)).unwrap(), Duration::from_millis(100));
+        assert_eq!(frame_interval(Some(1e-300)).unwrap(), Duration::MAX);
+        assert!(frame_interval(Some(f64::MIN_POSITIVE)).is_ok());
+        for bad in [0.0, -1.0, 1000.5, f64::NAN, f64::INFINITY, -0.0] {
+            assert!(frame_interval(Some(bad)).is_err(), "{bad}");
+        }
+    }
 }

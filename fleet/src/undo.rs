@@ -1,0 +1,241 @@
+//! Reversible changes: each change of [`crate::edit`] paired with the record that undoes it exactly,
+//! so a caller that applies a change first and makes it durable afterwards (the server's group
+//! commit) can take it back when the disk refuses it. Undo records are applied newest first.
+
+use crate::edit::EditError;
+use crate::fleet::{Fleet, Uav};
+use links::Link;
+use roads::{NavState, Road};
+use uav::{Params, UavState, Vec2};
+
+/// What restores the fleet to its state before one change.
+pub enum Undo {
+    /// A UAV was added: remove it (its link is dropped).
+    Added(String),
+    /// A UAV was removed from `index`: put it back there, link and all.
+    Removed {
+        /// Its index in the fleet before the removal.
+        index: usize,
+        /// The UAV as it was removed.
+        uav: Box<Uav>,
+    },
+    /// A UAV's navigation (goal, route progress) changed.
+    Nav {
+        /// The UAV.
+        id: String,
+        /// Its navigation state before the change.
+        nav: NavState,
+    },
+    /// A UAV's policy changed.
+    Policy {
+        /// The UAV.
+        id: String,
+        /// Its policy before the change.
+        policy: String,
+    },
+    /// The road was replaced (every UAV's navigation was reset with it).
+    Road {
+        /// The road before.
+        road: Road,
+        /// Every UAV's navigation state before, by id.
+        navs: Vec<(String, NavState)>,
+    },
+    /// Parameters, road and UAVs were replaced (a scenario load).
+    Fleet {
+        /// Parameters before.
+        params: Params,
+        /// Road before.
+        road: Road,
+        /// The UAVs before, links and all.
+        uavs: Vec<Uav>,
+        /// Hold before.
+        hold: bool,
+    },
+    /// Hold was switched.
+    Hold(bool),
+}
+
+impl Undo {
+    /// The UAVs this record keeps alive (removed ones whose links must stay open until the change
+    /// is durable); dropping the record drops them.
+    pub fn kept_uavs(&self) -> usize {
+        match self {
+            Undo::Removed { .. } => 1,
+            Undo::Fleet { uavs, .. } => uavs.len(),
+            _ => 0,
+        }
+    }
+}
+
+impl Fleet {
+    fn position_of(&self, id: &str) -> Result<usize, EditError> {
+        self.uavs.iter().position(|u| u.id == id).ok_or_else(|| EditError::UnknownUav(id.to_string()))
+    }
+
+    /// [`Fleet::try_add`], returning its undo record.
+    pub fn add_undoable(
+        &mut self,
+        id: String,
+        policy: String,
+        link: Box<dyn Link>,
+        state: UavState,
+        goal: Option<Vec2>,
+    ) -> Result<Undo, EditError> {
+        self.try_add(id.clone(), policy, link, state, goal)?;
+        Ok(Undo::Added(id))
+    }
+
+    /// [`Fleet::remove`], keeping the removed UAV (and its link) in the undo record.
+    pub fn remove_undoable(&mut self, id: &str) -> Result<Undo, EditError> {
+        let index = self.position_of(id)?;
+        let uav = self.uavs.remove(index);
+        Ok(Undo::Removed { index, uav: Box::new(uav) })
+    }
+
+    /// [`Fleet::set_goal`], returning its undo record.
+    pub fn set_goal_undoable(&mut self, id: &str, goal: Option<Vec2>) -> Result<Undo, EditError> {
+        let nav = self.uavs[self.position_of(id)?].nav;
+        self.set_goal(id, goal)?;
+        Ok(Undo::Nav { id: id.to_string(), nav })
+    }
+
+    /// [`Fleet::set_policy`], returning its undo record.
+    pub fn set_policy_undoable(&mut self, id: &str, policy: &str) -> Result<Undo, EditError> {
+        let before = self.uavs[self.position_of(id)?].policy.clone();
+        self.set_policy(id, policy)?;
+        Ok(Undo::Policy { id: id.to_string(), policy: before })
+    }
+
+    /// [`Fleet::replace_road`], returning the cleared goals and the undo record.
+    pub fn replace_road_undoable(&mut self, road: Road) -> Result<(Vec<String>, Undo), EditError> {
+        let navs = self.uavs.iter().map(|u| (u.id.clone(), u.nav)).collect();
+        let before = self.road.clone();
+        let cleared = self.replace_road(road)?;
+        Ok((cleared, Undo::Road { road: before, navs }))
+    }
+
+    /// [`Fleet::set_hold`], returning its undo record.
+    pub fn set_hold_undoable(&mut self, hold: bool) -> Undo {
+        let before = self.hold;
+        self.hold = hold;
+        Undo::Hold(before)
+    }
+
+    /// Starts over on `road` with `params` and no UAVs, like [`Fleet::reset`], keeping the old UAVs
+    /// (and their links) in the undo record.
+    pub fn reset_undoable(&mut self, params: Params, road: Road) -> Undo {
+        let uavs = std::mem::take(&mut self.uavs);
+        let before_params = std::mem::replace(&mut self.config.params, params);
+        let before_road = std::mem::replace(&mut self.road, road);
+        let hold = std::mem::replace(&mut self.hold, false);
+        Undo::Fleet { params: before_params, road: before_road, uavs, hold }
+    }
+
+    /// Takes a change back. Records must be undone newest first: each restores exactly the state
+    /// its change found (UAVs keep the positions they flew to meanwhile).
+    pub fn undo(&mut self, undo: Undo) {
+        match undo {
+            Undo::Added(id) => {
+                if let Ok(k) = self.position_of(&id) {
+                    drop(self.uavs.remove(k));
+                }
+            }
+            Undo::Removed { index, uav } => {
+                let index = index.min(self.uavs.len());
+                self.uavs.insert(index, *uav);
+            }
+            Undo::Nav { id, nav } => {
+                if let Ok(k) = self.position_of(&id) {
+                    self.uavs[k].nav = nav;
+                }
+            }
+            Undo::Policy { id, policy } => {
+                if let Ok(k) = self.position_of(&id) {
+                    self.uavs[k].policy = policy;
+                }
+            }
+            Undo::Road { road, navs } => {
+                self.road = road;
+                for (id, nav) in navs {
+                    if let Ok(k) = self.position_of(&id) {
+                        self.uavs[k].nav = nav;
+                    }
+                }
+            }
+            Undo::Fleet { params, road, uavs, hold } => {
+                self.config.params = params;
+                self.road = road;
+                self.uavs = uavs;
+                self.hold = hold;
+            }
+            Undo::Hold(hold) => self.hold = hold,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::FleetConfig;
+    use links::SimLink;
+    use policies::PolicyRegistry;
+    use roads::RoadLayout;
+
+    fn fleet() -> Fleet {
+        let road = Road::new(RoadLayout::straight(0.0, 20.0, 4.0, 2)).expect("a straight road is valid");
+        let config = FleetConfig::default();
+        let mut fleet = Fleet::new(config, road, PolicyRegistry::with_pd(config.params.delta));
+        for (i, y) in [-1.0, 1.0].into_iter().enumerate() {
+            let state = UavState::at_rest(Vec2::new(2.0, y));
+            let link = Box::new(SimLink::new(state, config.params.dt));
+            fleet.add(format!("u{i}"), "pd".into(), link, state, Some(Vec2::new(15.0, y)));
+        }
+        fleet
+    }
+
+    /// What a change may touch: ids in order, policies, goals, hold, road and params.
+    fn summary(f: &Fleet) -> String {
+        let uavs: Vec<String> = f
+            .uavs()
+            .iter()
+            .map(|u| format!("{}:{}:{:?}:{:?}", u.id, u.policy, u.nav.goal(), u.state.p))
+            .collect();
+        format!("{uavs:?} hold={} road={:?} dt={}", f.holding(), f.road().layout(), f.config.params.dt)
+    }
+
+    #[test]
+    fn every_change_undone_newest_first_restores_the_fleet() {
+        let mut f = fleet();
+        let before = summary(&f);
+        let mut undos = Vec::new();
+        let state = UavState::at_rest(Vec2::new(8.0, 0.0));
+        let link = Box::new(SimLink::new(state, 0.05));
+        undos.push(f.add_undoable("new".into(), "pd".into(), link, state, None).unwrap());
+        undos.push(f.set_goal_undoable("u0", Some(Vec2::new(10.0, 1.5))).unwrap());
+        undos.push(f.set_policy_undoable("u1", "pd").unwrap());
+        undos.push(f.remove_undoable("u0").unwrap());
+        undos.push(f.set_hold_undoable(true));
+        let longer = Road::new(RoadLayout::straight(0.0, 30.0, 4.0, 3)).unwrap();
+        let (_, undo) = f.replace_road_undoable(longer).unwrap();
+        undos.push(undo);
+        let other = Road::new(RoadLayout::straight(-5.0, 5.0, 3.0, 1)).unwrap();
+        undos.push(f.reset_undoable(Params { dt: 0.02, ..Params::default() }, other));
+        assert_ne!(summary(&f), before);
+        while let Some(undo) = undos.pop() {
+            f.undo(undo);
+        }
+        assert_eq!(summary(&f), before);
+        // The restored fleet still ticks.
+        f.tick();
+    }
+
+    #[test]
+    fn a_refused_change_gives_no_undo_record_and_changes_nothing() {
+        let mut f = fleet();
+        let before = summary(&f);
+        assert!(f.remove_undoable("nope").is_err());
+        assert!(f.set_goal_undoable("u0", Some(Vec2::new(100.0, 0.0))).is_err());
+        assert!(f.set_policy_undoable("u0", "nope").is_err());
+        assert_eq!(summary(&f), before);
+    }
+}

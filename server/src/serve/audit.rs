@@ -1,0 +1,119 @@
+//! The audit log: every request that may change something is recorded with its time, method, route,
+//! client address and outcome. A change the fleet applied is written in the same transaction as the
+//! change itself (so an acknowledged change is always in the log); everything else (refusals of any
+//! kind, land and stop) is queued for the state writer's next commit. `GET /api/audit` reads it.
+
+use super::durable::{AuditQuery, ToWriter};
+use super::error::{ApiError, ErrorInfo};
+use super::guard::is_change;
+use super::state::AppState;
+use super::store::{AuditRecord, now_ms};
+use axum::Json;
+use axum::extract::{Query, Request, State};
+use axum::http::StatusCode;
+use axum::middleware::Next;
+use axum::response::Response;
+use serde::Deserialize;
+use serde_json::{Value, json};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
+
+/// The audit context of the request being handled.
+#[derive(Debug)]
+pub struct RequestAudit {
+    /// Time, method, route and client; status and outcome are filled in when known.
+    pub record: AuditRecord,
+    /// The entry was committed with the change (the middleware writes none).
+    pub committed: AtomicBool,
+}
+
+tokio::task_local! {
+    static AUDIT: Arc<RequestAudit>;
+}
+
+/// The audit context of the current request, when it is a change.
+pub fn current() -> Option<Arc<RequestAudit>> {
+    AUDIT.try_with(Arc::clone).ok()
+}
+
+/// Records every change request (see the module documentation).
+pub async fn record(State(app): State<AppState>, request: Request, next: Next) -> Response {
+    if !is_change(request.method()) {
+        return next.run(request).await;
+    }
+    let remote = super::listener::remote(&request).map_or_else(|| "unknown".to_string(), |a| a.to_string());
+    let route = request.uri().path_and_query().map_or_else(String::new, |p| p.as_str().to_string());
+    let context = Arc::new(RequestAudit {
+        record: AuditRecord {
+            time_ms: now_ms(),
+            method: request.method().to_string(),
+            route,
+            remote,
+            status: 0,
+            outcome: String::new(),
+            detail: String::new(),
+        },
+        committed: AtomicBool::new(false),
+    });
+    let response = AUDIT.scope(context.clone(), next.run(request)).await;
+    if !context.committed.load(Relaxed) {
+        let (outcome, detail) = match response.extensions().get::<ErrorInfo>() {
+            Some(e) => (e.code.to_string(), e.message.clone()),
+            None if response.status().is_success() => ("applied".to_string(), String::new()),
+            None => ("http_error".to_string(), String::new()),
+        };
+        let mut record = context.record.clone();
+        record.status = response.status().as_u16();
+        record.outcome = outcome;
+        if record.detail.is_empty() {
+            record.detail = detail;
+        }
+        if app.writer.try_send(ToWriter::Audit(record)).is_err() {
+            app.storage.audit_dropped.fetch_add(1, Relaxed);
+        }
+    }
+    response
+}
+
+/// Query of `GET /api/audit`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AuditParams {
+    /// Entries newer than this sequence number, oldest first (for following the log).
+    pub after: Option<i64>,
+    /// Entries older than this sequence number, newest first (for paging back).
+    pub before: Option<i64>,
+    /// At most this many (1 to 1000, default 100).
+    pub limit: Option<usize>,
+}
+
+/// `GET /api/audit[?after=SEQ | ?before=SEQ][&limit=N]`: newest first unless `after` is given.
+pub async fn list(
+    State(app): State<AppState>,
+    query: Result<Query<AuditParams>, axum::extract::rejection::QueryRejection>,
+) -> Result<Json<Value>, ApiError> {
+    let Query(q) = query.map_err(|e| ApiError::invalid("query", e.body_text()))?;
+    let limit = q.limit.unwrap_or(100);
+    if !(1..=1000).contains(&limit) {
+        return Err(ApiError::invalid("limit", "must be between 1 and 1000"));
+    }
+    if q.after.is_some() && q.before.is_some() {
+        return Err(ApiError::invalid("after", "give `after` or `before`, not both"));
+    }
+    let (reply, answer) = tokio::sync::oneshot::channel();
+    let query = AuditQuery { after: q.after, before: q.before, limit, reply };
+    app.writer
+        .try_send(ToWriter::Query(query))
+        .map_err(|_| ApiError::busy("the audit log is busy; try again"))?;
+    let unavailable = |why: &str| {
+        let message = format!("the audit log cannot be read: {why}");
+        ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "storage_unavailable", message)
+    };
+    let entries = match tokio::time::timeout(std::time::Duration::from_secs(10), answer).await {
+        Ok(Ok(Ok(entries))) => entries,
+        Ok(Ok(Err(e))) => return Err(unavailable(&e)),
+        Ok(Err(_)) => return Err(unavailable("the state writer stopped")),
+        Err(_) => return Err(unavailable("no answer within 10 s")),
+    };
+    Ok(Json(json!({ "entries": entries })))
+}

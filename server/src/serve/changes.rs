@@ -1,0 +1,249 @@
+//! How the fleet loop applies a change and makes it durable: each command is applied to the fleet
+//! with its undo record and the writes that store it; a gap's changes go to the state writer after
+//! the tick's snapshot is published; the writer answers the clients once the batch is on disk, or
+//! sends it back, and the loop takes it (and every later batch) back, newest first, and answers 503.
+
+use super::command::{ChangeError, Command, Outcome, Reply, Request};
+use super::durable::{Batch, FromWriter, ToWriter};
+use super::engine::{Engine, PendingBatch, STORAGE_STALL};
+use super::linking::LinkFactory;
+use super::persist::{SavedState, SavedUav};
+use super::store::Write;
+use fleet::{EditError, Fleet, Undo, ValidScenario};
+use std::time::Instant;
+use uav::UavState;
+
+/// A gap's applied changes, not yet sent to the writer.
+#[derive(Default)]
+pub struct Gap {
+    undo: Vec<Undo>,
+    writes: Vec<Write>,
+    replies: Vec<(Reply, Outcome)>,
+    /// A `Resume` the writer has not been sent yet (its queue was full).
+    resume_owed: bool,
+}
+
+/// A change applied to the fleet: its outcome, what takes it back and what stores it.
+pub struct Applied {
+    /// What the client is told.
+    pub outcome: Outcome,
+    /// What restores the fleet (None: nothing to restore, e.g. land and stop).
+    pub undo: Option<Undo>,
+    /// What the database must store.
+    pub writes: Vec<Write>,
+}
+
+impl Applied {
+    fn new(outcome: Outcome, undo: Undo, writes: Vec<Write>) -> Self {
+        Self { outcome, undo: Some(undo), writes }
+    }
+
+    fn urgent() -> Self {
+        Self { outcome: Outcome::Done, undo: None, writes: Vec::new() }
+    }
+}
+
+fn uav_record(fleet: &Fleet, id: &str) -> Vec<Write> {
+    fleet.uav(id).map(|u| Write::Uav(SavedUav::of(u))).into_iter().collect()
+}
+
+impl Engine {
+    /// Applies one queued request (unless its client withdrew it), keeping it for the writer.
+    pub(crate) fn apply_request(&mut self, request: Request) {
+        let Request { command, reply, audit, claim } = request;
+        if !claim.take() {
+            return;
+        }
+        if let Some(reason) = self.channels.storage.refusal() {
+            let _ = reply.send(Err(ChangeError::NotDurable(reason)));
+            return;
+        }
+        let (status, detail) = (command.success_status(), command.describe());
+        match self.apply(command) {
+            Ok(applied) => {
+                self.gap.undo.extend(applied.undo);
+                self.gap.writes.extend(applied.writes);
+                if let Some(mut record) = audit {
+                    record.status = status;
+                    record.outcome = "applied".into();
+                    record.detail = detail;
+                    self.gap.writes.push(Write::Audit(record));
+                }
+                self.gap.replies.push((reply, applied.outcome));
+            }
+            Err(e) => {
+                let _ = reply.send(Err(e));
+            }
+        }
+    }
+
+    /// Applies one command to the fleet; on an error nothing changed.
+    pub fn apply(&mut self, command: Command) -> Result<Applied, ChangeError> {
+        let dt = self.fleet.config.params.dt;
+        Ok(match command {
+            Command::SetRoad(road) => {
+                let (cleared_goals, undo) = self.fleet.replace_road_undoable(road)?;
+                self.road_changed();
+                let mut writes = vec![Write::Road(self.fleet.road().layout().segments.clone())];
+                for id in &cleared_goals {
+                    writes.extend(uav_record(&self.fleet, id));
+                }
+                Applied::new(Outcome::RoadReplaced { cleared_goals }, undo, writes)
+            }
+            Command::AddUav { id, position, policy, goal, link } => {
+                let count = self.fleet.uavs().len();
+                if count >= self.max_uavs {
+                    return Err(ChangeError::FleetFull { wanted: count + 1, max: self.max_uavs });
+                }
+                let state = UavState::at_rest(position);
+                let policy = policy.unwrap_or_else(|| self.default_policy.clone());
+                // Checked before the link exists: a refused UAV never starts a radio session.
+                self.fleet.check_new(&id, &policy, &state, goal)?;
+                let link = self.links.make(&id, link.as_deref(), state, dt);
+                let undo = self.fleet.add_undoable(id.clone(), policy, link, state, goal)?;
+                Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
+            }
+            Command::Land(Some(id)) => {
+                self.fleet.land(&id)?;
+                Applied::urgent()
+            }
+            Command::Land(None) => {
+                self.fleet.land_all();
+                Applied::urgent()
+            }
+            Command::EmergencyStop => {
+                self.fleet.emergency_stop_all();
+                Applied::urgent()
+            }
+            Command::RemoveUav(id) => {
+                let undo = self.fleet.remove_undoable(&id)?;
+                Applied::new(Outcome::Done, undo, vec![Write::RemoveUav(id)])
+            }
+            Command::SetGoal(id, goal) => {
+                let undo = self.fleet.set_goal_undoable(&id, goal)?;
+                Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
+            }
+            Command::SetPolicy(id, policy) => {
+                let undo = self.fleet.set_policy_undoable(&id, &policy)?;
+                Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
+            }
+            Command::LoadScenario(scenario) => {
+                if scenario.uavs.len() > self.max_uavs {
+                    return Err(ChangeError::FleetFull { wanted: scenario.uavs.len(), max: self.max_uavs });
+                }
+                let policy = self.default_policy.clone();
+                let undo = load_scenario(&mut self.fleet, &scenario, &policy, &self.links)?;
+                self.road_changed();
+                let writes = vec![Write::Replace(SavedState::of(&self.fleet))];
+                Applied::new(Outcome::ScenarioLoaded { tick: self.ticks }, undo, writes)
+            }
+            Command::Hold(hold) => {
+                let undo = self.fleet.set_hold_undoable(hold);
+                Applied::new(Outcome::Done, undo, vec![Write::Paused(hold)])
+            }
+        })
+    }
+
+    /// Hands the gap's changes to the writer (after the tick published them). If the writer cannot
+    /// take them, they are taken back and their clients told after the next snapshot.
+    pub(crate) fn send_gap(&mut self) {
+        if self.gap.resume_owed {
+            self.gap.resume_owed = self.channels.writer.try_send(ToWriter::Resume).is_err();
+        }
+        if self.gap.replies.is_empty() {
+            return;
+        }
+        let undo = std::mem::take(&mut self.gap.undo);
+        self.next_seq += 1;
+        let seq = self.next_seq;
+        let batch = Batch {
+            seq,
+            writes: std::mem::take(&mut self.gap.writes),
+            replies: std::mem::take(&mut self.gap.replies),
+        };
+        match self.channels.writer.try_send(ToWriter::Batch(batch)) {
+            Ok(()) => self.pending.push_back(PendingBatch { seq, undo, sent: Instant::now() }),
+            Err(e) => {
+                let reason = "the state writer is not keeping up".to_string();
+                self.channels.storage.degrade(reason.clone());
+                self.take_back(undo);
+                if let ToWriter::Batch(batch) = e.into_inner() {
+                    self.refuse(batch.replies, &reason);
+                }
+            }
+        }
+    }
+
+    /// Reads the writer's answers: confirmed batches are final; a failed one is taken back with
+    /// every later batch. Also marks the storage degraded when it stops answering.
+    pub(crate) fn read_writer(&mut self) {
+        while let Ok(answer) = self.channels.written.try_recv() {
+            match answer {
+                FromWriter::Committed(seq) => {
+                    while self.pending.front().is_some_and(|p| p.seq <= seq) {
+                        // Dropping the undo records closes the links of removed UAVs.
+                        self.pending.pop_front();
+                    }
+                }
+                FromWriter::Failed { seq, replies, reason } => {
+                    if self.pending.iter().any(|p| p.seq == seq) {
+                        while self.pending.back().is_some_and(|p| p.seq >= seq) {
+                            if let Some(p) = self.pending.pop_back() {
+                                self.take_back(p.undo);
+                            }
+                        }
+                        self.gap.resume_owed = self.channels.writer.try_send(ToWriter::Resume).is_err();
+                    }
+                    self.refuse(replies, &reason);
+                }
+            }
+        }
+        if self.pending.front().is_some_and(|p| p.sent.elapsed() > STORAGE_STALL) {
+            self.channels
+                .storage
+                .degrade(format!("the disk has not confirmed a write for {} s", STORAGE_STALL.as_secs()));
+        }
+    }
+
+    fn refuse(&mut self, replies: Vec<(Reply, Outcome)>, reason: &str) {
+        for (reply, _) in replies {
+            self.after_publish.push((reply, Err(ChangeError::NotDurable(reason.to_string()))));
+        }
+    }
+
+    /// Undoes a batch's changes, newest first.
+    fn take_back(&mut self, undo: Vec<Undo>) {
+        for record in undo.into_iter().rev() {
+            let road = matches!(record, Undo::Road { .. } | Undo::Fleet { .. });
+            self.fleet.undo(record);
+            if road {
+                self.road_changed();
+            }
+        }
+    }
+}
+
+/// Replaces road, parameters and UAVs of `fleet` by those of `scenario`, every UAV flying `policy`;
+/// returns what restores the old fleet.
+pub fn load_scenario(
+    fleet: &mut Fleet,
+    scenario: &ValidScenario,
+    policy: &str,
+    links: &LinkFactory,
+) -> Result<Undo, EditError> {
+    // Checked before anything changes; the scenario's starts and goals were validated with it.
+    if !fleet.policy_names().any(|n| n == policy) {
+        return Err(EditError::UnknownPolicy(format!("policy `{policy}` is not loaded")));
+    }
+    let undo = fleet.reset_undoable(scenario.params, scenario.road.clone());
+    for u in &scenario.uavs {
+        let state = UavState::at_rest(u.start);
+        let link = links.make(&u.id, u.link.as_deref(), state, scenario.params.dt);
+        fleet.add(u.id.clone(), policy.to_string(), link, state, Some(u.goal));
+    }
+    Ok(undo)
+}
+
+#[cfg(test)]
+#[path = "changes_tests.rs"]
+mod tests;
