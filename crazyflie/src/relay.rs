@@ -95,13 +95,14 @@ pub struct Shared {
     error: Mutex<Option<String>>,
 }
 
-const PHASES: [LinkPhase; 6] = [
+const PHASES: [LinkPhase; 7] = [
     LinkPhase::Connecting,
     LinkPhase::TakingOff,
     LinkPhase::Flying,
     LinkPhase::Landing,
     LinkPhase::Landed,
     LinkPhase::Stopped,
+    LinkPhase::Stopping,
 ];
 
 impl Shared {
@@ -125,7 +126,7 @@ impl Shared {
     /// Sets the session's phase.
     pub fn set_phase(&self, phase: LinkPhase) {
         let index = PHASES.iter().position(|p| *p == phase).unwrap_or(0);
-        // PHASES has 6 entries: the index fits in a u8.
+        // PHASES has 7 entries: the index fits in a u8.
         self.phase.store(index as u8, Ordering::Release);
     }
 
