@@ -25,8 +25,10 @@
 //! * An emergency stop is confirmed by the locked bit (and, when logged, zero thrust); a firmware
 //!   without `supervisor.info` (before 2023) confirms it by zero thrust alone.
 //! * A landing is confirmed when the estimated height is below [`ON_GROUND_M`] and the motors are
-//!   off: zero thrust, or the is-flying bit clear (which the firmware clears 2 s after the thrust
-//!   went to idle).
+//!   off: zero thrust (once a landing trajectory ends, the high-level commander returns the null
+//!   setpoint, `crtp_commander_high_level.c`: "when the HLcommander is stopped, it wants the motors
+//!   to be off"), or the is-flying bit clear (which the firmware clears 2 s after the thrust went
+//!   to idle).
 
 /// The log variables that confirm a stop or a landing, in the order of [`Status`].
 pub const STATUS_VARIABLES: [&str; 2] = ["supervisor.info", "stabilizer.thrust"];

@@ -453,13 +453,16 @@ async fn emergency_stop(cf: &Crazyflie) -> Result<(), String> {
     supervisor.or(localization).map_err(|e| format!("emergency stop: {e}"))
 }
 
-/// Hands control back to the high-level commander and lands.
+/// Lands with the high-level commander, then hands control back to it. In this order the planner
+/// is landing before the low-level setpoint is given up: the other way round, until the land
+/// packet arrives nothing holds the Crazyflie up (the stopped setpoint counts as 2 s old, past the
+/// watchdog's motor cut-off). Sent again, a land is refused by a planner already landing or idle.
 async fn land(cf: &Crazyflie, config: RelayConfig) -> Result<(), String> {
-    cf.commander.notify_setpoint_stop(0).await.map_err(|e| format!("setpoint stop: {e}"))?;
     cf.high_level_commander
         .land(0.0, None, config.land_s as f32, None)
         .await
-        .map_err(|e| format!("land: {e}"))
+        .map_err(|e| format!("land: {e}"))?;
+    cf.commander.notify_setpoint_stop(0).await.map_err(|e| format!("setpoint stop: {e}"))
 }
 
 fn far_future() -> Instant {
