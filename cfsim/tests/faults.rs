@@ -89,13 +89,18 @@ async fn log_stream_survives_twenty_percent_loss() {
     let (sent, dropped) = (stats.sent - before.sent, stats.dropped_down - before.dropped_down);
     let rate = dropped as f64 / (sent + dropped) as f64;
     assert!((0.1..0.3).contains(&rate), "downlink loss {rate}: {stats:?}");
-    assert!(stats.dropped_down > 2 && stats.dropped_up > 2, "{stats:?}");
     // Setpoints get through too (each is independent).
     for _ in 0..20 {
         cf.commander.setpoint_position(0.25, 0.0, 0.5, 0.0).await.expect("setpoint");
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     assert!(sim.truth().motors_on);
+    // The uplink carried only keep-alives and the setpoints, some 60 datagrams: a loose band
+    // around 20% (below 2% has a probability of about 1e-5).
+    let stats = sim.stats();
+    let (received, dropped) = (stats.received - before.received, stats.dropped_up - before.dropped_up);
+    let rate = dropped as f64 / (received + dropped) as f64;
+    assert!((0.02..0.5).contains(&rate), "uplink loss {rate}: {stats:?}");
     assert!(cf.log.names().len() > 6);
 }
 
