@@ -15,6 +15,7 @@ export const STATUS_COLOURS = {
   landing: "#8fb3e8",
   landed: "#5b6570",
   stopped: "#3b0d0d",
+  stopping: "#961e1e",
 };
 const LABEL_LIMIT = 250; // more UAVs on screen than this: labels only for the selected ones
 

@@ -1,5 +1,7 @@
-//! Fault injection: packet loss and latency per direction, and a full disconnection switch.
+//! Fault injection: packet loss and latency per direction, a full disconnection switch, and a
+//! firmware that ignores emergency stops.
 
+use crate::commands::Command;
 use std::time::Duration;
 
 /// Link faults, changeable at run time with [`crate::SimHandle::set_faults`].
@@ -18,6 +20,11 @@ pub struct Faults {
     pub latency_down: Duration,
     /// Drop everything in both directions (out of radio range) until cleared.
     pub disconnected: bool,
+    /// Ignore emergency stops (supervisor and localization ports) until cleared: they arrive and
+    /// are counted ([`crate::LinkStats::stops_ignored`]) but the motors keep running and the
+    /// supervisor does not lock. Stands for stop packets lost on the way however often they are
+    /// sent.
+    pub ignore_stop: bool,
 }
 
 impl Faults {
@@ -28,7 +35,13 @@ impl Faults {
         latency_up: Duration::ZERO,
         latency_down: Duration::ZERO,
         disconnected: false,
+        ignore_stop: false,
     };
+
+    /// Whether the firmware ignores `command` under these faults.
+    pub fn ignores(&self, command: &Command) -> bool {
+        self.ignore_stop && *command == Command::EmergencyStop
+    }
 
     /// Whether a datagram in the given direction is dropped, drawing from `rng` only when needed.
     pub(crate) fn drops(&self, up: bool, rng: &mut Prng) -> bool {
@@ -84,6 +97,15 @@ mod tests {
         let rate = drops.iter().filter(|d| **d).count() as f64 / 10_000.0;
         assert!((rate - 0.2).abs() < 0.02, "rate {rate}");
         assert!(!f.drops(false, &mut a));
+    }
+
+    #[test]
+    fn ignore_stop_ignores_emergency_stops_only() {
+        let f = Faults { ignore_stop: true, ..Faults::NONE };
+        assert!(f.ignores(&Command::EmergencyStop));
+        assert!(!f.ignores(&Command::EmergencyStopWatchdog));
+        assert!(!f.ignores(&Command::ExternalPosition([0.0; 3])));
+        assert!(!Faults::NONE.ignores(&Command::EmergencyStop));
     }
 
     #[test]

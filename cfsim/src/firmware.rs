@@ -9,6 +9,7 @@ use crate::dynamics::{G, Gains};
 use crate::flight::{Flight, FlightMode};
 use crate::log::{Log, LogVar};
 use crate::param::Params;
+use crate::planner::PlanState;
 
 /// CRTP protocol version reported on the platform port (crazyflie-lib 0.8 accepts 12..=13).
 pub const PROTOCOL_VERSION: u8 = 12;
@@ -162,20 +163,53 @@ impl Firmware {
     }
 }
 
+/// Bits of `supervisor.info`, as the firmware's `supervisor.c` (`updateLogData`) sets them.
+pub mod supervisor {
+    /// Bit 0: can be armed (state "pre-flight checks passed").
+    pub const CAN_BE_ARMED: u16 = 1 << 0;
+    /// Bit 1: armed.
+    pub const IS_ARMED: u16 = 1 << 1;
+    /// Bit 2: arms itself (built without `CONFIG_MOTORS_REQUIRE_ARMING`, the default).
+    pub const AUTO_ARM: u16 = 1 << 2;
+    /// Bit 3: the motors are allowed to run.
+    pub const CAN_FLY: u16 = 1 << 3;
+    /// Bit 4: flying (state "flying" or "warning, level out").
+    pub const IS_FLYING: u16 = 1 << 4;
+    /// Bit 5: tumbled.
+    pub const IS_TUMBLED: u16 = 1 << 5;
+    /// Bit 6: locked by an emergency stop until a reboot.
+    pub const IS_LOCKED: u16 = 1 << 6;
+    /// Bit 7: crashed.
+    pub const IS_CRASHED: u16 = 1 << 7;
+    /// Bit 8: the high-level commander is flying or landing.
+    pub const HL_ACTIVE: u16 = 1 << 8;
+    /// Bit 9: the high-level trajectory has finished.
+    pub const HL_FINISHED: u16 = 1 << 9;
+    /// Bit 10: the high-level commander is disabled (low-level setpoints took over).
+    pub const HL_DISABLED: u16 = 1 << 10;
+}
+
+/// The supervisor bitfield of `f` at time `t`. The simulated Crazyflie auto-arms, never tumbles
+/// or crashes. Its supervisor states: ready to fly (armed, can fly) on the ground; flying while
+/// the motors ran within the last 2 s ([`Flight::is_flying`]); locked after an emergency stop
+/// (only auto-arm and locked: disarmed, motors not allowed, not flying). "Can be armed" is the
+/// pre-flight-checks-passed state, which an auto-arming firmware leaves in the same supervisor
+/// cycle, so it is never reported.
 fn supervisor_bits(f: &Flight, hl_enabled: bool, t: f64) -> u16 {
+    use supervisor::*;
     let locked = f.mode == FlightMode::Locked;
+    let plan = f.plan_state();
     let bits = [
-        (0, !locked),                         // can be armed
-        (1, !locked),                         // is armed (auto-arm)
-        (2, true),                            // auto-arm
-        (3, !locked),                         // can fly
-        (4, f.motors_on),                     // is flying
-        (6, locked),                          // is locked
-        (8, f.mode == FlightMode::HighLevel), // HL control active
-        (9, f.hl_finished(t)),                // HL trajectory finished
-        (10, !hl_enabled),                    // HL control disabled
+        (IS_ARMED, !locked),
+        (AUTO_ARM, true),
+        (CAN_FLY, !locked),
+        (IS_FLYING, f.is_flying(t)),
+        (IS_LOCKED, locked),
+        (HL_ACTIVE, matches!(plan, PlanState::Flying | PlanState::Landing)),
+        (HL_FINISHED, f.hl_finished(t)),
+        (HL_DISABLED, plan == PlanState::Disabled || !hl_enabled),
     ];
-    bits.iter().filter(|(_, on)| *on).fold(0, |acc, (b, _)| acc | (1 << b))
+    bits.iter().filter(|(_, on)| *on).fold(0, |acc, (bit, _)| acc | bit)
 }
 
 fn sample(f: &Flight, hl_enabled: bool, t: f64, var: LogVar) -> f64 {
@@ -199,7 +233,7 @@ fn sample(f: &Flight, hl_enabled: bool, t: f64, var: LogVar) -> f64 {
         LogVar::PmState => 0.0,
         LogVar::SupervisorInfo => f64::from(supervisor_bits(f, hl_enabled, t)),
         LogVar::CanFly => flag(f.mode != FlightMode::Locked),
-        LogVar::IsFlying => flag(f.motors_on),
+        LogVar::IsFlying => flag(f.is_flying(t)),
         LogVar::IsTumbled => 0.0,
         LogVar::ExtX => ext(0),
         LogVar::ExtY => ext(1),
@@ -238,6 +272,7 @@ fn link(pk: &Packet) -> Option<Packet> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::crtp::{PORT_HL_COMMANDER, PORT_SETPOINT_GENERIC};
 
     fn fw() -> Firmware {
         Firmware::new(FirmwareSettings {
@@ -275,6 +310,81 @@ mod tests {
         assert_eq!(f32::from_le_bytes(pk[0].data[4..8].try_into().expect("4")), 1.0);
         f.advance_to(1.2);
         assert_eq!(f.log.block_count(), 0, "reset after a second without packets");
+    }
+
+    fn hl(cmd: u8, height: f32, duration: f32) -> Packet {
+        let mut d = vec![cmd, 0];
+        d.extend_from_slice(&height.to_le_bytes());
+        d.extend_from_slice(&0f32.to_le_bytes());
+        d.push(1);
+        d.extend_from_slice(&duration.to_le_bytes());
+        Packet::new(PORT_HL_COMMANDER, 0, d)
+    }
+
+    fn hold(z: f32) -> Packet {
+        let mut d = vec![7];
+        for x in [0.0f32, 0.0, z, 0.0] {
+            d.extend_from_slice(&x.to_le_bytes());
+        }
+        Packet::new(PORT_SETPOINT_GENERIC, 0, d)
+    }
+
+    #[test]
+    fn supervisor_bits_follow_the_firmware_states() {
+        use supervisor::*;
+        let lib = crazyflie_lib::subsystems::supervisor::SupervisorInfo::from_bits;
+        let mut f = fw();
+        let ready = IS_ARMED | AUTO_ARM | CAN_FLY;
+        assert_eq!(f.supervisor_bits(), ready, "on the ground, auto-armed");
+        let info = lib(f.supervisor_bits());
+        assert!(info.is_armed() && info.is_auto_armed() && info.can_fly() && !info.can_be_armed());
+        assert!(!info.is_flying() && !info.is_locked());
+
+        f.handle(&hl(7, 1.0, 1.0));
+        f.advance_to(0.5);
+        assert_eq!(f.supervisor_bits(), ready | IS_FLYING | HL_ACTIVE, "taking off");
+        f.advance_to(1.5);
+        assert_eq!(f.supervisor_bits(), ready | IS_FLYING | HL_ACTIVE | HL_FINISHED, "hovering");
+        f.handle(&hold(1.0));
+        f.advance_to(1.6);
+        assert_eq!(f.supervisor_bits(), ready | IS_FLYING | HL_DISABLED, "low-level setpoints");
+        assert!(lib(f.supervisor_bits()).hl_control_disabled());
+
+        // Land: the motors stop when the trajectory ends; the supervisor calls it flying for 2 s more.
+        f.handle(&Packet::new(PORT_SETPOINT_GENERIC, 1, vec![0, 0, 0, 0, 0]));
+        f.handle(&hl(8, 0.0, 1.0));
+        f.advance_to(2.0);
+        assert_eq!(f.supervisor_bits(), ready | IS_FLYING | HL_ACTIVE, "landing");
+        assert!(f.sample(LogVar::Thrust) > 0.0);
+        f.advance_to(3.0);
+        assert!(!f.flight.motors_on && f.sample(LogVar::Z) < 0.01);
+        assert_eq!(f.sample(LogVar::Thrust), 0.0, "motors off, thrust logged as 0");
+        assert_eq!(f.supervisor_bits() & IS_FLYING, IS_FLYING, "within the 2 s hysteresis");
+        f.advance_to(5.0);
+        assert_eq!(f.supervisor_bits(), ready, "down for more than 2 s: not flying");
+        assert_eq!(f.sample(LogVar::IsFlying), 0.0);
+
+        // Emergency stop in flight: locked at once, motors off, and the log says so.
+        f.handle(&hl(7, 1.0, 1.0));
+        f.advance_to(6.5);
+        assert!(f.flight.motors_on && f.supervisor_bits() & IS_FLYING != 0);
+        f.handle(&Packet::new(PORT_SUPERVISOR, 1, vec![3]));
+        let stopped = AUTO_ARM | IS_LOCKED;
+        assert_eq!(f.supervisor_bits(), stopped, "locked: disarmed, cannot fly, not flying");
+        assert!(!f.flight.motors_on);
+        assert_eq!((f.sample(LogVar::Thrust), f.sample(LogVar::CanFly)), (0.0, 0.0));
+        let info = lib(f.supervisor_bits());
+        assert!(info.is_locked() && !info.can_fly() && !info.is_flying() && !info.is_armed());
+        // It stays locked: commands are ignored, it falls and rests on the ground.
+        f.handle(&hold(1.0));
+        f.handle(&hl(7, 1.0, 1.0));
+        f.advance_to(8.0);
+        assert_eq!(f.supervisor_bits(), stopped);
+        assert!(!f.flight.motors_on && f.sample(LogVar::Z) == 0.0);
+        // The supervisor port answers with the same bitfield as the log.
+        let answer = f.handle(&Packet::new(PORT_SUPERVISOR, 0, vec![0x0c]));
+        assert_eq!(answer[0].data, [vec![0x0c], stopped.to_le_bytes().to_vec()].concat());
+        assert_eq!(f.sample(LogVar::SupervisorInfo), f64::from(stopped));
     }
 
     #[test]

@@ -14,6 +14,9 @@ const WDT_SHUTDOWN: f64 = 2.0;
 const ESTOP_WATCHDOG: f64 = 1.0;
 /// Thrust fraction that hovers (about 36000 PWM on a Crazyflie 2.1).
 const HOVER_THRUST: f64 = 0.55;
+/// The supervisor calls the Crazyflie flying until this long after the thrust was last over idle
+/// (s; the firmware's `IS_FLYING_HYSTERESIS_THRESHOLD` in `supervisor.c`).
+pub const IS_FLYING_HYSTERESIS: f64 = 2.0;
 
 /// What currently drives the simulated Crazyflie.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -59,6 +62,8 @@ pub struct Flight {
     planner: Planner,
     estop_deadline: Option<f64>,
     thrust_unlocked: bool,
+    /// When the motors last ran (s), for the supervisor's is-flying hysteresis.
+    last_thrust: Option<f64>,
 }
 
 impl Flight {
@@ -76,6 +81,7 @@ impl Flight {
             planner: Planner::new(),
             estop_deadline: None,
             thrust_unlocked: false,
+            last_thrust: None,
         }
     }
 
@@ -84,6 +90,17 @@ impl Flight {
         let (body, gains) = (self.body, self.gains);
         *self = Self::new(body.p, gains);
         self.body = body;
+    }
+
+    /// The high-level planner's state.
+    pub fn plan_state(&self) -> PlanState {
+        self.planner.state()
+    }
+
+    /// Whether the supervisor calls it flying at time `t`: not locked, and the motors ran within
+    /// the last [`IS_FLYING_HYSTERESIS`] seconds (so it stays "flying" for 2 s after a landing).
+    pub fn is_flying(&self, t: f64) -> bool {
+        self.mode != FlightMode::Locked && self.last_thrust.is_some_and(|l| t - l < IS_FLYING_HYSTERESIS)
     }
 
     /// Whether the high-level planner's current trajectory has ended.
@@ -160,6 +177,7 @@ impl Flight {
         match refs {
             Some(refs) => {
                 self.motors_on = true;
+                self.last_thrust = Some(t);
                 self.motor_time += dt;
                 self.body.step_controlled(refs, &self.gains, dt);
             }

@@ -107,6 +107,10 @@ pub struct LinkStats {
     pub setpoints: u64,
     /// When the last generic setpoint was processed (for latency measurements).
     pub last_setpoint: Option<Instant>,
+    /// Emergency-stop packets received (supervisor or localization port), obeyed or not.
+    pub emergency_stops: u64,
+    /// Emergency-stop packets ignored because of [`Faults::ignore_stop`].
+    pub stops_ignored: u64,
 }
 
 struct Shared {
@@ -351,7 +355,16 @@ async fn process(
                         stats.setpoints += 1;
                         stats.last_setpoint = Some(Instant::now());
                     }
-                    answers.extend(fw.handle(&pk));
+                    let command = crate::commands::decode(&pk);
+                    let ignored = command.is_some_and(|c| lock(&shared.faults).ignores(&c));
+                    if command == Some(crate::commands::Command::EmergencyStop) {
+                        let mut stats = lock(&shared.stats);
+                        stats.emergency_stops += 1;
+                        stats.stops_ignored += u64::from(ignored);
+                    }
+                    if !ignored {
+                        answers.extend(fw.handle(&pk));
+                    }
                 }
             }
             answers

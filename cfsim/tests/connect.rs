@@ -94,10 +94,10 @@ async fn log_block_streams_at_the_requested_rate() {
     let stream = log_stream(&cf, &vars, 10).await;
     assert_eq!(sim.truth().log_blocks, 1);
 
-    let start = Instant::now();
-    let mut stamps = Vec::new();
-    while start.elapsed() < Duration::from_secs(1) {
-        let data = tokio::time::timeout(Duration::from_millis(500), stream.next())
+    // One second of the firmware's clock (its timestamps), however long it takes to arrive.
+    let mut stamps: Vec<u32> = Vec::new();
+    while stamps.last().zip(stamps.first()).is_none_or(|(last, first)| last - first < 1000) {
+        let data = tokio::time::timeout(PATIENCE, stream.next())
             .await
             .expect("log data keeps coming")
             .expect("log data");
@@ -108,18 +108,20 @@ async fn log_block_streams_at_the_requested_rate() {
         assert_eq!(data.data.len(), 6);
         stamps.push(data.timestamp);
     }
-    // 100 Hz for one second, with slack for a loaded machine.
-    assert!((85..=115).contains(&stamps.len()), "{} samples", stamps.len());
+    // Every 10 ms of the firmware's clock: a simulation run late by a loaded machine skips the
+    // periods it missed (whole multiples), it never bursts or drifts.
     let steps: Vec<u32> = stamps.windows(2).map(|w| w[1] - w[0]).collect();
+    assert!(steps.iter().all(|d| *d > 0 && d % 10 == 0), "timestamps not on the 10 ms grid: {steps:?}");
     let exact = steps.iter().filter(|d| **d == 10).count();
-    assert!(exact * 10 >= steps.len() * 9, "timestamps not 10 ms apart: {steps:?}");
+    assert!(exact * 2 >= steps.len(), "most samples not 10 ms apart: {steps:?}");
+    assert!(stamps.len() <= 102, "more than 100 Hz: {} samples", stamps.len());
 
     // Stopping stops the stream; dropping the block deletes it in the firmware.
     let block = stream.stop().await.expect("stop");
     tokio::time::sleep(Duration::from_millis(50)).await;
     drop(block);
     let _other = cf.log.create_block().await.expect("create another block");
-    assert!(eventually(Duration::from_secs(1), || sim.truth().log_blocks == 1).await.is_some());
+    assert!(eventually(PATIENCE, || sim.truth().log_blocks == 1).await.is_some());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -127,7 +129,7 @@ async fn link_echo_and_supervisor() {
     let sim = sim_at([0.0; 3]);
     let cf = connect(&sim).await;
     let ms = cf.link_service.ping().await.expect("ping");
-    assert!(ms < 500.0);
+    assert!(ms < PATIENCE.as_secs_f64() * 1000.0, "{ms} ms");
     let info = cf.supervisor.read_bitfield().await.expect("supervisor");
     assert!(info.can_fly() && info.is_armed() && !info.is_flying() && !info.is_locked());
     let echo = cf.link_service.test_echo_bandwidth(20).await.expect("echo");
@@ -156,7 +158,7 @@ async fn garbage_datagrams_are_survived() {
     let probe = [0xf0, 0xde, 0xad, 0xbe, 0xef];
     sock.send(&probe).await.expect("send");
     let mut buf = [0u8; 64];
-    let deadline = Instant::now() + Duration::from_secs(2);
+    let deadline = Instant::now() + PATIENCE;
     loop {
         let n = tokio::time::timeout_at(deadline.into(), sock.recv(&mut buf))
             .await

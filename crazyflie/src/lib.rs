@@ -1,6 +1,7 @@
 //! Crazyflie 2.1 relay: CRTP transports (Crazyradio through crazyflie-link, UDP to simulators) and
 //! [`CrazyflieLink`], the fleet's [`links::Link`] to one Crazyflie.
 
+pub mod confirm;
 mod relay;
 mod session;
 pub mod transport;

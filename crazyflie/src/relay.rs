@@ -5,7 +5,7 @@
 
 use crate::session;
 use links::{Link, LinkPhase};
-use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, watch};
@@ -33,6 +33,16 @@ pub struct RelayConfig {
     pub reconnect_timeout: f64,
     /// The fleet's tick (s): a setpoint is the state the command leads to one tick ahead.
     pub dt: f64,
+    /// Period of the status log block (`supervisor.info`, `stabilizer.thrust`) that confirms a
+    /// stop or a landing (ms).
+    pub status_period_ms: u64,
+    /// An emergency stop or a landing is sent again this often until the Crazyflie confirms it (s).
+    pub resend_every: f64,
+    /// An emergency stop not confirmed within this time is given up and reported (s).
+    pub stop_confirm_s: f64,
+    /// A landing not confirmed within `land_s` plus this margin is given up and reported (s). It
+    /// covers the firmware's 2 s before it stops calling itself flying once the thrust is idle.
+    pub land_margin_s: f64,
 }
 
 impl Default for RelayConfig {
@@ -47,6 +57,10 @@ impl Default for RelayConfig {
             connect_timeout: 15.0,
             reconnect_timeout: 1.0,
             dt: 0.05,
+            status_period_ms: 20,
+            resend_every: 0.15,
+            stop_confirm_s: 3.0,
+            land_margin_s: 3.0,
         }
     }
 }
@@ -77,6 +91,17 @@ pub struct Setpoint {
     pub issued: Instant,
 }
 
+impl RelayConfig {
+    /// How long a request may wait for the Crazyflie's confirmation before it is given up.
+    pub fn confirm_bound(&self, request: Urgent) -> Duration {
+        let seconds = match request {
+            Urgent::Stop => self.stop_confirm_s,
+            Urgent::Land => self.land_s + self.land_margin_s,
+        };
+        Duration::from_secs_f64(seconds.clamp(0.0, 3600.0))
+    }
+}
+
 /// A request that goes out ahead of any setpoint.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Urgent {
@@ -86,22 +111,35 @@ pub enum Urgent {
     Stop,
 }
 
+impl Urgent {
+    /// What the operator asked for, in words.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            Urgent::Land => "landing",
+            Urgent::Stop => "emergency stop",
+        }
+    }
+}
+
 /// State shared by the link (fleet thread) and its session task.
 #[derive(Debug, Default)]
 pub struct Shared {
     sample: Mutex<Option<Sample>>,
     phase: AtomicU8,
-    /// The last connection error, for the operator.
+    /// The last connection error, or a request the Crazyflie did not confirm, for the operator.
     error: Mutex<Option<String>>,
+    /// Stops and landings given up on without the Crazyflie's confirmation.
+    unconfirmed: AtomicU64,
 }
 
-const PHASES: [LinkPhase; 6] = [
+const PHASES: [LinkPhase; 7] = [
     LinkPhase::Connecting,
     LinkPhase::TakingOff,
     LinkPhase::Flying,
     LinkPhase::Landing,
     LinkPhase::Landed,
     LinkPhase::Stopped,
+    LinkPhase::Stopping,
 ];
 
 impl Shared {
@@ -125,18 +163,30 @@ impl Shared {
     /// Sets the session's phase.
     pub fn set_phase(&self, phase: LinkPhase) {
         let index = PHASES.iter().position(|p| *p == phase).unwrap_or(0);
-        // PHASES has 6 entries: the index fits in a u8.
+        // PHASES has 7 entries: the index fits in a u8.
         self.phase.store(index as u8, Ordering::Release);
     }
 
-    /// Records the last connection error.
+    /// Records the last error.
     pub fn set_error(&self, error: Option<String>) {
         *self.error.lock().unwrap_or_else(PoisonError::into_inner) = error;
     }
 
-    /// The last connection error, if the link is not connected because of one.
+    /// The last error: why the link is not connected, or a stop or landing the Crazyflie did not
+    /// confirm in time (e.g. `emergency stop not confirmed after 3 s`).
     pub fn error(&self) -> Option<String> {
         self.error.lock().unwrap_or_else(PoisonError::into_inner).clone()
+    }
+
+    /// Records a request given up on without the Crazyflie's confirmation.
+    pub fn record_unconfirmed(&self) {
+        self.unconfirmed.fetch_add(1, Ordering::AcqRel);
+    }
+
+    /// How many emergency stops and landings were given up on without the Crazyflie's confirmation
+    /// since the link was created.
+    pub fn unconfirmed_commands(&self) -> u64 {
+        self.unconfirmed.load(Ordering::Acquire)
     }
 }
 
@@ -169,6 +219,17 @@ impl CrazyflieLink {
     /// The state shared with the session (phase, newest sample, last error).
     pub fn shared(&self) -> &Arc<Shared> {
         &self.shared
+    }
+
+    /// How many emergency stops and landings were given up on without the Crazyflie's
+    /// confirmation (see [`Shared::unconfirmed_commands`]).
+    pub fn unconfirmed_commands(&self) -> u64 {
+        self.shared.unconfirmed_commands()
+    }
+
+    /// The last error (see [`Shared::error`]).
+    pub fn error(&self) -> Option<String> {
+        self.shared.error()
     }
 
     /// A sender for motion-capture positions of this Crazyflie (forwarded as external position).

@@ -4,6 +4,7 @@
 //! (an error, even a panic inside the client library) ends one session, never the server: the
 //! supervisor records it, waits and reconnects.
 
+use crate::confirm::{ON_GROUND_M, STATUS_VARIABLES, Status};
 use crate::relay::{RelayConfig, Setpoint, Shared, Urgent};
 use crate::transport::open;
 use crazyflie_lib::subsystems::log::LogPeriod;
@@ -24,8 +25,6 @@ pub const STATE_VARIABLES: [&str; 6] = [
     "stateEstimate.vz",
 ];
 
-/// Below this height (m) a connected Crazyflie is on the ground.
-const ON_GROUND_M: f64 = 0.1;
 /// Identity attitude and no body rates for the full-state setpoint (the fleet does not steer yaw).
 const LEVEL: [f32; 4] = [0.0, 0.0, 0.0, 1.0];
 
@@ -158,8 +157,116 @@ async fn start_log(
     block.start(period).await.map_err(|e| format!("log start: {e}"))
 }
 
+/// Starts the status block: those of [`STATUS_VARIABLES`] the firmware logs (none: no block, and
+/// no stop or landing can be confirmed).
+async fn start_status_log(
+    cf: &Crazyflie,
+    period_ms: u64,
+) -> Result<Option<crazyflie_lib::subsystems::log::LogStream>, String> {
+    let names = cf.log.names();
+    let available: Vec<&str> =
+        STATUS_VARIABLES.into_iter().filter(|v| names.iter().any(|n| n == v)).collect();
+    if available.is_empty() {
+        return Ok(None);
+    }
+    let mut block = cf.log.create_block().await.map_err(|e| format!("status log block: {e}"))?;
+    for name in available {
+        block.add_variable(name).await.map_err(|e| format!("log variable {name}: {e}"))?;
+    }
+    let period = LogPeriod::from_millis(period_ms).map_err(|e| format!("status log period: {e}"))?;
+    block.start(period).await.map(Some).map_err(|e| format!("status log start: {e}"))
+}
+
+/// The next sample of the status block; never resolves without one.
+async fn next_status(
+    stream: Option<&crazyflie_lib::subsystems::log::LogStream>,
+) -> crazyflie_lib::Result<crazyflie_lib::subsystems::log::LogData> {
+    match stream {
+        Some(s) => s.next().await,
+        None => std::future::pending().await,
+    }
+}
+
+/// A stop or a landing sent and not yet confirmed by the Crazyflie.
+#[derive(Debug, Clone, Copy)]
+struct Pending {
+    request: Urgent,
+    since: Instant,
+    /// When to send it again.
+    resend_at: Instant,
+    /// When to give up.
+    deadline: Instant,
+    /// The bound passed without a confirmation: reported, no longer resent.
+    given_up: bool,
+}
+
+impl Pending {
+    /// The next time something has to happen: a resend or giving up.
+    fn wake_at(&self) -> Option<Instant> {
+        (!self.given_up).then(|| self.resend_at.min(self.deadline))
+    }
+}
+
+/// The phase shown while `request` waits for its confirmation, and once confirmed.
+fn phases(request: Urgent) -> (LinkPhase, LinkPhase) {
+    match request {
+        Urgent::Stop => (LinkPhase::Stopping, LinkPhase::Stopped),
+        Urgent::Land => (LinkPhase::Landing, LinkPhase::Landed),
+    }
+}
+
+/// Sends `request` once.
+async fn send(cf: &Crazyflie, config: RelayConfig, request: Urgent) -> Result<(), String> {
+    match request {
+        Urgent::Stop => emergency_stop(cf).await,
+        Urgent::Land => land(cf, config).await,
+    }
+}
+
+/// Sends `request` and waits for the Crazyflie to confirm it (the phase says so meanwhile).
+async fn start(
+    cf: &Crazyflie,
+    config: RelayConfig,
+    shared: &Shared,
+    request: Urgent,
+) -> Result<Pending, String> {
+    let (waiting, _) = phases(request);
+    // The phase first: whatever happens to the packets, the operator never sees less than this.
+    shared.set_phase(waiting);
+    send(cf, config, request).await?;
+    let now = Instant::now();
+    Ok(Pending {
+        request,
+        since: now,
+        resend_at: now + Duration::from_secs_f64(config.resend_every.max(0.01)),
+        deadline: now + config.confirm_bound(request),
+        given_up: false,
+    })
+}
+
+/// Sets the confirmed phase if the Crazyflie's log confirms the pending request.
+fn check_confirmed(shared: &Shared, status: &Status, pending: &mut Option<Pending>) {
+    let Some(p) = *pending else { return };
+    let confirmed = match p.request {
+        Urgent::Stop => status.confirms_stop(),
+        Urgent::Land => shared.sample().is_some_and(|s| status.confirms_landed(s.p[2])),
+    };
+    if !confirmed {
+        return;
+    }
+    shared.set_phase(phases(p.request).1);
+    if p.given_up {
+        let after = p.since.elapsed().as_secs_f64();
+        shared.set_error(Some(format!(
+            "{} confirmed late, {after:.1} s after the request",
+            p.request.describe()
+        )));
+    }
+    *pending = None;
+}
+
 /// Flies one connected session; returns when the connection is lost or the link is dropped and
-/// the Crazyflie is down.
+/// the Crazyflie is down (or a stop or landing was given up on).
 async fn fly(
     cf: &Crazyflie,
     config: RelayConfig,
@@ -168,6 +275,10 @@ async fn fly(
     intent: &mut Intent,
 ) -> End {
     let stream = match start_log(cf, config.log_period_ms).await {
+        Ok(s) => s,
+        Err(e) => return End::Lost(e),
+    };
+    let status_stream = match start_status_log(cf, config.status_period_ms).await {
         Ok(s) => s,
         Err(e) => return End::Lost(e),
     };
@@ -184,32 +295,46 @@ async fn fly(
     shared.set_error(None);
     let hl = &cf.high_level_commander;
     let mut phase_until = None;
+    // What the Crazyflie said in this session; nothing is confirmed before it speaks.
+    let mut status = Status::default();
+    let mut pending: Option<Pending> = None;
     let on_ground = p[2] < ON_GROUND_M;
-    match (*intent, on_ground) {
+    let request = match (*intent, on_ground) {
         (Intent::Fly, true) if !ch.urgent.is_closed() => {
             if let Err(e) = hl.take_off(config.altitude as f32, None, config.takeoff_s as f32, None).await {
                 return End::Lost(format!("take-off: {e}"));
             }
             shared.set_phase(LinkPhase::TakingOff);
             phase_until = Some(Instant::now() + Duration::from_secs_f64(config.takeoff_s + 0.2));
+            None
         }
-        (Intent::Fly, false) => shared.set_phase(LinkPhase::Flying),
-        (Intent::Stop, _) => shared.set_phase(LinkPhase::Stopped),
-        (_, true) => shared.set_phase(LinkPhase::Landed),
-        (Intent::Land, false) => {
-            if let Err(e) = land(cf, config).await {
-                return End::Lost(e);
-            }
-            shared.set_phase(LinkPhase::Landing);
-            phase_until = Some(Instant::now() + Duration::from_secs_f64(config.land_s + 0.2));
+        (Intent::Fly, false) => {
+            shared.set_phase(LinkPhase::Flying);
+            None
+        }
+        // Stopped before (or during) a loss: stop again; a Crazyflie still locked confirms at once.
+        (Intent::Stop, _) => Some(Urgent::Stop),
+        // Landed, landing, or on the ground with the link dropped: landed once it says so.
+        (Intent::Land | Intent::Fly, _) => {
+            *intent = Intent::Land;
+            Some(Urgent::Land)
+        }
+    };
+    if let Some(request) = request {
+        match start(cf, config, shared, request).await {
+            Ok(p) => pending = Some(p),
+            Err(e) => return End::Lost(e),
         }
     }
     let (mut urgent_open, mut setpoints_open) = (true, true);
     let mut last_sample = Instant::now();
     loop {
-        if !urgent_open && matches!(shared.phase(), LinkPhase::Landed | LinkPhase::Stopped) {
+        let settled = matches!(shared.phase(), LinkPhase::Landed | LinkPhase::Stopped)
+            || pending.is_some_and(|p| p.given_up);
+        if !urgent_open && settled {
             return End::Done;
         }
+        let wake_at = pending.and_then(|p| p.wake_at());
         tokio::select! {
             biased;
             request = ch.urgent.recv(), if urgent_open => {
@@ -221,23 +346,36 @@ async fn fly(
                         Urgent::Land
                     }
                 };
-                match request {
+                let phase = shared.phase();
+                let restart = match request {
+                    // A stop outranks everything, and is never replaced by a landing.
                     Urgent::Stop => {
                         *intent = Intent::Stop;
-                        if let Err(e) = emergency_stop(cf).await {
-                            return End::Lost(e);
+                        match pending {
+                            // Already on its way: one more copy now, the bound runs from the first.
+                            Some(p) if p.request == Urgent::Stop && !p.given_up => {
+                                if let Err(e) = send(cf, config, Urgent::Stop).await {
+                                    return End::Lost(e);
+                                }
+                                false
+                            }
+                            _ => phase != LinkPhase::Stopped,
                         }
-                        shared.set_phase(LinkPhase::Stopped);
                     }
-                    Urgent::Land if shared.phase().airborne() => {
+                    Urgent::Land if *intent == Intent::Stop => false,
+                    Urgent::Land => {
                         *intent = Intent::Land;
-                        if let Err(e) = land(cf, config).await {
-                            return End::Lost(e);
-                        }
-                        shared.set_phase(LinkPhase::Landing);
-                        phase_until = Some(Instant::now() + Duration::from_secs_f64(config.land_s + 0.2));
+                        // Taking off or flying; or asked again after a landing was given up on.
+                        matches!(phase, LinkPhase::TakingOff | LinkPhase::Flying)
+                            || pending.is_some_and(|p| p.request == Urgent::Land && p.given_up)
                     }
-                    Urgent::Land => *intent = Intent::Land,
+                };
+                if restart {
+                    match start(cf, config, shared, request).await {
+                        Ok(p) => pending = Some(p),
+                        Err(e) => return End::Lost(e),
+                    }
+                    check_confirmed(shared, &status, &mut pending);
                 }
             }
             data = stream.next() => match data {
@@ -245,12 +383,36 @@ async fn fly(
                     if let Some((p, v)) = decode(&data.data) {
                         shared.set_sample(p, v);
                         last_sample = Instant::now();
+                        check_confirmed(shared, &status, &mut pending);
                     }
                 }
                 Err(e) => return End::Lost(format!("log: {e}")),
             },
+            data = next_status(status_stream.as_ref()) => match data {
+                Ok(data) => {
+                    status = decode_status(&data.data);
+                    check_confirmed(shared, &status, &mut pending);
+                }
+                Err(e) => return End::Lost(format!("status log: {e}")),
+            },
             _ = sleep_until(last_sample + stale) => {
                 return End::Lost(format!("no state for {} ms", stale.as_millis()));
+            }
+            _ = sleep_until(wake_at.unwrap_or_else(far_future)), if wake_at.is_some() => {
+                let Some(p) = pending.as_mut() else { continue };
+                let now = Instant::now();
+                if now >= p.deadline {
+                    // Reported, never shown confirmed: the phase stays stopping/landing.
+                    p.given_up = true;
+                    let bound = config.confirm_bound(p.request).as_secs_f64();
+                    shared.set_error(Some(format!("{} not confirmed after {bound} s", p.request.describe())));
+                    shared.record_unconfirmed();
+                } else {
+                    p.resend_at = now + Duration::from_secs_f64(config.resend_every.max(0.01));
+                    if let Err(e) = send(cf, config, p.request).await {
+                        return End::Lost(e);
+                    }
+                }
             }
             changed = ch.setpoints.changed(), if setpoints_open => {
                 if changed.is_err() {
@@ -274,10 +436,8 @@ async fn fly(
             }
             _ = sleep_until(phase_until.unwrap_or_else(far_future)), if phase_until.is_some() => {
                 phase_until = None;
-                match shared.phase() {
-                    LinkPhase::TakingOff if *intent == Intent::Fly => shared.set_phase(LinkPhase::Flying),
-                    LinkPhase::Landing => shared.set_phase(LinkPhase::Landed),
-                    _ => {}
+                if shared.phase() == LinkPhase::TakingOff && *intent == Intent::Fly {
+                    shared.set_phase(LinkPhase::Flying);
                 }
             }
         }
@@ -293,17 +453,31 @@ async fn emergency_stop(cf: &Crazyflie) -> Result<(), String> {
     supervisor.or(localization).map_err(|e| format!("emergency stop: {e}"))
 }
 
-/// Hands control back to the high-level commander and lands.
+/// Lands with the high-level commander, then hands control back to it. In this order the planner
+/// is landing before the low-level setpoint is given up: the other way round, until the land
+/// packet arrives nothing holds the Crazyflie up (the stopped setpoint counts as 2 s old, past the
+/// watchdog's motor cut-off). Sent again, a land is refused by a planner already landing or idle.
 async fn land(cf: &Crazyflie, config: RelayConfig) -> Result<(), String> {
-    cf.commander.notify_setpoint_stop(0).await.map_err(|e| format!("setpoint stop: {e}"))?;
     cf.high_level_commander
         .land(0.0, None, config.land_s as f32, None)
         .await
-        .map_err(|e| format!("land: {e}"))
+        .map_err(|e| format!("land: {e}"))?;
+    cf.commander.notify_setpoint_stop(0).await.map_err(|e| format!("setpoint stop: {e}"))
 }
 
 fn far_future() -> Instant {
     Instant::now() + Duration::from_secs(3600)
+}
+
+/// What one sample of the status block says (a variable missing or out of range is unknown).
+fn decode_status(data: &std::collections::HashMap<String, crazyflie_lib::Value>) -> Status {
+    let value = |name: &str| data.get(name).map(|v| v.to_f64_lossy()).filter(|x| x.is_finite());
+    let [info, thrust] = STATUS_VARIABLES;
+    Status {
+        // u16 in the firmware; anything else is not a bitfield.
+        info: value(info).filter(|x| (0.0..=f64::from(u16::MAX)).contains(x)).map(|x| x as u16),
+        thrust: value(thrust),
+    }
 }
 
 /// Position and velocity from one log sample, if every variable is there and finite.

@@ -29,12 +29,16 @@ pub enum LinkPhase {
     /// Airborne and following each tick's command.
     #[default]
     Flying,
-    /// Landing on request (or on shutdown).
+    /// Landing on request (or on shutdown), until the UAV reports it is down with its motors off.
     Landing,
-    /// On the ground with motors off after a landing.
+    /// On the ground with motors off after a landing, as the UAV itself reported.
     Landed,
-    /// Motors cut by an emergency stop; stays down until the server restarts the link.
+    /// Motors cut by an emergency stop, as the UAV itself confirmed; stays down until the server
+    /// restarts the link.
     Stopped,
+    /// An emergency stop was requested (and is being resent) but the UAV has not confirmed yet
+    /// that its motors are off: it may still be in the air.
+    Stopping,
 }
 
 impl LinkPhase {
@@ -47,12 +51,14 @@ impl LinkPhase {
             LinkPhase::Landing => "landing",
             LinkPhase::Landed => "landed",
             LinkPhase::Stopped => "stopped",
+            LinkPhase::Stopping => "stopping",
         }
     }
 
-    /// The UAV is in the air at the fleet's altitude (or on its way there or down): an obstacle.
+    /// The UAV is in the air at the fleet's altitude (or on its way there or down, or not yet
+    /// confirmed down after an emergency stop): an obstacle.
     pub fn airborne(&self) -> bool {
-        matches!(self, LinkPhase::TakingOff | LinkPhase::Flying | LinkPhase::Landing)
+        matches!(self, LinkPhase::TakingOff | LinkPhase::Flying | LinkPhase::Landing | LinkPhase::Stopping)
     }
 }
 
@@ -170,5 +176,12 @@ mod tests {
         assert_eq!(link.phase(), LinkPhase::Stopped);
         assert_eq!(link.state().unwrap().p, Vec2::zeros(), "a stopped UAV does not move");
         assert!(!link.phase().airborne());
+    }
+
+    #[test]
+    fn stopping_is_airborne_until_confirmed() {
+        assert_eq!(LinkPhase::Stopping.name(), "stopping");
+        assert!(LinkPhase::Stopping.airborne() && LinkPhase::Landing.airborne());
+        assert!(!LinkPhase::Stopped.airborne() && !LinkPhase::Landed.airborne());
     }
 }

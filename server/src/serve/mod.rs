@@ -325,7 +325,10 @@ pub async fn land_crazyflies(state: &AppState) {
     let airborne = |s: &Snapshot| -> Vec<String> {
         s.uavs
             .iter()
-            .filter(|u| u.link != links::SIM_LINK && matches!(u.phase, "taking_off" | "flying" | "landing"))
+            .filter(|u| {
+                u.link != links::SIM_LINK
+                    && matches!(u.phase, "taking_off" | "flying" | "landing" | "stopping")
+            })
             .map(|u| u.id.clone())
             .collect()
     };

@@ -75,6 +75,7 @@ fn color(status: UavStatus) -> Color {
         UavStatus::Landing => Color::from_rgb(143, 179, 232),
         UavStatus::Landed => Color::from_rgb(91, 101, 112),
         UavStatus::Stopped => Color::from_rgb(59, 13, 13),
+        UavStatus::Stopping => Color::from_rgb(150, 30, 30),
     }
 }
 

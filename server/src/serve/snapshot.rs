@@ -29,8 +29,10 @@ pub enum UavStatus {
     Landing,
     /// On the ground after landing.
     Landed,
-    /// Motors cut by an emergency stop.
+    /// Motors cut by an emergency stop, as the Crazyflie confirmed.
     Stopped,
+    /// Emergency stop sent, not yet confirmed by the Crazyflie: it may still be in the air.
+    Stopping,
 }
 
 /// One UAV in a snapshot. Vectors are `[x, y]` in metres, m/s and m/s².
@@ -112,6 +114,7 @@ fn status(u: &Uav, holding: bool) -> UavStatus {
         LinkPhase::Landing => return UavStatus::Landing,
         LinkPhase::Landed => return UavStatus::Landed,
         LinkPhase::Stopped => return UavStatus::Stopped,
+        LinkPhase::Stopping => return UavStatus::Stopping,
         LinkPhase::Flying => {}
     }
     if l.stale {
