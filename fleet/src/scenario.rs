@@ -1,5 +1,6 @@
 //! Scenario files: `{"name", "params"?, "segments", "uavs": [{"id", "start", "goal"}]}`.
 
+use links::LinkRules;
 use roads::{Road, RoadLayout};
 use serde::{Deserialize, Serialize};
 use uav::{Params, Vec2};
@@ -97,11 +98,18 @@ impl Scenario {
         })
     }
 
-    /// Validates parameters, road and fleet (cbf.md §5; the safe-set assumption for starts).
+    /// Validates parameters, road and fleet (cbf.md §5; the safe-set assumption for starts), with
+    /// the default [`LinkRules`] (UDP links to loopback only).
     pub fn validate(&self) -> Result<ValidScenario, ScenarioError> {
-        self.params
-            .validate()
-            .map_err(|e| invalid(format!("params.{}", e.field), format!("{} (got {})", e.reason, e.value)))?;
+        self.validate_with(&LinkRules::default())
+    }
+
+    /// Validates as [`Scenario::validate`] does, checking each UAV's link against `rules`.
+    ///
+    /// UAVs are checked in file order, each field in the order id, start, goal, separation, link, and
+    /// the first failure is reported.
+    pub fn validate_with(&self, rules: &LinkRules) -> Result<ValidScenario, ScenarioError> {
+        self.params.validate().map_err(|e| invalid(format!("params.{}", e.field), e.detail()))?;
         let road = Road::new(RoadLayout { segments: self.segments.clone() }).map_err(|e| {
             let field = e.segment.map(|i| format!("segments[{i}]")).unwrap_or_else(|| "segments".into());
             invalid(field, format!("{} ({})", e.message, e.rule.name()))
@@ -112,9 +120,7 @@ impl Scenario {
         let p = &self.params;
         let mut uavs: Vec<UavSpec> = Vec::with_capacity(self.uavs.len());
         for (i, u) in self.uavs.iter().enumerate() {
-            if u.id.is_empty() || u.id.len() > 64 {
-                return Err(invalid(format!("uavs[{i}].id"), "must be 1 to 64 characters"));
-            }
+            uav::check_uav_id(&u.id).map_err(|reason| invalid(format!("uavs[{i}].id"), reason))?;
             if let Some(j) = uavs.iter().position(|o| o.id == u.id) {
                 return Err(invalid(
                     format!("uavs[{i}].id"),
@@ -128,7 +134,8 @@ impl Scenario {
                 return Err(invalid(format!("uavs[{i}].start"), reason));
             }
             if let Some(link) = &u.link {
-                links::check_link(link).map_err(|reason| invalid(format!("uavs[{i}].link"), reason))?;
+                links::check_link_with(link, rules)
+                    .map_err(|reason| invalid(format!("uavs[{i}].link"), reason))?;
             }
             uavs.push(UavSpec { id: u.id.clone(), start, goal, link: u.link.clone() });
         }
