@@ -4,6 +4,7 @@
 use fleet::{EditError, Fleet, FleetConfig, Scenario, ScenarioError, ScenarioUav};
 use links::{LinkRules, SimLink};
 use policies::PolicyRegistry;
+use proptest::prelude::*;
 use roads::{Road, RoadLayout};
 use uav::{UAV_ID_RULE, UavState, Vec2};
 
@@ -134,4 +135,50 @@ fn dt_above_a_tenth_of_a_second_is_refused() {
     assert_eq!(invalid(&s), ("params.dt".into(), "is outside its valid range 0.001..=0.1 (got 1)".into()));
     s.params.dt = 0.1;
     assert!(s.validate().is_ok());
+}
+
+/// The first clash in file order as the quadratic search found it (before the grid and the map):
+/// a duplicate id names the first holder, a start closer than D_c the first earlier UAV.
+fn first_clash(uavs: &[ScenarioUav], d_c: f64) -> Option<(String, String)> {
+    for (i, u) in uavs.iter().enumerate() {
+        if let Some(j) = uavs[..i].iter().position(|o| o.id == u.id) {
+            return Some((format!("uavs[{i}].id"), format!("duplicate id `{}` (also uavs[{j}])", u.id)));
+        }
+        let start = Vec2::new(u.start[0], u.start[1]);
+        if let Some(j) =
+            uavs[..i].iter().position(|o| (Vec2::new(o.start[0], o.start[1]) - start).norm() < d_c)
+        {
+            return Some((
+                format!("uavs[{i}].start"),
+                format!("closer than D_c = {d_c} m to uavs[{j}].start"),
+            ));
+        }
+    }
+    None
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    /// Ids from a small set and starts on a 5 cm lattice (many exact D_c distances): the hash map and
+    /// the grid report the same first clash as the quadratic search, or none.
+    #[test]
+    fn the_first_clash_is_the_one_the_quadratic_search_finds(
+        cells in proptest::collection::vec((0u32..40, 0u32..20, 0u32..80), 1..60),
+        d_c in prop_oneof![Just(0.3), Just(0.25), 0.05f64..1.0],
+        spread in 1u32..20,
+    ) {
+        let uavs: Vec<ScenarioUav> = cells
+            .iter()
+            .map(|&(x, y, id)| uav(&format!("u{id}"), [2.0 + f64::from(x * spread) * 0.05 % 26.0, -1.5 + f64::from(y) * 0.15]))
+            .collect();
+        let mut s = scenario(uavs);
+        s.params.d_c = d_c;
+        let got = match s.validate() {
+            Ok(_) => None,
+            Err(ScenarioError::Invalid { field, reason }) => Some((field, reason)),
+            Err(e) => return Err(TestCaseError::fail(format!("{e}"))),
+        };
+        prop_assert_eq!(got, first_clash(&s.uavs, d_c));
+    }
 }
