@@ -16,6 +16,10 @@ pub enum EditError {
     /// A UAV with this id exists already.
     #[error("a UAV with id `{0}` exists already")]
     DuplicateId(String),
+    /// The id breaks the rule of [`uav::check_uav_id`] (1 to 64 of `A-Z a-z 0-9 _ - .`); the
+    /// string is the reason, which never repeats the id.
+    #[error("id: {0}")]
+    InvalidId(String),
     /// The change would put a UAV (or a goal) where it may not be.
     #[error("{field}: {reason}")]
     Unsafe {
@@ -103,7 +107,8 @@ impl Fleet {
         check_goal_on(&self.road, goal, field)
     }
 
-    /// Checks what [`Fleet::try_add`] checks: a new id, a loaded policy, a safe start, a goal on the road.
+    /// Checks what [`Fleet::try_add`] checks: a valid and new id, a loaded policy, a safe start, a
+    /// goal on the road.
     pub fn check_new(
         &self,
         id: &str,
@@ -111,6 +116,7 @@ impl Fleet {
         state: &UavState,
         goal: Option<Vec2>,
     ) -> Result<(), EditError> {
+        uav::check_uav_id(id).map_err(EditError::InvalidId)?;
         if self.uav(id).is_some() {
             return Err(EditError::DuplicateId(id.to_string()));
         }

@@ -1,7 +1,9 @@
 //! Scenario files: `{"name", "params"?, "segments", "uavs": [{"id", "start", "goal"}]}`.
 
+use links::LinkRules;
 use roads::{Road, RoadLayout};
 use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
 use uav::{Params, Vec2};
 
 /// A scenario as written in JSON.
@@ -97,11 +99,19 @@ impl Scenario {
         })
     }
 
-    /// Validates parameters, road and fleet (cbf.md §5; the safe-set assumption for starts).
+    /// Validates parameters, road and fleet (cbf.md §5; the safe-set assumption for starts), with
+    /// the default [`LinkRules`] (UDP links to loopback only).
     pub fn validate(&self) -> Result<ValidScenario, ScenarioError> {
-        self.params
-            .validate()
-            .map_err(|e| invalid(format!("params.{}", e.field), format!("{} (got {})", e.reason, e.value)))?;
+        self.validate_with(&LinkRules::default())
+    }
+
+    /// Validates as [`Scenario::validate`] does, checking each UAV's link against `rules`.
+    ///
+    /// UAVs are checked in file order, each field in the order id, start, goal, separation, link, and
+    /// the first failure is reported. It takes O(n log n) for n UAVs: ids go through a hash map,
+    /// starts through a grid of cells D_c wide, and each point query through the road's index.
+    pub fn validate_with(&self, rules: &LinkRules) -> Result<ValidScenario, ScenarioError> {
+        self.params.validate().map_err(|e| invalid(format!("params.{}", e.field), e.detail()))?;
         let road = Road::new(RoadLayout { segments: self.segments.clone() }).map_err(|e| {
             let field = e.segment.map(|i| format!("segments[{i}]")).unwrap_or_else(|| "segments".into());
             invalid(field, format!("{} ({})", e.message, e.rule.name()))
@@ -111,49 +121,87 @@ impl Scenario {
         }
         let p = &self.params;
         let mut uavs: Vec<UavSpec> = Vec::with_capacity(self.uavs.len());
+        let mut ids: HashMap<&str, usize> = HashMap::with_capacity(self.uavs.len());
+        let mut starts = StartGrid::new(p.d_c);
         for (i, u) in self.uavs.iter().enumerate() {
-            if u.id.is_empty() || u.id.len() > 64 {
-                return Err(invalid(format!("uavs[{i}].id"), "must be 1 to 64 characters"));
+            let field = |name: &str| format!("uavs[{i}].{name}");
+            uav::check_uav_id(&u.id).map_err(|reason| invalid(field("id"), reason))?;
+            if let Some(j) = ids.get(u.id.as_str()) {
+                return Err(invalid(field("id"), format!("duplicate id `{}` (also uavs[{j}])", u.id)));
             }
-            if let Some(j) = uavs.iter().position(|o| o.id == u.id) {
-                return Err(invalid(
-                    format!("uavs[{i}].id"),
-                    format!("duplicate id `{}` (also uavs[{j}])", u.id),
-                ));
-            }
-            let start = check_point(&road, &format!("uavs[{i}].start"), u.start, p.d_s)?;
-            let goal = check_point(&road, &format!("uavs[{i}].goal"), u.goal, 0.0)?;
-            if let Some(j) = uavs.iter().position(|o| (o.start - start).norm() < p.d_c) {
+            let start = check_point(&road, || field("start"), u.start, p.d_s)?;
+            let goal = check_point(&road, || field("goal"), u.goal, 0.0)?;
+            if let Some(j) = starts.first_closer_than(&uavs, start) {
                 let reason = format!("closer than D_c = {} m to uavs[{j}].start", p.d_c);
-                return Err(invalid(format!("uavs[{i}].start"), reason));
+                return Err(invalid(field("start"), reason));
             }
             if let Some(link) = &u.link {
-                links::check_link(link).map_err(|reason| invalid(format!("uavs[{i}].link"), reason))?;
+                links::check_link_with(link, rules).map_err(|reason| invalid(field("link"), reason))?;
             }
+            ids.insert(&u.id, i);
+            starts.insert(i, start);
             uavs.push(UavSpec { id: u.id.clone(), start, goal, link: u.link.clone() });
         }
         Ok(ValidScenario { name: self.name.clone(), params: self.params, road, uavs })
     }
 }
 
-/// Checks that a point is finite, inside the road and at least `clearance` from every wall.
+/// The starts accepted so far, bucketed in square cells a little wider than D_c: every start closer
+/// than D_c to a point is in the 3 × 3 cells around it. Accepted starts are D_c apart, so a cell
+/// holds a handful.
+struct StartGrid {
+    d_c: f64,
+    cell: f64,
+    cells: HashMap<(i64, i64), Vec<usize>>,
+}
+
+impl StartGrid {
+    fn new(d_c: f64) -> Self {
+        // 0.1 % wider than D_c: a pair closer than D_c is then less than one cell apart on each axis
+        // even after rounding, hence in neighbouring cells.
+        Self { d_c, cell: d_c * 1.001, cells: HashMap::new() }
+    }
+
+    fn key(&self, x: Vec2) -> (i64, i64) {
+        // Starts are inside the road (|x| ≤ 1e6 m) and D_c ≥ 1e-3 m: at most 1e9 cells per axis.
+        ((x.x / self.cell).floor() as i64, (x.y / self.cell).floor() as i64)
+    }
+
+    fn insert(&mut self, i: usize, x: Vec2) {
+        self.cells.entry(self.key(x)).or_default().push(i);
+    }
+
+    /// The lowest index among the accepted starts closer than D_c to `x`.
+    fn first_closer_than(&self, uavs: &[UavSpec], x: Vec2) -> Option<usize> {
+        let (cx, cy) = self.key(x);
+        let near = (-1..=1).flat_map(|dx| (-1..=1).map(move |dy| (cx + dx, cy + dy)));
+        near.filter_map(|k| self.cells.get(&k))
+            .flatten()
+            .copied()
+            .filter(|&j| (uavs[j].start - x).norm() < self.d_c)
+            .min()
+    }
+}
+
+/// Checks that a point is finite, inside the road and at least `clearance` from every wall;
+/// `field` names it in the error (built only then).
 pub(crate) fn check_point(
     road: &Road,
-    field: &str,
+    field: impl Fn() -> String,
     x: [f64; 2],
     clearance: f64,
 ) -> Result<Vec2, ScenarioError> {
     if !x[0].is_finite() || !x[1].is_finite() {
-        return Err(invalid(field, "must be two finite numbers"));
+        return Err(invalid(field(), "must be two finite numbers"));
     }
     let v = Vec2::new(x[0], x[1]);
     let d = road.boundary_distance(&v);
     if d < 0.0 {
-        return Err(invalid(field, format!("[{}, {}] is outside the road", x[0], x[1])));
+        return Err(invalid(field(), format!("[{}, {}] is outside the road", x[0], x[1])));
     }
     if d < clearance {
         return Err(invalid(
-            field,
+            field(),
             format!("[{}, {}] is {d:.3} m from a wall, closer than D_s = {clearance} m", x[0], x[1]),
         ));
     }

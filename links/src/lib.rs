@@ -2,21 +2,26 @@
 //! crate has the in-process simulator, and hardware links (the `crazyflie` crate's CRTP relay) slot
 //! in beside it. A fleet may mix links.
 
+pub mod uri;
+
 use uav::{UavState, Vec2};
+pub use uri::{LinkError, LinkRules, LinkUri, parse_link};
 
 /// The link of a UAV that names none: the in-process simulator.
 pub const SIM_LINK: &str = "sim";
 
-/// Checks a link name: `sim`, or a Crazyflie URI (`radio://…`, `usb://…`, `udp://HOST:PORT`).
+/// Checks a link name with the default [`LinkRules`] (UDP peers on loopback only): `sim`, or a
+/// Crazyflie URI (`radio://DEV/CHANNEL/RATE/ADDRESS`, `usb://SERIAL`, `udp://HOST:PORT`; see
+/// [`uri`] for the exact forms). The error says what is wrong, e.g.
+/// `udp://127.0.0.1:99999: port 99999 is not in 1..=65535`.
 pub fn check_link(link: &str) -> Result<(), String> {
-    let uri = ["radio://", "usb://", "udp://"].iter().any(|s| link.starts_with(s) && link.len() > s.len());
-    if link == SIM_LINK || (uri && link.len() <= 256 && !link.chars().any(char::is_whitespace)) {
-        Ok(())
-    } else {
-        Err(format!(
-            "`{link}` is not a link: expected `sim` or a Crazyflie URI (radio://0/80/2M/E7E7E7E7E7, udp://HOST:PORT)"
-        ))
-    }
+    check_link_with(link, &LinkRules::default())
+}
+
+/// Checks a link name as [`check_link`] does, with `rules` saying which UDP hosts beyond loopback
+/// are allowed.
+pub fn check_link_with(link: &str, rules: &LinkRules) -> Result<(), String> {
+    parse_link(link, rules).map(drop).map_err(|e| e.to_string())
 }
 
 /// Where a linked UAV is in its flight, as its link sees it.

@@ -10,6 +10,9 @@
 
 mod centerline;
 mod geometry;
+mod index;
+#[cfg(test)]
+mod index_tests;
 mod layout;
 mod nav;
 mod road;

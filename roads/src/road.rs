@@ -2,6 +2,7 @@
 
 use crate::centerline::CenterLine;
 use crate::geometry::{Quad, Wall, WallKind, segments_intersect};
+use crate::index::RoadIndex;
 use crate::layout::RoadLayout;
 use crate::validate::{RoadError, check_joins, check_overlaps, check_quads};
 use uav::Vec2;
@@ -20,6 +21,8 @@ pub struct Road {
     /// For each segment i, the walls whose infinite lines rule R3 (`halfplanes`) enforces there.
     halfplane_walls: Vec<Vec<usize>>,
     centerline: CenterLine,
+    /// R*-trees over quads and walls for the point queries.
+    index: RoadIndex,
 }
 
 impl Road {
@@ -40,7 +43,8 @@ impl Road {
         walls.push(Wall::new(last.p[0], last.p[2], last, quads.len() - 1, WallKind::ExitCap));
         let halfplane_walls = (0..quads.len()).map(|i| halfplane_set(&quads, &walls, i)).collect();
         let centerline = CenterLine::new(&quads);
-        Ok(Self { layout, quads, walls, segment_walls, halfplane_walls, centerline })
+        let index = RoadIndex::new(&quads, &walls);
+        Ok(Self { layout, quads, walls, segment_walls, halfplane_walls, centerline, index })
     }
 
     /// The layout this road was built from.
@@ -73,9 +77,9 @@ impl Road {
         &self.centerline
     }
 
-    /// True when `x` is inside some segment.
+    /// True when `x` is inside some segment (or within 1e-9 m of one).
     pub fn contains(&self, x: &Vec2) -> bool {
-        self.quads.iter().any(|q| q.contains(x, CONTAINS_TOL_M))
+        if RoadIndex::covers(x) { self.index.contains(&self.quads, x) } else { self.contains_scan(x) }
     }
 
     /// The segment `x` is in, preferring `previous` while `x` is still inside it (hysteresis); if `x`
@@ -86,6 +90,36 @@ impl Road {
         {
             return i;
         }
+        if RoadIndex::covers(x) { self.index.best_margin(&self.quads, x) } else { self.best_margin_scan(x) }
+    }
+
+    /// Distance (m) from `x` to the nearest wall, negative when `x` is outside the road.
+    pub fn boundary_distance(&self, x: &Vec2) -> f64 {
+        let d = if RoadIndex::covers(x) {
+            (self.walls[self.nearest_wall(x)].nearest(x).0 - x).norm()
+        } else {
+            self.wall_distance_scan(x)
+        };
+        if self.contains(x) { d } else { -d }
+    }
+
+    /// Index of the wall nearest to `x` (the lowest among equally near ones).
+    pub fn nearest_wall(&self, x: &Vec2) -> usize {
+        if RoadIndex::covers(x) {
+            self.index.nearest_wall(&self.walls, x).0
+        } else {
+            self.nearest_wall_scan(x)
+        }
+    }
+
+    /// [`Road::contains`] by scanning every quad: the definition the index reproduces, and the
+    /// answer for points it does not cover (not finite, or absurdly far).
+    pub(crate) fn contains_scan(&self, x: &Vec2) -> bool {
+        self.quads.iter().any(|q| q.contains(x, CONTAINS_TOL_M))
+    }
+
+    /// The segment with the largest margin at `x` (the first among equals), by scanning.
+    pub(crate) fn best_margin_scan(&self, x: &Vec2) -> usize {
         let mut best = (0, f64::NEG_INFINITY);
         for (i, q) in self.quads.iter().enumerate() {
             let m = q.margin(x);
@@ -96,14 +130,13 @@ impl Road {
         best.0
     }
 
-    /// Distance (m) from `x` to the nearest wall, negative when `x` is outside the road.
-    pub fn boundary_distance(&self, x: &Vec2) -> f64 {
-        let d = self.walls.iter().map(|w| (w.nearest(x).0 - x).norm()).fold(f64::INFINITY, f64::min);
-        if self.contains(x) { d } else { -d }
+    /// The distance from `x` to the nearest wall, by scanning.
+    pub(crate) fn wall_distance_scan(&self, x: &Vec2) -> f64 {
+        self.walls.iter().map(|w| (w.nearest(x).0 - x).norm()).fold(f64::INFINITY, f64::min)
     }
 
-    /// Index of the wall nearest to `x`.
-    pub fn nearest_wall(&self, x: &Vec2) -> usize {
+    /// [`Road::nearest_wall`] by scanning.
+    pub(crate) fn nearest_wall_scan(&self, x: &Vec2) -> usize {
         let mut best = (0, f64::INFINITY);
         for (k, w) in self.walls.iter().enumerate() {
             let d = (w.nearest(x).0 - x).norm_squared();
@@ -122,7 +155,28 @@ impl Road {
 
 /// Rule R3 for segment i: its own walls and caps, plus every wall of segments i±1 whose inner
 /// half-plane contains all four vertices of quad i (the neighbour walls meeting it at a convex corner).
+/// Only the walls of segments i−1..=i+1 are looked at, in index order: the side walls of segment s
+/// are walls 2s and 2s+1, the entry cap (segment 0) is wall 2n and the exit cap (segment n−1) 2n+1.
 fn halfplane_set(quads: &[Quad], walls: &[Wall], i: usize) -> Vec<usize> {
+    let n = quads.len();
+    let lo = i.saturating_sub(1);
+    let hi = (i + 1).min(n - 1);
+    let caps = [(lo == 0).then_some(2 * n), (hi == n - 1).then_some(2 * n + 1)];
+    (2 * lo..=2 * hi + 1)
+        .chain(caps.into_iter().flatten())
+        .filter(|&k| halfplane_wall(quads, &walls[k], i))
+        .collect()
+}
+
+/// Whether rule R3 enforces `w` (a wall of segment i or a neighbour) in segment i.
+fn halfplane_wall(quads: &[Quad], w: &Wall, i: usize) -> bool {
+    const TOL: f64 = 1e-9;
+    w.segment == i || quads[i].p.iter().all(|v| w.signed_distance(v) >= -TOL)
+}
+
+/// [`halfplane_set`] by scanning every wall (the definition).
+#[cfg(test)]
+pub(crate) fn halfplane_set_scan(quads: &[Quad], walls: &[Wall], i: usize) -> Vec<usize> {
     const TOL: f64 = 1e-9;
     let lo = i.saturating_sub(1);
     let hi = (i + 1).min(quads.len() - 1);

@@ -1,6 +1,7 @@
 //! Validation of road layouts: every rule names the segment and what is wrong.
 
 use crate::geometry::Quad;
+use crate::index::{bounds, quad_tree, touching};
 use uav::{Vec2, cross};
 
 /// Coordinates beyond this magnitude (m) are rejected as absurd.
@@ -170,26 +171,39 @@ pub(crate) fn check_joins(quads: &[Quad]) -> Result<(), RoadError> {
 }
 
 /// Checks that no two non-adjacent segments overlap (separating-axis test; touching is allowed).
+/// Reports the lowest j, then the lowest i < j − 1, whose quads overlap; the candidates i come from
+/// an R*-tree of the quads' boxes.
 pub(crate) fn check_overlaps(quads: &[Quad]) -> Result<(), RoadError> {
-    let boxes: Vec<(Vec2, Vec2)> = quads
-        .iter()
-        .map(|q| {
-            let lo = q.p.iter().fold(Vec2::repeat(f64::INFINITY), |m, v| m.inf(v));
-            let hi = q.p.iter().fold(Vec2::repeat(f64::NEG_INFINITY), |m, v| m.sup(v));
-            (lo, hi)
-        })
-        .collect();
+    let tree = quad_tree(quads, |_| 0.0);
+    for (j, b) in quads.iter().enumerate() {
+        let first = touching(&tree, b).filter(|&i| i + 1 < j && overlap(&quads[i], b)).min();
+        if let Some(i) = first {
+            let msg = format!("segment {j} overlaps segment {i}, which is not adjacent to it");
+            return Err(err(Some(j), RoadRule::Overlap, msg));
+        }
+    }
+    Ok(())
+}
+
+/// [`check_overlaps`] by testing every pair (the definition).
+#[cfg(test)]
+pub(crate) fn check_overlaps_pairwise(quads: &[Quad]) -> Result<(), RoadError> {
     for j in 0..quads.len() {
         for i in 0..j.saturating_sub(1) {
-            let ((alo, ahi), (blo, bhi)) = (boxes[i], boxes[j]);
-            let boxes_apart = ahi.x <= blo.x || bhi.x <= alo.x || ahi.y <= blo.y || bhi.y <= alo.y;
-            if !boxes_apart && interiors_overlap(&quads[i], &quads[j]) {
+            if overlap(&quads[i], &quads[j]) {
                 let msg = format!("segment {j} overlaps segment {i}, which is not adjacent to it");
                 return Err(err(Some(j), RoadRule::Overlap, msg));
             }
         }
     }
     Ok(())
+}
+
+/// True when the bounding boxes of `a` and `b` overlap (touching is apart) and so do the quads.
+fn overlap(a: &Quad, b: &Quad) -> bool {
+    let ((alo, ahi), (blo, bhi)) = (bounds(a), bounds(b));
+    let boxes_apart = ahi.x <= blo.x || bhi.x <= alo.x || ahi.y <= blo.y || bhi.y <= alo.y;
+    !boxes_apart && interiors_overlap(a, b)
 }
 
 /// Separating-axis test for two convex quads: true when their interiors intersect.

@@ -1,12 +1,14 @@
 //! Shared vocabulary of airroads: 2-D vectors, the UAV state of the double integrator (paper eq. 1),
-//! and the scenario parameters (δ, D_s, D_c, ζ, r_s, ...).
+//! the scenario parameters (δ, D_s, D_c, ζ, r_s, ...) and the rule for UAV ids.
 //!
 //! This crate owns no algorithm beyond the exact double-integrator step; roads, safety, policies and
 //! links all speak these types.
 
+mod id;
 mod params;
 
-pub use params::{ParamError, Params};
+pub use id::{MAX_UAV_ID_LEN, UAV_ID_RULE, check_uav_id, is_uav_id_char};
+pub use params::{MAX_DT_S, MIN_DT_S, ParamError, Params};
 
 /// A 2-D vector in metres (positions), m/s (velocities) or m/s² (accelerations), world frame.
 pub type Vec2 = nalgebra::Vector2<f64>;

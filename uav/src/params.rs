@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Params {
-    /// Control period dt (s). Default 0.05 (20 Hz).
+    /// Control period dt (s), 0.001 to 0.1 ([`MIN_DT_S`], [`MAX_DT_S`]). Default 0.05 (20 Hz).
     pub dt: f64,
     /// Input bound δ: ‖u‖ ≤ δ (m/s²). Default 5.
     pub delta: f64,
@@ -33,9 +33,16 @@ impl Default for Params {
     }
 }
 
-/// A parameter outside its valid range.
+/// Largest control period dt (s): 10 Hz. An emergency stop or a land request waits for the next
+/// tick, so a longer period would leave the fleet unattended for too long.
+pub const MAX_DT_S: f64 = 0.1;
+/// Smallest control period dt (s): 1 kHz, beyond what the fleet loop (QPs, policies) can keep up.
+pub const MIN_DT_S: f64 = 1e-3;
+
+/// A parameter outside its valid range, e.g.
+/// `params.dt: is outside its valid range 0.001..=0.1 (got 1)`.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("params.{field}: {reason} (got {value})")]
+#[error("params.{field}: {}", self.detail())]
 pub struct ParamError {
     /// JSON key of the offending parameter.
     pub field: &'static str,
@@ -43,13 +50,24 @@ pub struct ParamError {
     pub reason: &'static str,
     /// The rejected value.
     pub value: f64,
+    /// Smallest valid value.
+    pub min: f64,
+    /// Largest valid value.
+    pub max: f64,
+}
+
+impl ParamError {
+    /// The message without the `params.FIELD: ` prefix: the reason, the valid range and the value.
+    pub fn detail(&self) -> String {
+        format!("{} {}..={} (got {})", self.reason, self.min, self.max, self.value)
+    }
 }
 
 impl Params {
     /// Checks that every parameter is finite and within a physically meaningful range.
     pub fn validate(&self) -> Result<(), ParamError> {
         let checks: [(&'static str, f64, f64, f64); 8] = [
-            ("dt", self.dt, 1e-4, 1.0),
+            ("dt", self.dt, MIN_DT_S, MAX_DT_S),
             ("delta", self.delta, 1e-3, 100.0),
             ("r_s", self.r_s, 1e-2, 1e3),
             ("D_s", self.d_s, 0.0, 100.0),
@@ -58,16 +76,17 @@ impl Params {
             ("epsilon", self.epsilon, 1e-4, 100.0),
             ("t_max", self.t_max, 1e-3, 1e6),
         ];
-        for (field, value, lo, hi) in checks {
+        for (field, value, min, max) in checks {
             if !value.is_finite() {
-                return Err(ParamError { field, reason: "must be a finite number", value });
+                return Err(ParamError { field, reason: "must be a finite number within", value, min, max });
             }
-            if value < lo || value > hi {
-                return Err(ParamError { field, reason: "is outside its valid range", value });
+            if value < min || value > max {
+                return Err(ParamError { field, reason: "is outside its valid range", value, min, max });
             }
         }
         if self.d_s == 0.0 {
-            return Err(ParamError { field: "D_s", reason: "must be positive", value: self.d_s });
+            let (value, min, max) = (self.d_s, 0.0, 100.0);
+            return Err(ParamError { field: "D_s", reason: "must be positive, within", value, min, max });
         }
         Ok(())
     }
@@ -103,5 +122,27 @@ mod tests {
         assert_eq!(p.validate().unwrap_err().field, "delta");
         let p = Params { zeta: f64::NAN, ..Params::default() };
         assert_eq!(p.validate().unwrap_err().field, "zeta");
+        let p = Params { d_s: 0.0, ..Params::default() };
+        assert_eq!(
+            p.validate().unwrap_err().to_string(),
+            "params.D_s: must be positive, within 0..=100 (got 0)"
+        );
+    }
+
+    #[test]
+    fn dt_is_at_most_a_tenth_of_a_second() {
+        for dt in [MIN_DT_S, 0.01, 0.05, MAX_DT_S] {
+            assert_eq!(Params { dt, ..Params::default() }.validate(), Ok(()), "dt = {dt}");
+        }
+        for dt in [1.0, 0.1000001, 0.5, 1e-4, 0.0, -0.05] {
+            let e = Params { dt, ..Params::default() }.validate().unwrap_err();
+            assert_eq!(e.field, "dt");
+            assert_eq!(
+                e.to_string(),
+                format!("params.dt: is outside its valid range 0.001..=0.1 (got {dt})")
+            );
+        }
+        let e = Params { dt: f64::INFINITY, ..Params::default() }.validate().unwrap_err();
+        assert_eq!(e.to_string(), "params.dt: must be a finite number within 0.001..=0.1 (got inf)");
     }
 }

@@ -67,6 +67,7 @@ impl From<EditError> for ApiError {
                 format!("a UAV with id `{id}` exists already"),
             )
             .field("id"),
+            EditError::InvalidId(reason) => Self::invalid("id", reason),
             EditError::Unsafe { field, reason } => {
                 Self::new(StatusCode::UNPROCESSABLE_ENTITY, "unsafe", reason).field(field)
             }
