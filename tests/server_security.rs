@@ -283,3 +283,54 @@ async fn changes_are_audited_and_wrong_tokens_are_rate_limited() {
     assert_eq!(send(&server, "GET", "/api/audit?limit=0", &[good], "").await.status, 422);
     server.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_route_applies_the_same_rule_to_each_input() {
+    let server = start_with(&small(), |c| c.link_rules.udp_hosts = vec!["10.0.0.5".parse().unwrap()]).await;
+    let ids_before = server.get("/api/state").await["uavs"].as_array().unwrap().len();
+    let scenario = |id: &str, link: Option<&str>, dt: f64| {
+        let mut s = small();
+        s["uavs"][1]["id"] = serde_json::json!(id);
+        if let Some(link) = link {
+            s["uavs"][1]["link"] = serde_json::json!(link);
+        }
+        s["params"] = serde_json::json!({"dt": dt});
+        s.to_string()
+    };
+    let uav = |id: &str, link: Option<&str>| {
+        let mut u = serde_json::json!({"id": id, "position": [8.0, 0.0]});
+        if let Some(link) = link {
+            u["link"] = serde_json::json!(link);
+        }
+        u.to_string()
+    };
+    for id in ["a/b", "with space", "bell\u{7}", "rtl\u{202e}x", "", &"x".repeat(65)] {
+        let (status, body) = server.call("POST", "/api/scenario", Some(&scenario(id, None, 0.05))).await;
+        assert_eq!((status, body["error"]["field"].as_str()), (422, Some("uavs[1].id")), "{id:?}: {body}");
+        let (status, body) = server.call("POST", "/api/uavs", Some(&uav(id, None))).await;
+        assert_eq!((status, body["error"]["field"].as_str()), (422, Some("id")), "{id:?}: {body}");
+    }
+    for link in [
+        "udp://127.0.0.1:99999",
+        "udp://192.168.1.9:19850",
+        "udp://example.com:1",
+        "radio://0/126/2M/E7E7E7E7E7",
+    ] {
+        let (status, body) =
+            server.call("POST", "/api/scenario", Some(&scenario("b", Some(link), 0.05))).await;
+        assert_eq!((status, body["error"]["field"].as_str()), (422, Some("uavs[1].link")), "{link}: {body}");
+        let (status, body) = server.call("POST", "/api/uavs", Some(&uav("c", Some(link)))).await;
+        assert_eq!((status, body["error"]["field"].as_str()), (422, Some("link")), "{link}: {body}");
+    }
+    // A remote simulator host the server was told to allow.
+    let (status, body) =
+        server.call("POST", "/api/uavs", Some(&uav("c", Some("udp://10.0.0.5:19850")))).await;
+    assert_eq!(status, 201, "{body}");
+    let (status, _) = server.call("DELETE", "/api/uavs/c", None).await;
+    assert_eq!(status, 204);
+    // A control period that would make an emergency stop wait a whole second.
+    let (status, body) = server.call("POST", "/api/scenario", Some(&scenario("b", None, 1.0))).await;
+    assert_eq!((status, body["error"]["field"].as_str()), (422, Some("params.dt")), "{body}");
+    assert_eq!(server.get("/api/state").await["uavs"].as_array().unwrap().len(), ids_before);
+    server.stop().await;
+}

@@ -131,6 +131,9 @@ pub struct ServeArgs {
     /// Also accept this `Host` header (repeatable): `name` or `name:port`, e.g. a reverse proxy's.
     #[arg(long = "allow-host", value_name = "HOST")]
     pub allow_hosts: Vec<String>,
+    /// Also accept Crazyflie links `udp://IP:PORT` to this non-loopback simulator host (repeatable).
+    #[arg(long = "allow-link-host", value_name = "IP")]
+    pub allow_link_hosts: Vec<std::net::IpAddr>,
     /// Also let pages of this origin make changes and open /ws (repeatable), e.g.
     /// `https://ops.example.com`.
     #[arg(long = "allow-origin", value_name = "ORIGIN")]

@@ -12,6 +12,11 @@ pub const EXIT_INVALID: u8 = 2;
 
 /// Reads and validates a scenario file; the error names the file, the field (or line) and the reason.
 pub fn load_scenario(path: &Path) -> Result<ValidScenario, String> {
+    load_scenario_with(path, &links::LinkRules::default())
+}
+
+/// [`load_scenario`] with the links `rules` allow (e.g. the server's `--allow-link-host`).
+pub fn load_scenario_with(path: &Path, rules: &links::LinkRules) -> Result<ValidScenario, String> {
     let text = std::fs::read_to_string(path).map_err(|e| format!("{}: cannot read: {e}", path.display()))?;
     let located = |e: ScenarioError| match e {
         ScenarioError::Parse { line, column, message } => {
@@ -19,7 +24,7 @@ pub fn load_scenario(path: &Path) -> Result<ValidScenario, String> {
         }
         ScenarioError::Invalid { field, reason } => format!("{}: {field}: {reason}", path.display()),
     };
-    Scenario::from_json(&text).and_then(|s| s.validate()).map_err(located)
+    Scenario::from_json(&text).and_then(|s| s.validate_with(rules)).map_err(located)
 }
 
 /// Prints the short human summary of a run.

@@ -1,7 +1,7 @@
 //! `airroads serve`: checks the flags, starts the server and runs it until Ctrl-C or SIGTERM.
 
 use crate::cli::ServeArgs;
-use crate::run_cmd::{EXIT_INVALID, load_scenario};
+use crate::run_cmd::{EXIT_INVALID, load_scenario_with};
 use airroads::serve::rerun_sink;
 use airroads::serve::{self, ServeConfig, Server};
 use anyhow::Context as _;
@@ -92,8 +92,9 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
             args.addr
         ));
     }
+    let link_rules = links::LinkRules { udp_hosts: args.allow_link_hosts.clone() };
     let initial = match &args.scenario {
-        Some(path) => load_scenario(path)?,
+        Some(path) => load_scenario_with(path, &link_rules)?,
         None => serve::demo_scenario().map_err(|e| format!("{e:#}"))?,
     };
     let policies = args.flight.policies(initial.params.delta)?;
@@ -149,6 +150,7 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
     config.allow_origins = args.allow_origins.clone();
     config.limits = serve::listener::Limits::fitted(open_files);
     config.max_stream_clients = serve::ws::fitted_max_clients(open_files);
+    config.link_rules = link_rules;
     Ok(config)
 }
 

@@ -131,17 +131,6 @@ struct NewUav {
     link: Option<String>,
 }
 
-/// Ids appear in URL paths: 1 to 64 characters from `A-Z a-z 0-9 _ - .`.
-fn check_id(id: &str) -> Result<(), ApiError> {
-    let ok = (1..=64).contains(&id.len())
-        && id.bytes().all(|b| b.is_ascii_alphanumeric() || matches!(b, b'_' | b'-' | b'.'));
-    if ok {
-        Ok(())
-    } else {
-        Err(ApiError::invalid("id", "must be 1 to 64 characters from A-Z, a-z, 0-9, _, - and ."))
-    }
-}
-
 /// A point of a request: two finite coordinates within the range roads may have.
 fn point(field: &str, x: [f64; 2]) -> Result<Vec2, ApiError> {
     let limit = roads::MAX_COORDINATE_M;
@@ -153,11 +142,11 @@ fn point(field: &str, x: [f64; 2]) -> Result<Vec2, ApiError> {
 }
 
 async fn add_uav(State(app): State<AppState>, ApiJson(new): ApiJson<NewUav>) -> Result<Response, ApiError> {
-    check_id(&new.id)?;
+    uav::check_uav_id(&new.id).map_err(|reason| ApiError::invalid("id", reason))?;
     let position = point("position", new.position)?;
     let goal = new.goal.map(|g| point("goal", g)).transpose()?;
     if let Some(link) = &new.link {
-        links::check_link(link).map_err(|reason| ApiError::invalid("link", reason))?;
+        links::check_link_with(link, &app.link_rules).map_err(|reason| ApiError::invalid("link", reason))?;
     }
     let (id, link) = (new.id.clone(), new.link.clone());
     app.apply(Command::AddUav { id: new.id, position, policy: new.policy, goal, link: new.link }).await?;
@@ -230,9 +219,10 @@ async fn load_scenario(
         let full = super::command::ChangeError::FleetFull { wanted: scenario.uavs.len(), max: app.max_uavs };
         return Err(full.into());
     }
+    let rules = app.link_rules.clone();
     let valid = app
         .validate(move || {
-            scenario.validate().map_err(|e| match e {
+            scenario.validate_with(&rules).map_err(|e| match e {
                 fleet::ScenarioError::Invalid { field, reason } => ApiError::invalid(field, reason),
                 other => ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", other.to_string()),
             })

@@ -80,6 +80,8 @@ pub struct ServeConfig {
     pub limits: listener::Limits,
     /// Most WebSocket clients at once.
     pub max_stream_clients: usize,
+    /// Which Crazyflie links may be given (remote UDP hosts: `--allow-link-host`).
+    pub link_rules: links::LinkRules,
 }
 
 impl ServeConfig {
@@ -104,6 +106,7 @@ impl ServeConfig {
             allow_origins: Vec::new(),
             limits: listener::Limits::default(),
             max_stream_clients: ws::MAX_CLIENTS,
+            link_rules: links::LinkRules::default(),
         }
     }
 }
@@ -160,7 +163,7 @@ fn initial_fleet(
             if fleet.policy_names().any(|n| n == u.policy) { &u.policy } else { &config.default_policy };
         let state = UavState::at_rest(Vec2::new(u.position[0], u.position[1]));
         let goal = u.goal.map(|g| Vec2::new(g[0], g[1]));
-        if let Some(Err(e)) = u.link.as_deref().map(links::check_link) {
+        if let Some(Err(e)) = u.link.as_deref().map(|l| links::check_link_with(l, &config.link_rules)) {
             tracing::warn!("saved UAV `{}` not resumed: link: {e}", u.id);
             continue;
         }
@@ -191,6 +194,7 @@ impl Server {
         let (max_uavs, max_stream_clients, limits) =
             (config.max_uavs, config.max_stream_clients, config.limits);
         let (allow_hosts, allow_origins) = (config.allow_hosts.clone(), config.allow_origins.clone());
+        let link_rules = Arc::new(config.link_rules.clone());
         let mut store = open_store(config.data_dir.as_deref())
             .with_context(|| format!("data directory {}", display_dir(config.data_dir.as_deref())))?;
         let factory = LinkFactory::new(tokio::runtime::Handle::current(), config.relay);
@@ -245,6 +249,7 @@ impl Server {
             policies,
             default_policy,
             max_uavs,
+            link_rules,
             max_stream_clients,
             stream: Arc::new(StreamCounters::default()),
             connections: Arc::default(),

@@ -83,6 +83,8 @@ pub struct AppState {
     pub default_policy: Arc<str>,
     /// Most UAVs the fleet may have.
     pub max_uavs: usize,
+    /// Which Crazyflie links may be given (remote UDP hosts: `--allow-link-host`).
+    pub link_rules: Arc<links::LinkRules>,
     /// Most WebSocket clients at once.
     pub max_stream_clients: usize,
     /// WebSocket counters.
