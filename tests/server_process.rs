@@ -352,3 +352,25 @@ fn flags_that_would_weaken_the_server_are_refused_with_the_flag_named() {
     assert!(stderr.contains("--allow-origin"), "{stderr}");
     std::fs::remove_dir_all(&data).unwrap();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn with_few_file_descriptors_idle_sockets_cannot_block_the_emergency_stop() {
+    let data = scratch("fds");
+    // 128 open files in all (soft and hard): the server fits its connection caps under them.
+    let mut command = Command::new("bash");
+    command.args(["-c", "ulimit -n 128; exec \"$0\" \"$@\""]).arg(env!("CARGO_BIN_EXE_airroads"));
+    command.args(["serve", "--addr", "127.0.0.1:0", "--data-dir", data.to_str().unwrap(), "--policy", "pd"]);
+    let (_child, addr) = start_child(command);
+    let mut idle = Vec::new();
+    for _ in 0..200 {
+        idle.push(tokio::net::TcpStream::connect(addr).await.unwrap());
+    }
+    tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+    let stop = tokio::time::timeout(std::time::Duration::from_secs(5), call(addr, "POST", "/api/fleet/stop", None));
+    let (status, body) = stop.await.expect("the emergency stop answered within 5 s");
+    assert_eq!(status, 200, "{body}");
+    let metrics = call(addr, "GET", "/api/metrics", None).await.1;
+    assert!(metrics["connections"]["limit"].as_u64().unwrap() <= 16, "{}", metrics["connections"]);
+    drop(idle);
+    std::fs::remove_dir_all(&data).unwrap();
+}

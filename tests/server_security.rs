@@ -334,3 +334,30 @@ async fn every_route_applies_the_same_rule_to_each_input() {
     assert_eq!(server.get("/api/state").await["uavs"].as_array().unwrap().len(), ids_before);
     server.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn while_changes_cannot_be_saved_health_says_so_and_they_are_refused() {
+    let server = start(config(&small())).await;
+    // An empty fleet: no position writes that could succeed and clear the state below.
+    for id in ["a", "b"] {
+        assert_eq!(server.call("DELETE", &format!("/api/uavs/{id}"), None).await.0, 204);
+    }
+    tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+    // The state writer's verdict after a failed commit (as a full disk gives it).
+    server.state.storage.degrade("database or disk is full".into());
+    let health = server.get("/healthz").await;
+    assert_eq!(health["status"], "degraded", "{health}");
+    assert!(health["problems"][0].as_str().unwrap().contains("disk is full"), "{health}");
+    let metrics = server.get("/api/metrics").await;
+    assert_eq!(metrics["storage"]["degraded"], true, "{}", metrics["storage"]);
+    let (status, body) = server.call("POST", "/api/fleet/pause", None).await;
+    assert_eq!((status, body["error"]["code"].as_str()), (503, Some("not_durable")), "{body}");
+    assert_eq!(server.get("/api/state").await["paused"], false, "nothing changed");
+    // The next successful commit (here: the audit entry of that request) clears it.
+    let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+    while server.get("/healthz").await["status"] != "ok" {
+        assert!(std::time::Instant::now() < deadline, "still degraded after a successful commit");
+        tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+    }
+    server.stop().await;
+}

@@ -41,6 +41,8 @@ pub fn small() -> Value {
 pub struct Running {
     /// Its address.
     pub addr: SocketAddr,
+    /// Its shared handler state (to look inside, or to stage a failure).
+    pub state: airroads::serve::state::AppState,
     stop: Option<oneshot::Sender<()>>,
     task: Option<tokio::task::JoinHandle<anyhow::Result<()>>>,
 }
@@ -56,11 +58,12 @@ pub async fn start(config: ServeConfig) -> Running {
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
     let server = Server::start(config).unwrap();
+    let state = server.state().clone();
     let (stop, stopped) = oneshot::channel::<()>();
     let task = tokio::spawn(airroads::serve::serve(listener, server, async move {
         let _ = stopped.await;
     }));
-    Running { addr, stop: Some(stop), task: Some(task) }
+    Running { addr, state, stop: Some(stop), task: Some(task) }
 }
 
 impl Running {
