@@ -4,6 +4,7 @@
 import { after, before, test } from "node:test";
 import assert from "node:assert/strict";
 import { readFileSync } from "node:fs";
+import { createServer } from "node:http";
 import { join } from "node:path";
 import { ARTIFACTS, api, clickWorld, launchBrowser, openDashboard, screenshot, startServer, until } from "./harness.mjs";
 
@@ -297,4 +298,76 @@ test("land a selected UAV, then the emergency stop cuts every UAV", async () => 
     await page.locator('#legend [data-status="stopped"]').waitFor();
     await screenshot(page, "stopped");
   });
+});
+
+test("a page on another origin cannot command the fleet or open the stream", async () => {
+  const server = await startServer([]);
+  // The attacker's page, served from another origin (another port of the same machine).
+  const target = server.url;
+  const evil = `<!doctype html><body>
+<iframe name="sink"></iframe>
+<form id="form" method="POST" action="${target}/api/fleet/stop" enctype="text/plain" target="sink"><input name="x" value="y"></form>
+<script>
+  window.results = {};
+  for (const path of ["/api/fleet/stop", "/api/fleet/pause", "/api/fleet/land"]) {
+    fetch("${target}" + path, { method: "POST", mode: "no-cors", headers: { "Content-Type": "text/plain" }, body: "{}" })
+      .then(() => (window.results[path] = "sent"), (e) => (window.results[path] = String(e)));
+  }
+  fetch("${target}/api/uavs/uav1/goal", { method: "PUT", headers: { "Content-Type": "application/json" }, body: '{"goal": [1, 1]}' })
+    .then((r) => (window.results.put = r.status), (e) => (window.results.put = "blocked"));
+  const ws = new WebSocket("${target.replace("http", "ws")}/ws");
+  ws.onopen = () => (window.results.ws = "open");
+  ws.onerror = () => (window.results.ws = "refused");
+  setTimeout(() => document.getElementById("form").submit(), 500);
+</script></body>`;
+  const site = createServer((req, res) => {
+    res.writeHead(200, { "Content-Type": "text/html" });
+    res.end(evil);
+  });
+  await new Promise((resolve) => site.listen(0, "127.0.0.1", resolve));
+  const page = await browser.newPage();
+  try {
+    const before = await api(server.url, "GET", "/api/state");
+    await page.goto(`http://127.0.0.1:${site.address().port}/`);
+    await until("the page's requests to settle", async () =>
+      page.evaluate(() => window.results && window.results.ws && window.results.put !== undefined).catch(() => false));
+    const results = await page.evaluate(() => window.results).catch(() => ({}));
+    assert.equal(results.ws, "refused", "the foreign page's WebSocket is refused");
+    assert.equal(results.put, "blocked", "a JSON change needs a preflight the server never grants");
+    // Give the form post time to land, then check that nothing changed.
+    await new Promise((r) => setTimeout(r, 1500));
+    const after = await api(server.url, "GET", "/api/state");
+    assert.equal(after.paused, false, "not paused");
+    assert.ok(after.uavs.every((u) => u.phase === "flying"), "nothing stopped or landing");
+    const uav1 = after.uavs.find((u) => u.id === "uav1");
+    assert.deepEqual(uav1.goal, before.uavs.find((u) => u.id === "uav1").goal, "goal unchanged");
+    const audit = await api(server.url, "GET", "/api/audit?limit=100");
+    const refused = audit.entries.filter((e) => e.outcome === "origin_not_allowed");
+    assert.ok(refused.length >= 3, `the refused requests are in the audit log: ${JSON.stringify(audit.entries)}`);
+  } finally {
+    await page.close();
+    site.close();
+    await server.stop();
+  }
+});
+
+test("the dashboard cannot be framed by another origin", async () => {
+  const server = await startServer([]);
+  const site = createServer((req, res) => {
+    res.writeHead(200, { "Content-Type": "text/html" });
+    res.end(`<!doctype html><iframe id="frame" src="${server.url}/"></iframe>`);
+  });
+  await new Promise((resolve) => site.listen(0, "127.0.0.1", resolve));
+  const page = await browser.newPage();
+  try {
+    await page.goto(`http://127.0.0.1:${site.address().port}/`);
+    await new Promise((r) => setTimeout(r, 1500));
+    const frame = page.frames().find((f) => f !== page.mainFrame());
+    const framed = frame ? await frame.evaluate(() => !!document.querySelector("canvas")).catch(() => false) : false;
+    assert.equal(framed, false, "the dashboard did not render inside a foreign frame");
+  } finally {
+    await page.close();
+    site.close();
+    await server.stop();
+  }
 });
