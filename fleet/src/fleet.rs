@@ -1,5 +1,5 @@
-//! One tick of the fleet loop (`shared/design/layout.md`): states → targets → neighbours → policies
-//! (batched) → CBF-QP filter → commands.
+//! One tick of the fleet loop (ARCHITECTURE.md, "One tick"): states → targets → neighbours →
+//! policies (batched) → CBF-QP filter → commands.
 
 use crate::lost::obstacle_row;
 use crate::neighbours::NeighbourSearch;
@@ -15,14 +15,15 @@ use uav::{Params, UavState, Vec2, braking_input};
 /// How the collision barrier b_kd of a pair is shared between its two UAVs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum CollisionShare {
-    /// Each UAV k enforces its share δ_k/(δ_k+δ_d) of every pair row (paper eq. 14, 15; cbf.md §2).
+    /// Each UAV k enforces its share δ_k/(δ_k+δ_d) of every pair row (paper eq. 14, 15;
+    /// docs/safety.md §2).
     Split,
     /// UAVs are filtered one after another within a tick. A UAV enforces the whole relative row
     /// `−p̂ᵀ(u_k − u_d) ≤ rhs` against every neighbour d already filtered (its u_d is known) and its
     /// share against the others. Each pair is then enforced exactly by its later UAV, whose row is at
     /// least as loose as its share because the earlier one met its own share; so every QP is at least
     /// as feasible as with `Split`, and a platoon can brake together (with `Split` every member may
-    /// only decelerate by about ζb³/2 towards its follower: cbf.md §10.3).
+    /// only decelerate by about ζb³/2 towards its follower: docs/safety.md §10.3).
     #[default]
     Sequential,
 }
@@ -342,9 +343,10 @@ impl Fleet {
         let segment = self.uavs[k].nav.tracker.current.unwrap_or(0);
         road_rows(&self.road, self.config.road_rule, me.p, me.v, segment, p, &mut self.rows);
         let delta_sum = 2.0 * p.delta;
-        // Sampled-data margin (cbf.md §4.4, §8 d): with inputs held for dt, the curvature of b_kd lets a
-        // pair drift below the continuous-time boundary by up to ½·δΣ·dt² per step, and in dense jams
-        // the filtered inputs alternate from tick to tick; the filter keeps twice that, δΣ·dt², beyond D_c.
+        // Sampled-data margin (docs/safety.md §4.4, §8 d): with inputs held for dt, the curvature of
+        // b_kd lets a pair drift below the continuous-time boundary by up to ½·δΣ·dt² per step, and in
+        // dense jams the filtered inputs alternate from tick to tick; the filter keeps twice that,
+        // δΣ·dt², beyond D_c.
         let d_c = p.d_c + delta_sum * p.dt * p.dt;
         for &d in &self.neighbours.lists[k] {
             let other = self.uavs[d].state;

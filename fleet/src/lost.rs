@@ -2,7 +2,7 @@
 //! or lost.
 //!
 //! A UAV d taking off or landing holds its place: a static obstacle, the collision barrier with
-//! δ_d = 0 (cbf.md §5 R2 with D_s → D_c), which its neighbour k enforces alone.
+//! δ_d = 0 (docs/safety.md §5 R2 with D_s → D_c), which its neighbour k enforces alone.
 //!
 //! A UAV whose link gave no state for t seconds may have moved. The Crazyflie holds its last
 //! setpoint until its watchdog levels it out after T_hold = 0.5 s and cuts the motors after 2 s; any

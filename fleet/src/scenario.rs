@@ -99,8 +99,8 @@ impl Scenario {
         })
     }
 
-    /// Validates parameters, road and fleet (cbf.md §5; the safe-set assumption for starts), with
-    /// the default [`LinkRules`] (UDP links to loopback only).
+    /// Validates parameters, road and fleet (docs/safety.md §5; the safe-set assumption for starts),
+    /// with the default [`LinkRules`] (UDP links to loopback only).
     pub fn validate(&self) -> Result<ValidScenario, ScenarioError> {
         self.validate_with(&LinkRules::default())
     }

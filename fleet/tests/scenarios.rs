@@ -1,5 +1,5 @@
-//! The shipped scenarios fly safely to their goals; the hairpin of cbf.md §10.1 does not trap UAVs
-//! at its inner vertex.
+//! The shipped scenarios fly safely to their goals; the hairpin of docs/safety.md §10.1 does not trap
+//! UAVs at its inner vertex.
 
 use fleet::{FleetConfig, RunMetrics, RunOptions, Scenario, ScenarioUav, ValidScenario, run_scenario};
 use policies::PolicyRegistry;

@@ -20,7 +20,8 @@ impl Quad {
         cross(&(self.p[1] - self.p[0]), &(self.p[3] - self.p[1])).signum()
     }
 
-    /// Signed distance from `x` to the nearest edge line, positive inside (cbf.md §5 point-in-quad).
+    /// Signed distance from `x` to the nearest edge line, positive inside (docs/safety.md §5,
+    /// membership).
     pub fn margin(&self, x: &Vec2) -> f64 {
         let c = self.cyclic();
         let sigma = self.orientation();

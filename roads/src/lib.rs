@@ -1,6 +1,6 @@
 //! Air-road layouts: the JSON format, validation with precise errors, and the geometry the
 //! safety filter and navigation need (finite walls with end caps, point-in-road, centre line),
-//! plus navigation (Algorithm 1 and its road-aware `route` variant, `shared/design/cbf.md` §5, §7).
+//! plus navigation (Algorithm 1 and its road-aware `route` variant, `docs/safety.md` §5, §7).
 //!
 //! Conventions (paper labels): segment i = `[p1, p2, p3, p4]`; walls (barrier lines) p2→p1 (j = 21)
 //! and p4→p3 (j = 43); passable edges p2–p4 (entry) and p1–p3 (exit); cyclic polygon order

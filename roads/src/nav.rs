@@ -1,5 +1,5 @@
-//! Navigation: the temporary target p^r of Algorithm 1 (cbf.md §7), literal (`alg1`, with the E8
-//! initialisation fix) or road-aware (`route`, the default).
+//! Navigation: the temporary target p^r of Algorithm 1 (docs/safety.md §7), literal (`alg1`, with
+//! the E8 initialisation fix) or road-aware (`route`, the default).
 
 use crate::road::{Road, SegmentTracker};
 use uav::Vec2;
@@ -14,12 +14,13 @@ pub const LANE_FRACTION: f64 = 0.5;
 /// How the temporary target p^r is chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum NavMode {
-    /// Road-aware Algorithm 1 (default, cbf.md §7): the goal when it is within r_s and visible,
+    /// Road-aware Algorithm 1 (default, docs/safety.md §7): the goal when it is within r_s and visible,
     /// otherwise the farthest visible centre-line point at most r_s of arc length ahead towards it.
     #[default]
     Route,
-    /// `route` with keep-right lanes (cbf.md §10.4): each centre-line candidate is shifted right of the
-    /// travel direction by [`LANE_FRACTION`] of its clearance, so opposing traffic passes side by side.
+    /// `route` with keep-right lanes (docs/safety.md §10.4): each centre-line candidate is shifted
+    /// right of the travel direction by [`LANE_FRACTION`] of its clearance, so opposing traffic
+    /// passes side by side.
     Lanes,
     /// The paper's Algorithm 1: p^r = p + r_s·(goal direction), moved only when ‖p − p^r‖ ≤ r_s/2.
     Alg1,

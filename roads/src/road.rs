@@ -26,7 +26,7 @@ pub struct Road {
 }
 
 impl Road {
-    /// Validates `layout` (cbf.md §5) and derives walls, end caps and the centre line.
+    /// Validates `layout` (docs/safety.md §5) and derives walls, end caps and the centre line.
     pub fn new(layout: RoadLayout) -> Result<Self, RoadError> {
         let quads = check_quads(&layout.segments)?;
         check_joins(&quads)?;
@@ -191,7 +191,7 @@ pub(crate) fn halfplane_set_scan(quads: &[Quad], walls: &[Wall], i: usize) -> Ve
         .collect()
 }
 
-/// Tracks which segment one UAV is in, with hysteresis (cbf.md §5).
+/// Tracks which segment one UAV is in, with hysteresis (docs/safety.md §5).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SegmentTracker {
     /// The segment at the last update.

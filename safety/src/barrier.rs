@@ -1,11 +1,14 @@
 //! Barrier functions and their affine CBF rows in normalised form `aᵀu_k ≤ c`, ‖a‖ = 1, with the
-//! numerically safe evaluation of cbf.md §4 (clamp `max(h, h_min)`, never √ of a negative number).
+//! numerically safe evaluation of docs/safety.md §4 (clamp `max(h, h_min)`, never √ of a negative
+//! number).
 
 use uav::Vec2;
 
-/// h_min (m/s): lower clamp of h = √(2δΣ(n − D_c)) and g = √(2δ(s − D_s)) in the rows (cbf.md §4.1).
+/// h_min (m/s): lower clamp of h = √(2δΣ(n − D_c)) and g = √(2δ(s − D_s)) in the rows
+/// (docs/safety.md §4.1).
 pub const H_MIN: f64 = 1e-3;
-/// Distances below this (m) are treated as this, to keep p̂ defined after a collision (cbf.md §4.3).
+/// Distances below this (m) are treated as this, to keep p̂ defined after a collision
+/// (docs/safety.md §4.3).
 pub const MIN_DISTANCE_M: f64 = 1e-12;
 
 /// What a row protects against.
@@ -31,12 +34,13 @@ pub struct Row {
 }
 
 /// `δ ẋ / max(h, h_min)` written so it is exact when h ≥ h_min and only tightens otherwise:
-/// with b = h + ẋ, `δẋ/h = −δ + δb/h`, and the clamp applies to the second form (cbf.md §4.1).
+/// with b = h + ẋ, `δẋ/h = −δ + δb/h`, and the clamp applies to the second form
+/// (docs/safety.md §4.1).
 fn braking_term(delta: f64, rate: f64, h: f64, b: f64) -> f64 {
     if h >= H_MIN { delta * rate / h } else { -delta + delta * b / H_MIN }
 }
 
-/// Collision row of UAV k against neighbour d (cbf.md §1, §2; paper eq. 4, 11, 14):
+/// Collision row of UAV k against neighbour d (docs/safety.md §1, §2; paper eq. 4, 11, 14):
 /// b_kd = √(2δΣ(‖p_kd‖ − D_c)) + p̂_kdᵀv_kd, row
 /// `−p̂ᵀu_k ≤ δ_k/δΣ · (δΣ ṅ/h + ‖v_⊥‖²/n + ζ b_kd³)`, with δΣ = δ_k + δ_d.
 pub fn collision_row(
@@ -60,13 +64,13 @@ pub fn collision_row(
     Row { a: -p_hat, c: delta_k / delta_sum * rhs, b, kind }
 }
 
-/// End-point barrier of a finite wall (cbf.md §5 R2): the collision barrier with a static obstacle at
-/// `vertex` (δ_d = 0, D_c → D_s), for a UAV at `p` with velocity `v`.
+/// End-point barrier of a finite wall (docs/safety.md §5 R2): the collision barrier with a static
+/// obstacle at `vertex` (δ_d = 0, D_c → D_s), for a UAV at `p` with velocity `v`.
 pub fn point_row(p: Vec2, v: Vec2, vertex: Vec2, delta: f64, d_s: f64, zeta: f64, kind: RowKind) -> Row {
     collision_row(p - vertex, v, delta, 0.0, d_s, zeta, kind)
 }
 
-/// Signed line barrier (cbf.md §3, E5): with s = n̂_inᵀ(p − a) and ṡ = n̂_inᵀv,
+/// Signed line barrier (docs/safety.md §3, E5): with s = n̂_inᵀ(p − a) and ṡ = n̂_inᵀv,
 /// b_kij = √(2δ(s − D_s)) + ṡ, row `−n̂_inᵀu ≤ δṡ/g + ζb³`. `n_in` must be a unit vector.
 pub fn line_row(s: f64, s_dot: f64, n_in: Vec2, delta: f64, d_s: f64, zeta: f64, kind: RowKind) -> Row {
     let g = (2.0 * delta * (s - d_s).max(0.0)).sqrt();

@@ -1,5 +1,6 @@
 //! The safety filter of one UAV: skip the QP when the nominal input already satisfies every row
-//! (cbf.md §10.2), otherwise solve it; a result that is not `Solved` is never applied: the UAV brakes.
+//! (docs/safety.md §10.2), otherwise solve it; a result that is not `Solved` is never applied: the
+//! UAV brakes.
 
 use crate::barrier::{Row, RowKind};
 use crate::qp::{ConstraintRow, QpSolver};
@@ -10,7 +11,7 @@ use uav::{Vec2, braking_input};
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Objective {
     /// ½‖u_q‖² + Σ(ρ r + ½P r²): the exact penalty ρ keeps every slack at 0 whenever the hard
-    /// problem is feasible (cbf.md §6, E7).
+    /// problem is feasible (docs/safety.md §6, E7).
     #[default]
     Exact,
     /// The paper's (17) with ‖u_q‖ squared so it is a QP: ½‖u_q‖² + Σ ½P r², no linear penalty; its
@@ -39,11 +40,12 @@ impl std::str::FromStr for Objective {
     }
 }
 
-/// Slack weights and objective (cbf.md §6 reference values).
+/// Slack weights and objective (docs/safety.md §6 reference values).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FilterSettings {
-    /// Exact penalty ρ of a collision row's slack. 10⁴ rather than cbf.md §6's 10³: the multipliers of
-    /// thin feasible slivers (a UAV squeezed between two neighbours) exceed 2·10³.
+    /// Exact penalty ρ of a collision row's slack. 10⁴ rather than the design's reference 10³
+    /// (docs/safety.md §6): the multipliers of thin feasible slivers (a UAV squeezed between two
+    /// neighbours) exceed 2·10³.
     pub rho_collision: f64,
     /// Quadratic weight P of a collision row's slack.
     pub weight_collision: f64,
@@ -52,7 +54,7 @@ pub struct FilterSettings {
     /// Urgency weighting: when > 0, each row's ρ and P are also divided by `clamp(b, urgency_floor, 1)`
     /// (b in m/s), so when rows conflict the QP relaxes those with a comfortable barrier value first and
     /// keeps the ones about to reach b = 0. Rows with b ≥ 1 keep the reference weights, so the weights
-    /// are never below them. 0 disables it (the fixed weights of cbf.md §6).
+    /// are never below them. 0 disables it (the fixed weights of docs/safety.md §6).
     pub urgency_floor: f64,
     /// The objective.
     pub objective: Objective,
@@ -126,10 +128,10 @@ pub struct SafetyFilter {
 }
 
 /// Rows with c ≥ δ can never bind under ‖u‖ ≤ δ with ‖a‖ = 1; rows with c below this many δ are
-/// clamped. Such a row (b < 0, cbf.md §4.1) already asks for more than full braking, so its slack is
-/// positive either way and the exact penalty makes the QP brake as hard as the other rows allow; the
-/// clamp keeps one violated row's quadratic penalty from swamping every other row (in jams that made
-/// the inputs chatter between opposite full-braking directions).
+/// clamped. Such a row (b < 0, docs/safety.md §4.1) already asks for more than full braking, so its
+/// slack is positive either way and the exact penalty makes the QP brake as hard as the other rows
+/// allow; the clamp keeps one violated row's quadratic penalty from swamping every other row (in jams
+/// that made the inputs chatter between opposite full-braking directions).
 const MIN_RHS_IN_DELTAS: f64 = -2.0;
 
 impl SafetyFilter {

@@ -1,4 +1,4 @@
-//! The safety filter of airroads (`shared/design/cbf.md` §1–§6, §10): control barrier functions for
+//! The safety filter of airroads (`docs/safety.md` §1–§6, §10): control barrier functions for
 //! road walls (b_kij, signed, finite walls with end-point barriers) and neighbours (b_kd, decentralised
 //! share δ_k/(δ_k+δ_d)), turned into affine rows `aᵀu ≤ c`, and the per-UAV QP
 //! `min ½‖u_q‖² + Σ(ρ r + ½P r²)` with one slack per row and ‖u‖ ≤ δ as a second-order cone, solved

@@ -1,6 +1,7 @@
-//! The paper's unnormalised quantities (eq. 2–4, 6–8, 11, 12) with the corrections of cbf.md §0
-//! (E1 sign of the braking integral, E2 Δ² carries the minus sign, E3 outer product). Used as an
-//! oracle against `shared/data/cbf_test_vectors.json` and by the `paper` road rule's unsigned barrier.
+//! The paper's unnormalised quantities (eq. 2–4, 6–8, 11, 12) with the corrections of
+//! docs/safety.md §0 (E1 sign of the braking integral, E2 Δ² carries the minus sign, E3 outer
+//! product). Used as an oracle against `safety/tests/data/cbf_test_vectors.json` and by the `paper`
+//! road rule's unsigned barrier.
 
 use uav::Vec2;
 

@@ -1,5 +1,6 @@
-//! The per-UAV QP of cbf.md §6 in Clarabel's standard form, with one solver per row count built once
-//! and then only updated (`update_P/q/A/b`; presolve and zero-dropping off so the pattern is fixed).
+//! The per-UAV QP of docs/safety.md §6 in Clarabel's standard form, with one solver per row count
+//! built once and then only updated (`update_P/q/A/b`; presolve and zero-dropping off so the pattern
+//! is fixed).
 //!
 //! `min_{u_q, r} ½‖u_q‖² + Σ_c (ρ_c r_c + ½P_c r_c²)  s.t.  a_cᵀ(u_r + u_q) ≤ c_c + r_c,  r_c ≥ 0,
 //! ‖u_r + u_q‖ ≤ δ`, with x = [u_q; r].
@@ -67,7 +68,7 @@ enum Attempt {
     /// A freshly built solver with Clarabel's defaults (equilibration computed for this instance,
     /// iterative refinement on): cached solvers reuse the scaling of the instance they were built for.
     Fresh,
-    /// A fresh solver without equilibration and with a shorter maximum step (cbf.md §10.2).
+    /// A fresh solver without equilibration and with a shorter maximum step (docs/safety.md §10.2).
     Robust,
 }
 

@@ -1,5 +1,5 @@
 //! Which walls a UAV enforces, and their rows: rule R2 `walls` (default), R3 `halfplanes`, R1 `paper`
-//! (cbf.md §5, amended by §10.1).
+//! (docs/safety.md §5, amended by §10.1).
 
 use crate::barrier::{Row, RowKind, line_row, point_row};
 use roads::Road;
@@ -8,10 +8,11 @@ use uav::{Params, Vec2};
 /// Barrier value B (m/s) below which every row is present: walls and neighbours are searched within
 /// R = D + (‖v‖ + B)²/(2δ), since b ≤ B implies √(2δ(dist − D)) ≤ B + ‖v‖.
 ///
-/// cbf.md §5 suggests R = D_s + ‖v‖²/(2δ) + 1 m. That keeps new rows inside the safe set (b > 0) but
-/// lets a fast neighbour appear with b ≈ 1, when its row already demands near-full braking: a jump that
-/// made the QP infeasible in crowded runs. With B = 5 m/s a row appears while ζb³ ≥ 6 m/s² keeps it
-/// mild, and since |ḃ| ≤ ~20 m/s² unconstrained, b ≥ 4 when it first counts (dt = 0.05 s).
+/// The first design (docs/safety.md §5) used R = D_s + ‖v‖²/(2δ) + 1 m. That keeps new rows inside the
+/// safe set (b > 0) but lets a fast neighbour appear with b ≈ 1, when its row already demands near-full
+/// braking: a jump that made the QP infeasible in crowded runs. With B = 5 m/s a row appears while
+/// ζb³ ≥ 6 m/s² keeps it mild, and since |ḃ| ≤ ~20 m/s² unconstrained, b ≥ 4 when it first counts
+/// (dt = 0.05 s).
 pub const ACTIVATION_BARRIER: f64 = 5.0;
 
 /// The activation radius (m) of a barrier with safe distance `d` for closing speed bound `speed` and
@@ -100,11 +101,11 @@ pub fn road_rows(
 ///
 /// In the slab the distance is taken from whichever side the UAV is on. Past the inner vertex V of a
 /// bend sharper than 90°, a UAV still in the road can stand behind the next wall's line with its foot
-/// inside that wall. §10.1 of cbf.md dropped the wall there (its *signed* barrier is negative), which
-/// left V unguarded: a UAV sliding along the first wall towards V met V's end-point barrier only when
-/// its foot left the slab, already at b ≈ 0 (stress seed 225, rl: S = 0.088 m < D_s). The unsigned
-/// distance is the true distance to that wall, so it is positive and C¹-continuous with V's end-point
-/// barrier where the foot reaches V.
+/// inside that wall. The first fix of docs/safety.md §10.1 dropped the wall there (its *signed* barrier
+/// is negative), which left V unguarded: a UAV sliding along the first wall towards V met V's end-point
+/// barrier only when its foot left the slab, already at b ≈ 0 (stress seed 225, rl: S = 0.088 m < D_s).
+/// The unsigned distance is the true distance to that wall, so it is positive and C¹-continuous with
+/// V's end-point barrier where the foot reaches V.
 fn walls_rows(road: &Road, p: Vec2, v: Vec2, radius: f64, params: &Params, out: &mut Vec<Row>) {
     let (delta, d_s, zeta) = (params.delta, params.d_s, params.zeta);
     let walls = road.walls();

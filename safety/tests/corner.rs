@@ -1,6 +1,7 @@
-//! Proves the corner result of cbf.md §5 (E6): a UAV pushed straight into the outer wall of a left
-//! bend leaves the road under the paper's segment rule (R1) for every turn and speed tried, while the
-//! finite-walls rule (R2, default) and the halfplanes rule (R3) keep it inside, R2 at ≥ D_s − 0.02 m.
+//! Proves the corner result of docs/safety.md §5 (E6): a UAV pushed straight into the outer wall of a
+//! left bend leaves the road under the paper's segment rule (R1) for every turn and speed tried, while
+//! the finite-walls rule (R2, default) and the halfplanes rule (R3) keep it inside, R2 at
+//! ≥ D_s − 0.02 m.
 
 use roads::{Road, RoadLayout, SegmentTracker};
 use safety::{RoadRule, Row, SafetyFilter, road_rows};

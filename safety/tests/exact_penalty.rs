@@ -1,8 +1,8 @@
-//! Feasible filter problems that once broke cbf.md §6's exact-penalty promise (slack 0 whenever the hard
-//! problem is feasible), found by `properties.rs`'s generator: slivers whose hard multipliers exceeded ρ
-//! (urgency weights used to lower ρ for rows with b > 1; ρ = 10³ was below a sliver's 2.1·10³) and a
-//! single-point feasible set on which the cached solver stops at `AlmostSolved` (a freshly built solver
-//! solves it). Each must now be solved exactly.
+//! Feasible filter problems that once broke the exact-penalty promise of docs/safety.md §6 (slack 0
+//! whenever the hard problem is feasible), found by `properties.rs`'s generator: slivers whose hard
+//! multipliers exceeded ρ (urgency weights used to lower ρ for rows with b > 1; ρ = 10³ was below a
+//! sliver's 2.1·10³) and a single-point feasible set on which the cached solver stops at `AlmostSolved`
+//! (a freshly built solver solves it). Each must now be solved exactly.
 
 mod common;
 
@@ -54,8 +54,8 @@ fn sliver_with_urgency_weights() {
     assert_exact(FilterSettings::default(), 6.479327543547886, u_ref, &raw);
 }
 
-/// With fixed weights: a thinner strip needs ρ ≈ 2.1·10³ on its collision row, more than cbf.md §6's
-/// reference 10³ ("multipliers ≤ ~2δ" is not a bound); the default ρ is 10⁴.
+/// With fixed weights: a thinner strip needs ρ ≈ 2.1·10³ on its collision row, more than the design's
+/// reference 10³ of docs/safety.md §6 ("multipliers ≤ ~2δ" is not a bound); the default ρ is 10⁴.
 #[test]
 fn sliver_with_reference_weights() {
     let raw = [
@@ -84,7 +84,7 @@ fn single_point_u_ref() -> Vec2 {
 }
 
 /// Two rows through the same point of the circle ‖u‖ = δ make the feasible set that single point
-/// (cbf.md §4.1: "the QP is ill-conditioned near such states"). The cached solver stopped at
+/// (docs/safety.md §4.1: states close to it give badly conditioned QPs). The cached solver stopped at
 /// `AlmostSolved` and the filter braked; the retry with a freshly built solver solves it.
 /// (Shrinking δ by 1e-9 makes the problem infeasible.)
 #[test]

@@ -1,6 +1,6 @@
-//! Proves the safety properties of rows and filter (cbf.md §2, §4, §6, §10.2): full braking satisfies
-//! every row with b ≥ 0 (also next to the singularities), the h_min clamp only tightens rows, the
-//! filter respects ‖u‖ ≤ δ, keeps every slack at 0 on feasible rows (exact penalty), brakes on
+//! Proves the safety properties of rows and filter (docs/safety.md §2, §4, §6, §10.2): full braking
+//! satisfies every row with b ≥ 0 (also next to the singularities), the h_min clamp only tightens rows,
+//! the filter respects ‖u‖ ≤ δ, keeps every slack at 0 on feasible rows (exact penalty), brakes on
 //! non-finite data, and returns a safe nominal input unchanged without solving.
 
 mod common;
@@ -19,7 +19,7 @@ const ZETA: f64 = 0.05;
 const DT: f64 = 0.05;
 /// Round-off allowed when full braking meets a row exactly (b = 0), in units of δ.
 const ROUND_OFF: f64 = 1e-12;
-/// Row satisfaction and slack tolerance of the filter's output (cbf.md §6: solver tolerances 1e-9).
+/// Row satisfaction and slack tolerance of the filter's output (solver tolerances 1e-9, docs/safety.md §6).
 const QP_TOL: f64 = 1e-6;
 
 thread_local! {
@@ -179,7 +179,7 @@ proptest! {
         } else {
             point_row(p, v, Vec2::zeros(), delta_k, D_S, ZETA, RowKind::Road(0))
         };
-        // The exact row, evaluated as cbf.md §1 writes it, from the same n, ṅ, h.
+        // The exact row, evaluated as docs/safety.md §1 writes it, from the same n, ṅ, h.
         let n = p.norm();
         let n_dot = (p / n).dot(&v);
         let v_perp2 = (v.norm_squared() - n_dot * n_dot).max(0.0);
@@ -228,8 +228,9 @@ proptest! {
     }
 
     /// Jointly feasible rows (u* in the δ-ball, c ≥ aᵀu*): when ρ of every row exceeds its multiplier in
-    /// the hard problem (the premise of cbf.md §6's exact-penalty claim, checked with an exact 2-D
-    /// oracle), the filter returns the hard optimum: every row holds, every slack is 0, no failure.
+    /// the hard problem (the premise of the exact-penalty claim of docs/safety.md §6, checked with an
+    /// exact 2-D oracle), the filter returns the hard optimum: every row holds, every slack is 0, no
+    /// failure.
     #[test]
     fn filter_exact_on_feasible_rows(
         (delta, u_star, rows) in (0.5..8.0f64).prop_flat_map(|d| (Just(d), in_ball(d)))

@@ -78,7 +78,8 @@ pub struct FlightArgs {
     /// How pair rows are shared: `sequential` (default) or `split` (the paper's δ_k/(δ_k+δ_d) split).
     #[arg(long, default_value = "sequential", value_parser = ["sequential", "split"])]
     pub share: String,
-    /// Slack weights: `urgency` (divided by the row's barrier value, default) or `fixed` (cbf.md §6).
+    /// Slack weights: `urgency` (divided by the row's barrier value, default) or `fixed`
+    /// (docs/safety.md §6).
     #[arg(long, default_value = "urgency", value_parser = ["urgency", "fixed"])]
     pub slack_weights: String,
 }

@@ -1,5 +1,5 @@
-//! The fleet loop: a dedicated OS thread that ticks the fleet every dt (`shared/design/layout.md`,
-//! one tick). Commands from REST handlers are applied between ticks, never during one; land and
+//! The fleet loop: a dedicated OS thread that ticks the fleet every dt (ARCHITECTURE.md, "One
+//! tick"). Commands from REST handlers are applied between ticks, never during one; land and
 //! stop requests the moment they arrive (the loop sleeps in `park_timeout` and the handler unparks
 //! it). After each tick an immutable snapshot and the metrics are published on `watch` channels, then
 //! the gap's changes go to the state writer ([`super::durable`]). The thread never waits on a
