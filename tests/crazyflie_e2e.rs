@@ -299,3 +299,50 @@ async fn a_radio_uav_without_a_crazyradio_never_takes_the_server_down() {
     assert_eq!(status, 204);
     server.stop().await;
 }
+
+/// A policy that takes 5 s per call: it stalls the fleet loop.
+struct Stall;
+
+impl policies::Policy for Stall {
+    fn act(
+        &mut self,
+        observations: &[policies::Observation],
+        actions: &mut Vec<uav::Vec2>,
+    ) -> Result<(), policies::PolicyError> {
+        std::thread::sleep(Duration::from_secs(5));
+        actions.clear();
+        actions.resize(observations.len(), uav::Vec2::zeros());
+        Ok(())
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_emergency_stop_reaches_the_crazyflies_while_the_loop_is_stalled() {
+    let (scenario, sims) = with_sims(shipped("lab3.json"));
+    let mut c = config(&scenario);
+    c.policies.insert("stall", Box::new(Stall));
+    let server = start(c).await;
+    until_every_phase(&server, &sims, "flying").await;
+    // Stall the loop: each tick now takes 5 s.
+    let (status, body) = server.call("PUT", "/api/uavs/cf1/policy", Some(r#"{"policy": "stall"}"#)).await;
+    assert_eq!(status, 200, "{body}");
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert!(server.state.clock.tick_age() > Duration::from_millis(250), "the loop is inside a slow tick");
+    let sent = Instant::now();
+    let addr = server.addr;
+    // The answer may wait for the stalled loop (503 after 2 s); the Crazyflies must not.
+    let answer = tokio::spawn(async move { support::raw(addr, "POST", "/api/fleet/stop", None, &[]).await });
+    // The motors are off long before the stalled loop could have applied the stop, and before the
+    // Crazyflies' own watchdog (2 s without a setpoint) would have cut them.
+    let deadline = Instant::now() + Duration::from_millis(1000);
+    while sims.iter().any(|s| s.truth().motors_on) {
+        assert!(Instant::now() < deadline, "motors still on {:?} after the stop", sent.elapsed());
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    let (status, body) = answer.await.unwrap();
+    assert!(status == 200 || body.contains("sent the stop directly"), "{status}: {body}");
+    server.stop().await;
+    for sim in sims {
+        sim.shutdown().await;
+    }
+}

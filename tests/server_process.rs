@@ -366,7 +366,8 @@ async fn with_few_file_descriptors_idle_sockets_cannot_block_the_emergency_stop(
         idle.push(tokio::net::TcpStream::connect(addr).await.unwrap());
     }
     tokio::time::sleep(std::time::Duration::from_millis(300)).await;
-    let stop = tokio::time::timeout(std::time::Duration::from_secs(5), call(addr, "POST", "/api/fleet/stop", None));
+    let stop =
+        tokio::time::timeout(std::time::Duration::from_secs(5), call(addr, "POST", "/api/fleet/stop", None));
     let (status, body) = stop.await.expect("the emergency stop answered within 5 s");
     assert_eq!(status, 200, "{body}");
     let metrics = call(addr, "GET", "/api/metrics", None).await.1;

@@ -7,5 +7,5 @@ mod session;
 pub mod transport;
 pub mod udp;
 
-pub use relay::{CrazyflieLink, RelayConfig, Sample, Setpoint, Shared, Urgent};
+pub use relay::{CrazyflieLink, RelayConfig, Sample, Setpoint, Shared, StopHandle, Urgent};
 pub use session::STATE_VARIABLES;

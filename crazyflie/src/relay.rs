@@ -190,6 +190,17 @@ impl Shared {
     }
 }
 
+/// Sends one Crazyflie an emergency stop straight to its session task, bypassing the fleet loop.
+#[derive(Debug, Clone)]
+pub struct StopHandle(mpsc::WeakUnboundedSender<Urgent>);
+
+impl StopHandle {
+    /// Sends the stop; false when the link is gone (nothing left to stop).
+    pub fn stop(&self) -> bool {
+        self.0.upgrade().is_some_and(|urgent| urgent.send(Urgent::Stop).is_ok())
+    }
+}
+
 /// The fleet's link to one Crazyflie (`radio://…` through a Crazyradio, `udp://HOST:PORT` to a
 /// simulator). Dropping it lands the Crazyflie.
 pub struct CrazyflieLink {
@@ -230,6 +241,12 @@ impl CrazyflieLink {
     /// The last error (see [`Shared::error`]).
     pub fn error(&self) -> Option<String> {
         self.shared.error()
+    }
+
+    /// A handle that sends this Crazyflie an emergency stop from outside the fleet loop (which may
+    /// be stalled); it does not keep the session alive.
+    pub fn stop_handle(&self) -> StopHandle {
+        StopHandle(self.urgent.downgrade())
     }
 
     /// A sender for motion-capture positions of this Crazyflie (forwarded as external position).

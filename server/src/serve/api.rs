@@ -261,8 +261,17 @@ async fn land_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<
 }
 
 async fn stop_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
-    app.apply_urgent(Command::EmergencyStop).await?;
-    Ok(Json(json!({"stopped": "all"})))
+    // Straight to every Crazyflie's radio session first: that works even while the loop is stalled.
+    let direct = app.stops.stop_all();
+    match app.apply_urgent(Command::EmergencyStop).await {
+        Ok(_) => Ok(Json(json!({"stopped": "all"}))),
+        Err(mut e) => {
+            if direct > 0 {
+                e.message = format!("{}; {direct} Crazyflies were sent the stop directly", e.message);
+            }
+            Err(e)
+        }
+    }
 }
 
 async fn get_state(State(app): State<AppState>) -> Response {

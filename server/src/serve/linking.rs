@@ -33,6 +33,24 @@ impl MocapRoutes {
     }
 }
 
+/// UAV id → a handle that sends its Crazyflie an emergency stop without the fleet loop.
+#[derive(Clone, Default)]
+pub struct StopRoutes(Arc<Mutex<HashMap<String, crazyflie::StopHandle>>>);
+
+impl StopRoutes {
+    /// Sends every Crazyflie an emergency stop straight to its radio session (forgetting links that
+    /// are gone); returns how many were sent one.
+    pub fn stop_all(&self) -> usize {
+        let mut routes = self.0.lock().unwrap_or_else(PoisonError::into_inner);
+        routes.retain(|_, handle| handle.stop());
+        routes.len()
+    }
+
+    fn insert(&self, id: &str, handle: crazyflie::StopHandle) {
+        self.0.lock().unwrap_or_else(PoisonError::into_inner).insert(id.to_string(), handle);
+    }
+}
+
 /// Makes the link of each UAV.
 #[derive(Clone)]
 pub struct LinkFactory {
@@ -41,12 +59,14 @@ pub struct LinkFactory {
     pub relay: RelayConfig,
     /// Motion-capture routes of the Crazyflie links made so far.
     pub mocap: MocapRoutes,
+    /// Emergency-stop handles of the Crazyflie links made so far.
+    pub stops: StopRoutes,
 }
 
 impl LinkFactory {
     /// A factory whose Crazyflie sessions run on `runtime`.
     pub fn new(runtime: tokio::runtime::Handle, relay: RelayConfig) -> Self {
-        Self { runtime, relay, mocap: MocapRoutes::default() }
+        Self { runtime, relay, mocap: MocapRoutes::default(), stops: StopRoutes::default() }
     }
 
     /// The link of UAV `id`: `link` None or `sim` simulates it in-process from `state`; a URI
@@ -58,6 +78,7 @@ impl LinkFactory {
                 let config = RelayConfig { dt, ..self.relay };
                 let link = CrazyflieLink::spawn(&self.runtime, uri, config);
                 self.mocap.insert(id, link.external_position_sender());
+                self.stops.insert(id, link.stop_handle());
                 Box::new(link)
             }
         }

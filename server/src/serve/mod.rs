@@ -229,6 +229,7 @@ impl Server {
         };
         let stop = Arc::new(AtomicBool::new(false));
         let mocap = factory.mocap.clone();
+        let stops = factory.stops.clone();
         let engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
         let fleet_loop = engine.spawn(stop.clone())?;
         tokio::spawn(serialise(snapshots.clone(), frames_tx));
@@ -236,6 +237,7 @@ impl Server {
             commands,
             urgent,
             loop_thread: Some(fleet_loop.thread().clone()),
+            stops,
             snapshots,
             frames,
             road,

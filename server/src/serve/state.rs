@@ -57,6 +57,8 @@ pub struct AppState {
     pub urgent: mpsc::UnboundedSender<Request>,
     /// The fleet loop's thread (unparked for land and stop).
     pub loop_thread: Option<std::thread::Thread>,
+    /// Every Crazyflie's emergency stop, reachable without the fleet loop.
+    pub stops: super::linking::StopRoutes,
     /// The latest snapshot.
     pub snapshots: watch::Receiver<Arc<Snapshot>>,
     /// The latest snapshot as JSON text (serialised once, sent to every client).
