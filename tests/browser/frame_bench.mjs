@@ -90,7 +90,7 @@ function replaySocket(frames) {
 const dir = mkdtempSync(join(tmpdir(), "airroads-bench-"));
 const file = join(dir, "bench1000.json");
 writeFileSync(file, JSON.stringify(scenario()));
-const server = await startServer(["--scenario", file]);
+const server = await startServer(["--scenario", file, "--max-uavs", String(N)]);
 const browser = await launchBrowser();
 try {
   console.log(`dashboard frame benchmark: ${N} UAVs, ${SECONDS} s per phase, Chromium headless (software rendering)`);

@@ -47,7 +47,7 @@ use uav::{UavState, Vec2};
 
 /// Most UAVs by default: what the fleet loop ticks within dt on the development machine with the
 /// default policy in a dense crowd, with room to spare (BENCHMARKS.md, "Admission").
-pub const DEFAULT_MAX_UAVS: usize = 300;
+pub const DEFAULT_MAX_UAVS: usize = 120;
 
 /// The scenario `airroads serve` flies when it has no saved state and no `--scenario`.
 pub const DEMO_SCENARIO: &str = include_str!("../../../scenarios/demo.json");
