@@ -9,15 +9,17 @@ import os
 
 
 def road(points, width):
-    """Segments [p1, p2, p3, p4] along the polyline, p1/p2 on the right wall, p3/p4 on the left."""
+    """Segments [p1, p2, p3, p4] along the polyline, p1/p2 on the right wall, p3/p4 on the left;
+    `width` is one number or one per point."""
+    widths = width if isinstance(width, list) else [width] * len(points)
     def left_normal(k):
         dx, dy = points[k + 1][0] - points[k][0], points[k + 1][1] - points[k][1]
         n = math.hypot(dx, dy)
         return (-dy / n, dx / n)
 
-    half = width / 2
     offsets = []
     for k in range(len(points)):
+        half = widths[k] / 2
         if 0 < k < len(points) - 1:
             a, b = left_normal(k - 1), left_normal(k)
             bis = (a[0] + b[0], a[1] + b[1])
@@ -61,3 +63,23 @@ write("snake10", {"t_max": 120},
 write("demo", {"t_max": 120},
       road([[float(x), float(y)] for x, y in snake], 3.0),
       [(f"uav{i + 1}", s, g) for i, (s, g) in enumerate(zip(starts[:6], goals[:6]))])
+
+# Head-on traffic through a single narrow section: a 5 m long, 0.9 m wide section between 4 m wide
+# roads, 8 UAVs each way. Two UAVs fit side by side in it (D_s + D_c + D_s = 0.5 m < 0.9 m).
+narrow = [[-14.0, 0.0], [-6.0, 0.0], [-2.5, 0.0], [2.5, 0.0], [6.0, 0.0], [14.0, 0.0]]
+west = [[-13.0 + 1.2 * (i // 4), -1.2 + 0.8 * (i % 4)] for i in range(8)]
+east = [[13.0 - 1.2 * (i // 4), -1.2 + 0.8 * (i % 4)] for i in range(8)]
+write("narrow16", {"t_max": 120},
+      road(narrow, [4.0, 4.0, 0.9, 0.9, 4.0, 4.0]),
+      [(f"w{i}", s, [e[0] + 1.0, e[1]]) for i, (s, e) in enumerate(zip(west, east))]
+      + [(f"e{i}", s, [w[0] - 1.0, w[1]]) for i, (s, w) in enumerate(zip(east, west))])
+
+# Tight bends: a 9-segment road 2 m wide with turns of 100-120 degrees, 10 UAVs from one end to the
+# other. Route targets beyond an inner vertex used to aim the nominal input straight at it.
+bends = [[0, 0], [6, 0], [3, 5], [9, 6], [6, 11], [12, 12], [9, 17], [15, 18], [12, 23], [18, 24]]
+starts = [[1.0 + 1.0 * (i // 2), -0.45 if i % 2 == 0 else 0.45] for i in range(5)]
+goals = [[17.0 - 1.0 * (i // 2), 23.4 if i % 2 == 0 else 24.3] for i in range(5)]
+write("bends10", {"t_max": 120},
+      road([[float(x), float(y)] for x, y in bends], 2.0),
+      [(f"u{i}", s, g) for i, (s, g) in enumerate(zip(starts, goals))]
+      + [(f"v{i}", [g[0], g[1]], [s[0], s[1]]) for i, (s, g) in enumerate(zip(starts, goals))])

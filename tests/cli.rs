@@ -52,6 +52,7 @@ fn shipped_lab_scenario_is_safe_and_writes_exactly_the_metrics_keys() {
         [
             "all_arrived",
             "arrival_time_s",
+            "max_stall_s",
             "min_collision_margin_m",
             "min_road_margin_m",
             "min_separation_m",
@@ -60,6 +61,7 @@ fn shipped_lab_scenario_is_safe_and_writes_exactly_the_metrics_keys() {
             "safe",
             "scenario",
             "sim_time_s",
+            "stall_s",
             "steps_outside_road",
             "ticks"
         ]

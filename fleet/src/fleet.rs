@@ -3,6 +3,7 @@
 
 use crate::lost::obstacle_row;
 use crate::neighbours::NeighbourSearch;
+use crate::traffic::{Participant, TrafficRules, UavTraffic};
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::{Link, LinkPhase};
 use policies::{Observation, PolicyRegistry, observation};
@@ -113,6 +114,26 @@ pub struct UavTick {
     pub lost: bool,
     /// Wall time of the filter for this UAV (µs), when a QP was solved.
     pub solve_us: f64,
+    /// Length (s) of the stall it is in (no progress towards its goal for a while), 0 when none.
+    pub stall_s: f64,
+}
+
+/// Wall time (µs) of each stage of the last tick (ARCHITECTURE.md, "One tick").
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StageTimes {
+    /// Reading every link's state.
+    pub read_us: f64,
+    /// The neighbour search.
+    pub neighbours_us: f64,
+    /// Navigation and traffic rules: locating each UAV on its route, progress, reservations,
+    /// deadlock resolution, targets, arrived UAVs making way.
+    pub navigation_us: f64,
+    /// The policies (batched).
+    pub policies_us: f64,
+    /// Rows and CBF-QP filter of every UAV.
+    pub filter_us: f64,
+    /// Sending every command.
+    pub send_us: f64,
 }
 
 /// One UAV of the fleet.
@@ -133,6 +154,8 @@ pub struct Uav {
     pub phase: LinkPhase,
     /// Consecutive ticks without a fresh state from the link.
     pub stale_ticks: u32,
+    /// Its progress and standing with the traffic rules.
+    pub traffic: UavTraffic,
     /// It was airborne when last heard from, so while lost it may still be in the air.
     pub(crate) airborne: bool,
 }
@@ -166,12 +189,15 @@ pub struct Fleet {
     pub(crate) hold: bool,
     filter: SafetyFilter,
     pub(crate) neighbours: NeighbourSearch,
+    traffic: TrafficRules,
     positions: Vec<Vec2>,
+    segments: Vec<usize>,
     rows: Vec<Row>,
     observations: Vec<Observation>,
     batch: Vec<usize>,
     actions: Vec<Vec2>,
     tick: u64,
+    stages: StageTimes,
 }
 
 impl Fleet {
@@ -185,12 +211,15 @@ impl Fleet {
             policies,
             hold: false,
             neighbours: NeighbourSearch::default(),
+            traffic: TrafficRules::default(),
             positions: Vec::new(),
+            segments: Vec::new(),
             rows: Vec::new(),
             observations: Vec::new(),
             batch: Vec::new(),
             actions: Vec::new(),
             tick: 0,
+            stages: StageTimes::default(),
         }
     }
 
@@ -207,6 +236,11 @@ impl Fleet {
     /// Ticks run so far.
     pub fn ticks(&self) -> u64 {
         self.tick
+    }
+
+    /// How long each stage of the last tick took.
+    pub fn stage_times(&self) -> StageTimes {
+        self.stages
     }
 
     /// Adds a UAV at `state` flying policy `policy` towards `goal` (None: hover where it is).
@@ -230,6 +264,7 @@ impl Fleet {
             last: UavTick::default(),
             phase,
             stale_ticks: 0,
+            traffic: UavTraffic::default(),
             airborne: phase.airborne(),
         });
     }
@@ -237,12 +272,15 @@ impl Fleet {
     /// Runs one tick and returns the number of UAVs that have arrived.
     pub fn tick(&mut self) -> usize {
         let params = self.config.params;
+        let mut clock = Instant::now();
+        let mut lap = || {
+            let now = Instant::now();
+            let us = now.duration_since(clock).as_secs_f64() * 1e6;
+            clock = now;
+            us
+        };
         self.read_states();
-        let nav =
-            Navigator { road: &self.road, mode: self.config.nav, r_s: params.r_s, epsilon: params.epsilon };
-        for uav in &mut self.uavs {
-            uav.last.target = nav.target(&mut uav.nav, uav.state.p);
-        }
+        self.stages.read_us = lap();
         self.positions.clear();
         self.positions.extend(self.uavs.iter().map(|u| u.state.p));
         let v_max = self.uavs.iter().map(|u| u.state.v.norm()).fold(0.0, f64::max);
@@ -250,16 +288,55 @@ impl Fleet {
             .max(YIELD_RADIUS_IN_DC * params.d_c)
             + self.max_stale_reach();
         self.neighbours.update(&self.positions, reach);
+        self.stages.neighbours_us = lap();
+        self.plan_targets();
         self.make_way();
+        self.stages.navigation_us = lap();
         self.run_policies();
+        self.stages.policies_us = lap();
         for k in 0..self.uavs.len() {
             self.filter_one(k);
         }
+        self.stages.filter_us = lap();
         for uav in &mut self.uavs {
             uav.link.send(uav.last.u);
         }
+        self.stages.send_us = lap();
         self.tick += 1;
         self.uavs.iter().filter(|u| u.nav.arrived).count()
+    }
+
+    /// Locates every UAV on its route, tracks its progress, applies the traffic rules (`traffic`
+    /// navigation) and chooses its temporary target.
+    fn plan_targets(&mut self) {
+        let params = self.config.params;
+        let now = self.tick as f64 * params.dt;
+        let nav = Navigator::new(&self.road, self.config.nav, &params);
+        let mut segments = std::mem::take(&mut self.segments);
+        segments.clear();
+        let hold = self.hold;
+        let mut participants: Vec<Participant> = Vec::with_capacity(self.uavs.len());
+        for uav in &mut self.uavs {
+            segments.push(nav.locate(&mut uav.nav, uav.state.p));
+            let tracked = !hold && uav.flying() && !uav.nav.arrived;
+            let position = uav.nav.position.filter(|_| tracked);
+            let (p, target) = (uav.state.p, uav.last.target);
+            participants.push(Participant { id: &uav.id, position, p, target, traffic: &mut uav.traffic });
+        }
+        if self.config.nav == NavMode::Traffic {
+            self.traffic.plan(&nav, now, &mut participants, &self.neighbours.lists);
+        } else {
+            for p in &mut participants {
+                p.traffic.progress.update(p.position.map(|pos| pos.remaining()), now);
+            }
+        }
+        drop(participants);
+        for (uav, &segment) in self.uavs.iter_mut().zip(&segments) {
+            let restriction = uav.traffic.restriction;
+            uav.last.target = nav.choose(&mut uav.nav, uav.state.p, uav.state.v, segment, &restriction);
+            uav.last.stall_s = uav.traffic.progress.stalled_for(now).unwrap_or(0.0);
+        }
+        self.segments = segments;
     }
 
     /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::yielding`]).

@@ -1,5 +1,5 @@
 //! The fleet loop as plain synchronous code: one [`Fleet::tick`] reads states from the links, picks
-//! targets (navigation), finds neighbours, runs the policies batched, filters every command through
+//! targets (navigation and traffic rules), finds neighbours, runs the policies batched, filters every command through
 //! the CBF-QP and sends it. Also the scenario file format, safety metrics and headless runs.
 //!
 //! No async, no I/O beyond what a [`links::Link`] does: the server wraps this in its 20 Hz task.
@@ -10,17 +10,20 @@ mod lost;
 mod margins;
 mod metrics;
 mod neighbours;
+pub mod progress;
 mod run;
 mod scenario;
 pub mod stress;
+pub mod traffic;
 mod undo;
 mod yielding;
+pub mod zones;
 
 pub use edit::EditError;
-pub use fleet::{CollisionShare, Fleet, FleetConfig, Uav, UavTick};
+pub use fleet::{CollisionShare, Fleet, FleetConfig, StageTimes, Uav, UavTick};
 pub use lost::{ReachDisk, WATCHDOG_HOLD_S, obstacle_row, point_disk, reach_disk};
 pub use margins::{collision_margin, road_margin};
-pub use metrics::{MetricsRecorder, QpMetrics, RunMetrics};
+pub use metrics::{MetricsRecorder, QpMetrics, RunMetrics, Stall};
 pub use run::{RunOptions, RunOutcome, TAKEOFF_TIMEOUT_S, TRAJECTORY_HEADER, run_scenario, run_scenario_on};
 pub use scenario::{Scenario, ScenarioError, ScenarioUav, UavSpec, ValidScenario};
 pub use undo::Undo;

@@ -2,6 +2,7 @@
 
 use crate::fleet::Fleet;
 use crate::margins::{collision_margin, road_margin};
+use crate::progress::STALL_AFTER_S;
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -35,6 +36,11 @@ pub struct RunMetrics {
     pub all_arrived: bool,
     /// Arrival time per UAV id (s), null if it never arrived.
     pub arrival_time_s: BTreeMap<String, Option<f64>>,
+    /// UAV-seconds spent stalled: with a goal, flying, and no progress towards it for at least
+    /// [`STALL_AFTER_S`] (counted from the last progress).
+    pub stall_s: f64,
+    /// The longest single stall (s).
+    pub max_stall_s: f64,
     /// min over time and pairs of S_kd (eq. 2, corrected sign); null with fewer than two UAVs.
     pub min_collision_margin_m: Option<f64>,
     /// min over time, UAVs and walls of S_kij (eq. 6) to the finite walls.
@@ -49,6 +55,19 @@ pub struct RunMetrics {
     pub qp: QpMetrics,
     /// Margins ≥ D_c and D_s, no step outside, no failure.
     pub safe: bool,
+}
+
+/// One stall of one UAV: no progress towards its goal for `duration_s` from `start_s`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stall {
+    /// The UAV.
+    pub id: String,
+    /// When its last progress was (s of the run).
+    pub start_s: f64,
+    /// How long it lasted (s).
+    pub duration_s: f64,
+    /// Where the UAV was when it was detected.
+    pub at: [f64; 2],
 }
 
 /// Accumulates metrics tick by tick.
@@ -67,6 +86,11 @@ pub struct MetricsRecorder {
     pub policy_fallbacks: u64,
     solve_us: Vec<f64>,
     arrival: BTreeMap<String, Option<f64>>,
+    stall_s: f64,
+    max_stall_s: f64,
+    /// Stalls going on, by UAV id, and those that ended.
+    ongoing: BTreeMap<String, Stall>,
+    stalls: Vec<Stall>,
 }
 
 fn min_opt(a: Option<f64>, b: f64) -> Option<f64> {
@@ -95,6 +119,23 @@ impl MetricsRecorder {
                 self.min_separation = min_opt(self.min_separation, (u.state.p - d.state.p).norm());
             }
             let last = &u.last;
+            if last.stall_s > 0.0 {
+                // The first stalled tick adds the whole second without progress before it.
+                let first = last.stall_s < STALL_AFTER_S + p.dt / 2.0;
+                self.stall_s += if first { last.stall_s } else { p.dt };
+                self.max_stall_s = self.max_stall_s.max(last.stall_s);
+                let at = [u.state.p.x, u.state.p.y];
+                let start_s = t - last.stall_s;
+                let stall = self.ongoing.entry(u.id.clone()).or_insert(Stall {
+                    id: u.id.clone(),
+                    start_s,
+                    duration_s: 0.0,
+                    at,
+                });
+                stall.duration_s = last.stall_s;
+            } else if let Some(stall) = self.ongoing.remove(&u.id) {
+                self.stalls.push(stall);
+            }
             if last.solved {
                 self.solves += 1;
                 self.solve_us.push(last.solve_us);
@@ -108,6 +149,13 @@ impl MetricsRecorder {
                 *arrival = Some(t);
             }
         }
+    }
+
+    /// Every stall so far (those going on included), longest first.
+    pub fn stalls(&self) -> Vec<Stall> {
+        let mut all: Vec<Stall> = self.stalls.iter().chain(self.ongoing.values()).cloned().collect();
+        all.sort_by(|a, b| b.duration_s.total_cmp(&a.duration_s));
+        all
     }
 
     /// The METRICS.json document.
@@ -142,6 +190,8 @@ impl MetricsRecorder {
             sim_time_s: fleet.ticks() as f64 * p.dt,
             all_arrived: self.arrival.values().all(Option::is_some),
             arrival_time_s: self.arrival,
+            stall_s: self.stall_s,
+            max_stall_s: self.max_stall_s,
             min_collision_margin_m: self.min_collision,
             min_road_margin_m: self.min_road,
             min_separation_m: self.min_separation,

@@ -2,7 +2,7 @@
 //! optionally, a trajectory CSV.
 
 use crate::fleet::{Fleet, FleetConfig};
-use crate::metrics::{MetricsRecorder, RunMetrics};
+use crate::metrics::{MetricsRecorder, RunMetrics, Stall};
 use crate::scenario::{UavSpec, ValidScenario};
 use links::{Link, LinkPhase, SimLink};
 use policies::PolicyRegistry;
@@ -26,6 +26,8 @@ pub struct RunOutcome {
     pub metrics: RunMetrics,
     /// UAV-ticks where the policy gave no finite action and the UAV braked instead.
     pub policy_fallbacks: u64,
+    /// Every stall, longest first.
+    pub stalls: Vec<Stall>,
 }
 
 /// Header of the trajectory CSV.
@@ -126,8 +128,8 @@ pub fn run_scenario_on(
         w.flush()?;
     }
     land(&mut fleet, wait_tick, params.dt);
-    let policy_fallbacks = recorder.policy_fallbacks;
-    Ok(RunOutcome { metrics: recorder.finish(&fleet, &scenario.name), policy_fallbacks })
+    let (policy_fallbacks, stalls) = (recorder.policy_fallbacks, recorder.stalls());
+    Ok(RunOutcome { metrics: recorder.finish(&fleet, &scenario.name), policy_fallbacks, stalls })
 }
 
 /// Lands every UAV whose link takes off and ticks until they are down (at most 10 s).

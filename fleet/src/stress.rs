@@ -95,6 +95,43 @@ fn random_fleet(rng: &mut StdRng, road: &Road, params: &Params, wanted: usize) -
         .collect()
 }
 
+/// A dense two-way crowd of `n` UAVs (BENCHMARKS.md, "Admission" and "Fleet stages"): a straight
+/// road 12 m wide, two blocks on a 1.2 m grid 30 m apart, each flying through the other to the far
+/// side (as `scripts/crowd_scenario.py`).
+pub fn crowd_scenario(n: usize) -> Scenario {
+    let (width, rows, spacing) = (12.0, 9usize, 1.2);
+    let per_block = n.div_ceil(2).max(1);
+    let cols = per_block.div_ceil(rows);
+    let length = 2.0 * cols as f64 * spacing + 80.0;
+    let step = 10.0;
+    let mut segments = Vec::new();
+    let mut x: f64 = 0.0;
+    while x < length {
+        let x1 = (x + step).min(length);
+        let half = width / 2.0;
+        segments.push([[x1, -half], [x, -half], [x1, half], [x, half]]);
+        x = x1;
+    }
+    let reach = cols as f64 * spacing + 30.0;
+    let uavs = (0..n)
+        .map(|i| {
+            let (block, k) = (i / per_block, i % per_block);
+            let (col, row) = (k / rows, k % rows);
+            let y = -4.8 + row as f64 * spacing;
+            let (start, goal) = if block == 0 {
+                let start = 5.0 + col as f64 * spacing;
+                (start, start + reach)
+            } else {
+                let start = length - 5.0 - col as f64 * spacing;
+                (start, start - reach)
+            };
+            ScenarioUav { id: format!("u{i}"), start: [start, y], goal: [goal, y], link: None }
+        })
+        .collect();
+    let params = Params { t_max: 120.0, ..Params::default() };
+    Scenario { name: format!("crowd{n}"), params, segments, uavs }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -106,6 +143,15 @@ mod tests {
             assert!(s.validate().is_ok(), "seed {seed}: {:?}", s.validate().err());
             assert_eq!(s, random_scenario(seed));
             assert!((2..=30).contains(&s.uavs.len()));
+        }
+    }
+
+    #[test]
+    fn crowds_are_valid() {
+        for n in [2, 17, 300] {
+            let s = crowd_scenario(n);
+            assert_eq!(s.uavs.len(), n);
+            assert!(s.validate().is_ok(), "{n}: {:?}", s.validate().err());
         }
     }
 }

@@ -11,8 +11,9 @@ fn models_dir() -> std::path::PathBuf {
 #[test]
 fn shipped_models_reproduce_their_golden_pairs() {
     let mut checked = 0;
-    for entry in std::fs::read_dir(models_dir()).unwrap() {
-        let path = entry.unwrap().path();
+    let dir = models_dir();
+    for entry in std::fs::read_dir(&dir).unwrap_or_else(|e| panic!("{}: {e}", dir.display())) {
+        let path = entry.unwrap_or_else(|e| panic!("{}: {e}", dir.display())).path();
         let Some(stem) =
             path.file_name().and_then(|n| n.to_str()).and_then(|n| n.strip_suffix(".golden.json"))
         else {

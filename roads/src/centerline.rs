@@ -59,8 +59,26 @@ impl CenterLine {
         (self.points[k + 1] - self.points[k]).normalize()
     }
 
+    /// Unit normal to the left of the direction of increasing arc length at `s`.
+    pub fn normal_at(&self, s: f64) -> Vec2 {
+        let t = self.tangent_at(s);
+        Vec2::new(-t.y, t.x)
+    }
+
+    /// Lateral offset ℓ of `x` from piece `segment` (positive to the left of increasing s).
+    pub fn lateral(&self, segment: usize, x: &Vec2) -> f64 {
+        let (a, b) = (self.points[segment], self.points[segment + 1]);
+        let t = (b - a).normalize();
+        Vec2::new(-t.y, t.x).dot(&(x - a))
+    }
+
+    /// The point at arc length `s` and lateral offset `lateral` (road coordinates to the plane).
+    pub fn point_beside(&self, s: f64, lateral: f64) -> Vec2 {
+        self.point_at(s) + self.normal_at(s) * lateral
+    }
+
     /// Index of the piece containing arc length `s` (clamped).
-    fn piece_at(&self, s: f64) -> usize {
+    pub fn piece_at(&self, s: f64) -> usize {
         self.arc.partition_point(|&a| a <= s).saturating_sub(1).min(self.points.len().saturating_sub(2))
     }
 

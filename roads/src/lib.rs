@@ -13,14 +13,18 @@ mod geometry;
 mod index;
 #[cfg(test)]
 mod index_tests;
+mod lanes;
 mod layout;
 mod nav;
 mod road;
+mod traffic_nav;
 mod validate;
 
 pub use centerline::CenterLine;
 pub use geometry::{Quad, Wall, WallKind, nearest_on_segment, segments_intersect};
+pub use lanes::{ClearanceProfile, PROFILE_STEP_M, segment_distance};
 pub use layout::RoadLayout;
-pub use nav::{NavMode, NavState, Navigator};
+pub use nav::{NavMode, NavState, Navigator, Restriction, RoutePosition};
 pub use road::{Road, SegmentTracker};
+pub use traffic_nav::{CLEARANCE_MARGIN_M, LANE_GAP_MARGIN_M};
 pub use validate::{MAX_COORDINATE_M, RoadError, RoadRule};

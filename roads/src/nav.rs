@@ -1,8 +1,10 @@
 //! Navigation: the temporary target p^r of Algorithm 1 (docs/safety.md §7), literal (`alg1`, with
-//! the E8 initialisation fix) or road-aware (`route`, the default).
+//! the E8 initialisation fix), road-aware (`route`, `lanes`) or with the traffic rules (`traffic`,
+//! the default: corner clearance and keep-right lanes here, holds and back-offs from the fleet).
 
 use crate::road::{Road, SegmentTracker};
-use uav::Vec2;
+use crate::traffic_nav::Route;
+use uav::{Params, Vec2};
 
 /// Arc-length spacing (m) of the centre-line candidates the `route` target is chosen from.
 const ROUTE_STEP_M: f64 = 0.25;
@@ -14,9 +16,13 @@ pub const LANE_FRACTION: f64 = 0.5;
 /// How the temporary target p^r is chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum NavMode {
-    /// Road-aware Algorithm 1 (default, docs/safety.md §7): the goal when it is within r_s and visible,
-    /// otherwise the farthest visible centre-line point at most r_s of arc length ahead towards it.
+    /// The traffic rules (default, README "Traffic rules"): targets in a keep-right lane sized to the
+    /// road's width, reached by straight paths that keep a clearance from every wall and vertex; the
+    /// fleet adds holds before single-file sections and back-offs that resolve deadlocks.
     #[default]
+    Traffic,
+    /// Road-aware Algorithm 1 (docs/safety.md §7): the goal when it is within r_s and visible,
+    /// otherwise the farthest visible centre-line point at most r_s of arc length ahead towards it.
     Route,
     /// `route` with keep-right lanes (docs/safety.md §10.4): each centre-line candidate is shifted
     /// right of the travel direction by [`LANE_FRACTION`] of its clearance, so opposing traffic
@@ -30,6 +36,7 @@ impl NavMode {
     /// The CLI/JSON name.
     pub fn name(&self) -> &'static str {
         match self {
+            NavMode::Traffic => "traffic",
             NavMode::Route => "route",
             NavMode::Lanes => "lanes",
             NavMode::Alg1 => "alg1",
@@ -41,11 +48,58 @@ impl std::str::FromStr for NavMode {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
         match s {
+            "traffic" => Ok(NavMode::Traffic),
             "route" => Ok(NavMode::Route),
             "lanes" => Ok(NavMode::Lanes),
             "alg1" => Ok(NavMode::Alg1),
-            other => Err(format!("unknown navigation mode `{other}` (expected route, lanes or alg1)")),
+            other => {
+                Err(format!("unknown navigation mode `{other}` (expected traffic, route, lanes or alg1)"))
+            }
         }
+    }
+}
+
+/// Where a UAV with a goal is along its route, in road coordinates (arc length s of its foot on the
+/// centre line, lateral offset ℓ positive to the left of increasing s).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RoutePosition {
+    /// Arc length of the UAV.
+    pub s: f64,
+    /// Lateral offset of the UAV.
+    pub lateral: f64,
+    /// Arc length of the goal.
+    pub goal_s: f64,
+    /// Lateral offset of the goal.
+    pub goal_lateral: f64,
+}
+
+impl RoutePosition {
+    /// +1 when the goal lies towards increasing arc length, −1 otherwise.
+    pub fn direction(&self) -> f64 {
+        if self.goal_s >= self.s { 1.0 } else { -1.0 }
+    }
+
+    /// What is left to fly in road coordinates, |Δs| + |Δℓ|: it decreases whenever the UAV moves
+    /// towards its goal along the road or across it.
+    pub fn remaining(&self) -> f64 {
+        (self.goal_s - self.s).abs() + (self.goal_lateral - self.lateral).abs()
+    }
+}
+
+/// A goal with its segment and road coordinates, cached when it is set.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Goal {
+    p: Vec2,
+    segment: usize,
+    s: f64,
+    lateral: f64,
+}
+
+impl Goal {
+    fn new(road: &Road, p: Vec2) -> Self {
+        let segment = road.locate(&p, None);
+        let line = road.centerline();
+        Self { p, segment, s: line.project_on_piece(segment, &p), lateral: line.lateral(segment, &p) }
     }
 }
 
@@ -58,25 +112,27 @@ pub struct NavState {
     pub arrived: bool,
     /// Segment membership of the UAV (hysteresis).
     pub tracker: SegmentTracker,
-    /// The goal and its segment, cached when the goal is set.
-    goal: Option<(Vec2, usize)>,
+    /// Where it is along its route (None without a goal), as of the last [`Navigator::locate`].
+    pub position: Option<RoutePosition>,
+    goal: Option<Goal>,
 }
 
 impl NavState {
     /// State of a UAV starting at `p0` with no goal (it hovers at `p0`).
     pub fn new(p0: Vec2) -> Self {
-        Self { target: p0, arrived: false, tracker: SegmentTracker::default(), goal: None }
+        Self { target: p0, arrived: false, tracker: SegmentTracker::default(), position: None, goal: None }
     }
 
     /// The current goal p_g, if any.
     pub fn goal(&self) -> Option<Vec2> {
-        self.goal.map(|(g, _)| g)
+        self.goal.map(|g| g.p)
     }
 
     /// Sets a new goal (clears `arrived`), or clears it so the UAV hovers where it is (`p`).
     pub fn set_goal(&mut self, road: &Road, goal: Option<Vec2>, p: Vec2) {
         self.arrived = false;
-        self.goal = goal.map(|g| (g, road.locate(&g, None)));
+        self.goal = goal.map(|g| Goal::new(road, g));
+        self.position = None;
         if goal.is_none() {
             self.target = p;
         }
@@ -85,8 +141,21 @@ impl NavState {
     /// Re-locates the goal after the road changed.
     pub fn road_changed(&mut self, road: &Road) {
         self.tracker = SegmentTracker::default();
-        self.goal = self.goal.map(|(g, _)| (g, road.locate(&g, None)));
+        self.position = None;
+        self.goal = self.goal.map(|g| Goal::new(road, g.p));
     }
+}
+
+/// What the fleet's traffic rules ask of one UAV's next target (`traffic` navigation).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Restriction {
+    /// Hold: the target may not pass this arc length in the direction of travel (the hold point
+    /// before a section reserved for the other direction).
+    pub hold_at: Option<f64>,
+    /// Back off: fly to this point instead (deadlock resolution).
+    pub back_off: Option<Vec2>,
+    /// When past `hold_at`: wait where it is (beside, in its lane) rather than go back to it.
+    pub wait_here: bool,
 }
 
 /// Chooses temporary targets on one road.
@@ -100,26 +169,79 @@ pub struct Navigator<'a> {
     pub r_s: f64,
     /// Arrival tolerance ε (m).
     pub epsilon: f64,
+    /// Road safety distance D_s (m), for lanes and clearances.
+    pub d_s: f64,
+    /// Collision distance D_c (m), for the gap between opposite lanes.
+    pub d_c: f64,
+    /// Input bound δ (m/s²), for the braking margin of the clearance.
+    pub delta: f64,
 }
 
-impl Navigator<'_> {
-    /// Updates `state` for a UAV at `p` and returns its temporary target p^r.
-    pub fn target(&self, state: &mut NavState, p: Vec2) -> Vec2 {
+impl<'a> Navigator<'a> {
+    /// A navigator on `road` with the parameters of `params`.
+    pub fn new(road: &'a Road, mode: NavMode, params: &Params) -> Self {
+        let (r_s, epsilon, d_s, d_c, delta) =
+            (params.r_s, params.epsilon, params.d_s, params.d_c, params.delta);
+        Self { road, mode, r_s, epsilon, d_s, d_c, delta }
+    }
+
+    /// Updates the segment, arrival and road coordinates of a UAV at `p`; returns its segment.
+    pub fn locate(&self, state: &mut NavState, p: Vec2) -> usize {
         let segment = state.tracker.update(self.road, &p);
-        let Some((goal, goal_segment)) = state.goal else {
-            return state.target;
+        let Some(goal) = state.goal else {
+            state.position = None;
+            return segment;
         };
-        if (p - goal).norm() <= self.epsilon {
+        if (p - goal.p).norm() <= self.epsilon {
             state.arrived = true;
         }
+        let line = self.road.centerline();
+        state.position = Some(RoutePosition {
+            s: line.project_on_piece(segment, &p),
+            lateral: line.lateral(segment, &p),
+            goal_s: goal.s,
+            goal_lateral: goal.lateral,
+        });
+        segment
+    }
+
+    /// Updates `state` for a UAV at `p` at rest with no restriction and returns its target p^r.
+    pub fn target(&self, state: &mut NavState, p: Vec2) -> Vec2 {
+        self.target_with(state, p, Vec2::zeros(), &Restriction::default())
+    }
+
+    /// Updates `state` for a UAV at `p` flying at `v` and returns its temporary target p^r; with
+    /// `traffic` navigation, `restriction` is what the fleet's traffic rules ask (holds, back-offs).
+    pub fn target_with(&self, state: &mut NavState, p: Vec2, v: Vec2, restriction: &Restriction) -> Vec2 {
+        let segment = self.locate(state, p);
+        self.choose(state, p, v, segment, restriction)
+    }
+
+    /// The target of a UAV that [`Navigator::locate`] has just placed in `segment` (as
+    /// [`Navigator::target_with`] without locating it again).
+    pub fn choose(
+        &self,
+        state: &mut NavState,
+        p: Vec2,
+        v: Vec2,
+        segment: usize,
+        restriction: &Restriction,
+    ) -> Vec2 {
+        let (Some(goal), Some(position)) = (state.goal, state.position) else {
+            return state.target;
+        };
         if state.arrived {
-            state.target = goal;
-            return goal;
+            state.target = goal.p;
+            return goal.p;
         }
         state.target = match self.mode {
-            NavMode::Route => self.route_target(p, segment, goal, goal_segment, 0.0),
-            NavMode::Lanes => self.route_target(p, segment, goal, goal_segment, LANE_FRACTION),
-            NavMode::Alg1 => self.alg1_target(state.target, p, goal),
+            NavMode::Traffic => {
+                let (goal_segment, goal) = (goal.segment, goal.p);
+                self.traffic_target(&Route { p, v, segment, goal, goal_segment, position }, restriction)
+            }
+            NavMode::Route => self.route_target(p, segment, goal.p, goal.segment, 0.0),
+            NavMode::Lanes => self.route_target(p, segment, goal.p, goal.segment, LANE_FRACTION),
+            NavMode::Alg1 => self.alg1_target(state.target, p, goal.p),
         };
         state.target
     }

@@ -3,6 +3,7 @@
 use crate::centerline::CenterLine;
 use crate::geometry::{Quad, Wall, WallKind, segments_intersect};
 use crate::index::RoadIndex;
+use crate::lanes::{ClearanceProfile, path_clear, route_walls};
 use crate::layout::RoadLayout;
 use crate::validate::{RoadError, check_joins, check_overlaps, check_quads};
 use uav::Vec2;
@@ -21,9 +22,16 @@ pub struct Road {
     /// For each segment i, the walls whose infinite lines rule R3 (`halfplanes`) enforces there.
     halfplane_walls: Vec<Vec<usize>>,
     centerline: CenterLine,
+    /// Clearance on each side of the centre line (traffic rules).
+    profile: ClearanceProfile,
     /// R*-trees over quads and walls for the point queries.
     index: RoadIndex,
+    /// Unique per built road (clones share it): lets users cache what they derive from the road.
+    id: u64,
 }
+
+/// The id of the next road built.
+static NEXT_ROAD_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
 impl Road {
     /// Validates `layout` (docs/safety.md §5) and derives walls, end caps and the centre line.
@@ -44,7 +52,14 @@ impl Road {
         let halfplane_walls = (0..quads.len()).map(|i| halfplane_set(&quads, &walls, i)).collect();
         let centerline = CenterLine::new(&quads);
         let index = RoadIndex::new(&quads, &walls);
-        Ok(Self { layout, quads, walls, segment_walls, halfplane_walls, centerline, index })
+        let profile = ClearanceProfile::new(&centerline, &walls, quads.len());
+        let id = NEXT_ROAD_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        Ok(Self { layout, quads, walls, segment_walls, halfplane_walls, centerline, profile, index, id })
+    }
+
+    /// A number unique to this road among those built by the process (its clones share it).
+    pub fn id(&self) -> u64 {
+        self.id
     }
 
     /// The layout this road was built from.
@@ -75,6 +90,19 @@ impl Road {
     /// The centre line.
     pub fn centerline(&self) -> &CenterLine {
         &self.centerline
+    }
+
+    /// Clearance on each side of the centre line along its arc length.
+    pub fn profile(&self) -> &ClearanceProfile {
+        &self.profile
+    }
+
+    /// True when the straight path from `p` (in segment `seg_p`) to `q` (in `seg_q`) crosses no wall
+    /// along the route between them and comes no closer to any than `need`, or than the nearer of its
+    /// ends already is (README "Traffic rules"). Costs the walls of the segments between, not all.
+    pub fn path_clear(&self, p: &Vec2, seg_p: usize, q: &Vec2, seg_q: usize, need: f64) -> bool {
+        let (lo, hi) = (seg_p.min(seg_q), seg_p.max(seg_q));
+        path_clear(p, q, need, route_walls(&self.walls, self.quads.len(), lo, hi))
     }
 
     /// True when `x` is inside some segment (or within 1e-9 m of one).

@@ -14,7 +14,7 @@ fn u_turn() -> Road {
 /// Moves a point at most `speed·dt` towards its target each step, refusing any step that would leave the
 /// road (a crude stand-in for the safety filter); returns the steps taken to reach the goal, if ever.
 fn fly(road: &Road, mode: NavMode, start: Vec2, goal: Vec2) -> Option<usize> {
-    let nav = Navigator { road, mode, r_s: 5.0, epsilon: 0.1 };
+    let nav = Navigator::new(road, mode, &uav::Params::default());
     let mut state = NavState::new(start);
     state.set_goal(road, Some(goal), start);
     let mut p = start;
@@ -48,7 +48,7 @@ fn literal_alg1_dead_locks_against_the_wall_erratum_e8() {
 #[test]
 fn route_target_is_visible_and_within_r_s() {
     let road = u_turn();
-    let nav = Navigator { road: &road, mode: NavMode::Route, r_s: 5.0, epsilon: 0.1 };
+    let nav = Navigator::new(&road, NavMode::Route, &uav::Params::default());
     for x in [0.5, 3.0, 6.0, 9.0, 11.5] {
         let p = Vec2::new(x, 0.7);
         let mut state = NavState::new(p);
@@ -66,7 +66,7 @@ fn route_target_is_visible_and_within_r_s() {
 #[test]
 fn arrived_uav_hovers_at_its_goal_and_clearing_the_goal_hovers_in_place() {
     let road = u_turn();
-    let nav = Navigator { road: &road, mode: NavMode::Route, r_s: 5.0, epsilon: 0.1 };
+    let nav = Navigator::new(&road, NavMode::Route, &uav::Params::default());
     let goal = Vec2::new(5.0, 0.0);
     let mut state = NavState::new(Vec2::new(4.95, 0.0));
     state.set_goal(&road, Some(goal), Vec2::new(4.95, 0.0));

@@ -16,6 +16,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         BenchTarget::Server => return crate::bench_server::main(&args),
         BenchTarget::Crazyflie => return crate::bench_crazyflie::main(&args),
         BenchTarget::Durability => return crate::bench_durability::main(&args),
+        BenchTarget::Fleet => return crate::bench_fleet::main(&args),
     }
     ExitCode::SUCCESS
 }

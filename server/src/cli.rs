@@ -63,7 +63,7 @@ pub struct FlightArgs {
     #[arg(long, default_value = "walls", value_parser = ["walls", "halfplanes", "paper"])]
     pub road_rule: String,
     /// How temporary targets are chosen.
-    #[arg(long, default_value = "route", value_parser = ["route", "lanes", "alg1"])]
+    #[arg(long, default_value = "traffic", value_parser = ["traffic", "route", "lanes", "alg1"])]
     pub nav: String,
     /// Policy flown by every UAV: `rl` (the shipped RL model, default), `pd` (the PD baseline), or a
     /// name given with `--model NAME=FILE.onnx`.
@@ -185,6 +185,9 @@ pub struct StressArgs {
     /// Save the scenario file of every violating case into this directory.
     #[arg(long)]
     pub save_failing: Option<PathBuf>,
+    /// Save the scenario file of every safe case in which not every UAV arrived into this directory.
+    #[arg(long)]
+    pub save_unfinished: Option<PathBuf>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub jobs: Option<usize>,
@@ -214,6 +217,15 @@ pub struct BenchArgs {
     /// Fleet sizes to measure (`crazyflie`), comma-separated.
     #[arg(long, value_delimiter = ',', default_values_t = [1, 10, 25, 50, 100])]
     pub crazyflies: Vec<usize>,
+    /// Fleet sizes to measure (`fleet`), comma-separated.
+    #[arg(long, value_delimiter = ',', default_values_t = [1000, 10000])]
+    pub uavs: Vec<usize>,
+    /// Ticks measured per fleet size (`fleet`).
+    #[arg(long, default_value_t = 40)]
+    pub ticks: usize,
+    /// Policy flown (`fleet`): `pd` or `rl`.
+    #[arg(long, default_value = "rl")]
+    pub policy: String,
 }
 
 /// Benchmarks.
@@ -228,6 +240,9 @@ pub enum BenchTarget {
     Crazyflie,
     /// Changes per second the server acknowledges on disk (fsync, group commit) and in memory.
     Durability,
+    /// Per-stage time of one tick (navigation and traffic rules, policies, filter, ...) per UAV, for
+    /// dense two-way crowds of each `--uavs` size.
+    Fleet,
 }
 
 impl FlightArgs {

@@ -28,11 +28,22 @@ pub fn load_scenario_with(path: &Path, rules: &links::LinkRules) -> Result<Valid
 }
 
 /// Prints the short human summary of a run.
-pub fn print_summary(m: &RunMetrics, policy_fallbacks: u64) {
+pub fn print_summary(m: &RunMetrics, policy_fallbacks: u64, stalls: &[fleet::Stall]) {
     let arrived = m.arrival_time_s.values().filter(|t| t.is_some()).count();
     let fmt = |x: Option<f64>| x.map_or("n/a".to_string(), |v| format!("{v:.3} m"));
     say!("scenario {}: {} ticks, {:.2} s simulated", m.scenario, m.ticks, m.sim_time_s);
     say!("  arrived          {arrived}/{}", m.arrival_time_s.len());
+    say!("  stalls           {:.1} UAV-s in total, longest {:.1} s", m.stall_s, m.max_stall_s);
+    for s in stalls.iter().filter(|s| s.duration_s > 2.0).take(5) {
+        say!(
+            "                   {} {:.1} s from t = {:.1} s at [{:.2}, {:.2}]",
+            s.id,
+            s.duration_s,
+            s.start_s,
+            s.at[0],
+            s.at[1]
+        );
+    }
     say!(
         "  collision margin {} (min S_kd), separation {}",
         fmt(m.min_collision_margin_m),
@@ -144,7 +155,7 @@ fn execute(args: &RunArgs, scenario: &ValidScenario, policies: PolicyRegistry) -
     } else {
         run_scenario(scenario, options, policies).context("writing the trajectory")?
     };
-    print_summary(&outcome.metrics, outcome.policy_fallbacks);
+    print_summary(&outcome.metrics, outcome.policy_fallbacks, &outcome.stalls);
     if let Some(path) = &args.out {
         let json = serde_json::to_string_pretty(&outcome.metrics)?;
         std::fs::write(path, json + "\n").with_context(|| format!("{}: cannot write", path.display()))?;

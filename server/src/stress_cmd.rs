@@ -62,9 +62,12 @@ fn run_case(args: &StressArgs, seed: u64) -> CaseResult {
     };
     // Without a trajectory writer the run does no I/O and cannot fail.
     let outcome = run_scenario(&valid, options, policies).expect("no I/O without a trajectory");
-    if !outcome.metrics.safe
-        && let Some(dir) = &args.save_failing
-    {
+    let dir = if outcome.metrics.safe {
+        args.save_unfinished.as_ref().filter(|_| !outcome.metrics.all_arrived)
+    } else {
+        args.save_failing.as_ref()
+    };
+    if let Some(dir) = dir {
         let path = dir.join(format!("stress-{seed}.json"));
         let written = std::fs::create_dir_all(dir).and_then(|()| {
             std::fs::write(&path, serde_json::to_string_pretty(&scenario).unwrap_or_default())
@@ -102,6 +105,19 @@ fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
         results.iter().map(|r| r.metrics.qp.failures).sum::<u64>(),
         results.iter().map(|r| r.metrics.qp.max_slack).fold(0.0, f64::max)
     );
+    let stalls: f64 = results.iter().map(|r| r.metrics.stall_s).sum();
+    let longest = results.iter().map(|r| r.metrics.max_stall_s).fold(0.0, f64::max);
+    say!("  stalls {stalls:.1} UAV-s in total, longest {longest:.1} s");
+    let unfinished: Vec<&CaseResult> = results.iter().filter(|r| !r.metrics.all_arrived).collect();
+    if !unfinished.is_empty() {
+        say!("  not all arrived (replay with: airroads stress --scenarios 1 --seed SEED):");
+        say!("  {:>20} {:>5} {:>5} {:>8} {:>12}", "seed", "uavs", "segs", "arrived", "longest_s");
+        for r in &unfinished {
+            let m = &r.metrics;
+            let arrived = m.arrival_time_s.values().filter(|t| t.is_some()).count();
+            say!("  {:>20} {:>5} {:>5} {:>8} {:>12.1}", r.seed, r.uavs, r.segments, arrived, m.max_stall_s);
+        }
+    }
     if violations.is_empty() {
         say!("  violations 0");
         return ExitCode::SUCCESS;

@@ -83,7 +83,7 @@ async fn put_road(
     ApiJson(layout): ApiJson<RoadLayout>,
 ) -> Result<Response, ApiError> {
     let road = app.validate(move || road_of(layout)).await?;
-    match app.apply(Command::SetRoad(road)).await {
+    match app.apply(Command::SetRoad(Box::new(road))).await {
         Ok(Outcome::RoadReplaced { cleared_goals }) => {
             let version = app.road.borrow().version;
             Ok(Json(json!({"version": version, "cleared_goals": cleared_goals})).into_response())

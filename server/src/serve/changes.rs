@@ -82,7 +82,7 @@ impl Engine {
         let dt = self.fleet.config.params.dt;
         Ok(match command {
             Command::SetRoad(road) => {
-                let (cleared_goals, undo) = self.fleet.replace_road_undoable(road)?;
+                let (cleared_goals, undo) = self.fleet.replace_road_undoable(*road)?;
                 self.road_changed();
                 let mut writes = vec![Write::Road(self.fleet.road().layout().segments.clone())];
                 for id in &cleared_goals {

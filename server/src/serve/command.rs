@@ -13,7 +13,7 @@ use uav::Vec2;
 #[derive(Debug)]
 pub enum Command {
     /// Replace the road (already validated).
-    SetRoad(Road),
+    SetRoad(Box<Road>),
     /// Add a simulated UAV at rest at `position`.
     AddUav {
         /// Unique id.

@@ -1,0 +1,381 @@
+//! The fleet's traffic rules (`traffic` navigation, README "Traffic rules"), run once per tick
+//! before the targets are chosen, in O(UAVs + zones + neighbour pairs):
+//! - **single-file sections**: the parts of the road where two opposite lanes do not fit are
+//!   conflict zones ([`crate::zones`]); a UAV whose route crosses one holds before it until the
+//!   zone admits its direction;
+//! - **deadlock resolution**: a UAV stalled for [`DEADLOCK_AFTER_S`] next to a stalled neighbour
+//!   with priority (stalled longer, then the smaller id) backs off for [`BACK_OFF_S`] to the far
+//!   right of its lane, or, in a single-file part, back to the nearest place where two fit.
+
+use crate::progress::Progress;
+use crate::yielding::{Flying, make_way};
+use crate::zones::{Request, Reservations};
+use roads::{Navigator, PROFILE_STEP_M, Restriction, Road, RoutePosition};
+use uav::Vec2;
+
+/// A stall this long (s) next to a stalled neighbour with priority makes a UAV back off.
+pub const DEADLOCK_AFTER_S: f64 = 3.0;
+
+/// How long (s) a back-off lasts.
+pub const BACK_OFF_S: f64 = 3.0;
+
+/// Distance (m) from a single-file section's end at which UAVs wait for their turn.
+pub const HOLD_M: f64 = 1.0;
+
+/// A grant is kept until its UAV is this far (m) beyond the section's far end.
+pub const EXIT_M: f64 = 0.5;
+
+/// Gap (in D_c) a UAV admitted to a zone keeps behind the one ahead of it on the way in.
+pub const FOLLOW_GAP_IN_DC: f64 = 2.0;
+
+/// Neighbours closer than this many D_c count as blocking each other in the deadlock rule.
+const BLOCKING_IN_DC: f64 = 3.0;
+
+/// A part of the road's centre line, [start, end] in arc length, where two opposite UAVs do not
+/// fit side by side, with the hold points where UAVs wait for their turn on either side.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Section {
+    /// Arc length where it starts.
+    pub start: f64,
+    /// Arc length where it ends.
+    pub end: f64,
+    /// Where UAVs coming from its start wait: [`HOLD_M`] before the nearest place (within r_s) wide
+    /// enough for a waiting UAV beside the lane of those leaving.
+    pub hold_before: f64,
+    /// Where UAVs coming from its end wait.
+    pub hold_after: f64,
+}
+
+/// One UAV's standing with the traffic rules.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct UavTraffic {
+    /// Progress towards its goal (stalls).
+    pub progress: Progress,
+    /// The zone it may enter (or is in), with its entry.
+    pub grant: Option<(usize, usize)>,
+    /// Since when (s) it waits for a zone.
+    pub waiting_since: Option<f64>,
+    /// It backs off towards this point until the time given.
+    pub back_off: Option<(Vec2, f64)>,
+    /// What the rules ask of its target this tick.
+    pub restriction: Restriction,
+}
+
+/// The single-file sections of `road` for `nav`'s parameters: maximal runs of profile samples where
+/// the two lanes do not fit, merged when the two-way gap between them is too short to wait in.
+pub fn sections(road: &Road, nav: &Navigator) -> Vec<Section> {
+    let length = road.centerline().length();
+    let mut out: Vec<Section> = Vec::new();
+    let samples = road.profile().len();
+    let mut k = 0;
+    while k < samples {
+        let s = |k: usize| (k as f64 * PROFILE_STEP_M).min(length);
+        if nav.two_way_at(s(k)) {
+            k += 1;
+            continue;
+        }
+        let first = k;
+        while k < samples && !nav.two_way_at(s(k)) {
+            k += 1;
+        }
+        let (start, end) = (s(first), s(k - 1));
+        match out.last_mut() {
+            Some(last) if start - last.end < 2.0 * HOLD_M + nav.d_c => last.end = end,
+            _ => out.push(Section { start, end, hold_before: start, hold_after: end }),
+        }
+    }
+    for z in &mut out {
+        z.hold_before = wide_place(nav, z.start, -1.0, length) - HOLD_M;
+        z.hold_after = wide_place(nav, z.end, 1.0, length) + HOLD_M;
+    }
+    out
+}
+
+/// The nearest arc length from `s` towards `direction` (at most r_s away) where each side of the
+/// road has room for a lane and a UAV waiting beside it: D_s + margin + D_c/2 + gap + D_c.
+fn wide_place(nav: &Navigator, s: f64, direction: f64, length: f64) -> f64 {
+    let room = nav.d_s + roads::CLEARANCE_MARGIN_M + nav.d_c / 2.0 + roads::LANE_GAP_MARGIN_M + nav.d_c;
+    let steps = (nav.r_s / PROFILE_STEP_M).ceil() as usize;
+    (0..=steps)
+        .map(|k| (s + direction * k as f64 * PROFILE_STEP_M).clamp(0.0, length))
+        .find(|&x| {
+            let (right, left) = nav.road.profile().at(x);
+            right.min(left) >= room
+        })
+        .unwrap_or(s + direction * nav.r_s)
+}
+
+/// The section a UAV at `pos` must cross next (or is in), with its entry (0: from its start, going
+/// towards increasing arc length; 1: from its end), when it is within `approach` of it.
+fn next_section(sections: &[Section], pos: &RoutePosition, approach: f64) -> Option<(usize, usize)> {
+    let (lo, hi) = (pos.s.min(pos.goal_s), pos.s.max(pos.goal_s));
+    if pos.direction() > 0.0 {
+        let z = sections.partition_point(|z| z.end + EXIT_M < pos.s);
+        let zone = sections.get(z)?;
+        (zone.start <= hi && zone.start - pos.s <= approach).then_some((z, 0))
+    } else {
+        let z = sections.partition_point(|z| z.start - EXIT_M <= pos.s).checked_sub(1)?;
+        let zone = sections[z];
+        (zone.end >= lo && pos.s - zone.end <= approach).then_some((z, 1))
+    }
+}
+
+/// Everything the rules need to know of one UAV this tick.
+pub struct Participant<'a> {
+    /// Its id (the deadlock rule's tie break).
+    pub id: &'a str,
+    /// Where it is along its route, when it flies towards a goal (not arrived, following commands).
+    pub position: Option<RoutePosition>,
+    /// Its position.
+    pub p: Vec2,
+    /// Its temporary target in the last tick.
+    pub target: Vec2,
+    /// Its standing.
+    pub traffic: &'a mut UavTraffic,
+}
+
+/// The rules' state between ticks.
+#[derive(Debug, Default)]
+pub struct TrafficRules {
+    road_id: u64,
+    sections: Vec<Section>,
+    zones: Reservations,
+    requests: Vec<Request>,
+}
+
+impl TrafficRules {
+    /// The single-file sections of the current road.
+    pub fn sections(&self) -> &[Section] {
+        &self.sections
+    }
+
+    /// Applies the rules at time `now` and sets each participant's restriction. `neighbours[k]`
+    /// lists the UAVs near participant k.
+    pub fn plan(&mut self, nav: &Navigator, now: f64, uavs: &mut [Participant], neighbours: &[Vec<usize>]) {
+        if self.road_id != nav.road.id() {
+            self.road_id = nav.road.id();
+            self.sections = sections(nav.road, nav);
+            self.zones = Reservations::new(self.sections.len());
+        }
+        for u in uavs.iter_mut() {
+            u.traffic.progress.update(u.position.map(|p| p.remaining()), now);
+            u.traffic.restriction = Restriction::default();
+        }
+        self.reserve(nav, now, uavs);
+        self.resolve_deadlocks(nav, now, uavs, neighbours);
+    }
+
+    fn reserve(&mut self, nav: &Navigator, now: f64, uavs: &mut [Participant]) {
+        self.zones.begin();
+        self.requests.clear();
+        let approach = 2.0 * nav.r_s + HOLD_M;
+        for (k, u) in uavs.iter_mut().enumerate() {
+            let wanted = u.position.and_then(|p| next_section(&self.sections, &p, approach));
+            if let Some((zone, entry)) = wanted.filter(|_| u.traffic.grant == wanted)
+                && let Some(pos) = u.position
+            {
+                // Clear of its entry once D_c inside the section.
+                let z = self.sections[zone];
+                let entering = if entry == 0 { pos.s < z.start + nav.d_c } else { pos.s > z.end - nav.d_c };
+                self.zones.held(zone, entry, entering);
+                continue;
+            }
+            u.traffic.grant = None;
+            let Some((zone, entry)) = wanted else {
+                u.traffic.waiting_since = None;
+                continue;
+            };
+            let since = *u.traffic.waiting_since.get_or_insert(now);
+            let z = self.sections[zone];
+            let past_hold =
+                u.position.is_some_and(|p| if entry == 0 { p.s > z.hold_before } else { p.s < z.hold_after });
+            // Past the hold point the queue is by how far along it is; at it, by waiting time.
+            let order = match u.position {
+                Some(p) if past_hold => -p.direction() * p.s,
+                _ => since,
+            };
+            let inside = u.position.is_some_and(|p| (z.start..=z.end).contains(&p.s));
+            self.requests.push(Request { zone, entry, since, order, rank: k, who: k, past_hold, inside });
+        }
+        self.line_up(nav, uavs);
+        let mut granted = Vec::new();
+        self.zones.decide(&mut self.requests, now, |who| granted.push(who));
+        for &k in &granted {
+            let r = self.requests.iter().find(|r| r.who == k).copied();
+            if let Some(r) = r {
+                uavs[k].traffic.grant = Some((r.zone, r.entry));
+                uavs[k].traffic.waiting_since = None;
+            }
+        }
+        for r in &self.requests {
+            let u = &mut uavs[r.who];
+            if u.traffic.grant.is_none() {
+                let z = self.sections[r.zone];
+                u.traffic.restriction.hold_at = Some(if r.entry == 0 { z.hold_before } else { z.hold_after });
+            }
+        }
+    }
+
+    /// UAVs admitted to a zone and still on their way in go in single file: each one but the first
+    /// (the farthest along) waits [`FOLLOW_GAP_IN_DC`]·D_c behind the one ahead of it, so a group
+    /// admitted together does not squeeze into the entry side by side and clog it.
+    fn line_up(&mut self, nav: &Navigator, uavs: &mut [Participant]) {
+        let mut entering: Vec<(usize, usize, f64, usize)> = Vec::new();
+        for (k, u) in uavs.iter().enumerate() {
+            if let (Some((zone, entry)), Some(pos)) = (u.traffic.grant, u.position) {
+                let z = self.sections[zone];
+                let along = if entry == 0 { pos.s } else { -pos.s };
+                let edge = if entry == 0 { z.start } else { -z.end };
+                if along < edge + nav.d_c {
+                    entering.push((zone, entry, -along, k));
+                }
+            }
+        }
+        entering.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)).then(a.2.total_cmp(&b.2)));
+        for pair in entering.windows(2) {
+            let (ahead, behind) = (pair[0], pair[1]);
+            if (ahead.0, ahead.1) == (behind.0, behind.1) {
+                let direction = if behind.1 == 0 { 1.0 } else { -1.0 };
+                let wait = -ahead.2 * direction - direction * FOLLOW_GAP_IN_DC * nav.d_c;
+                uavs[behind.3].traffic.restriction.hold_at = Some(wait);
+                uavs[behind.3].traffic.restriction.wait_here = true;
+            }
+        }
+    }
+
+    fn resolve_deadlocks(
+        &self,
+        nav: &Navigator,
+        now: f64,
+        uavs: &mut [Participant],
+        neighbours: &[Vec<usize>],
+    ) {
+        let blocking = BLOCKING_IN_DC * nav.d_c;
+        for k in 0..uavs.len() {
+            if let Some((target, until)) = uavs[k].traffic.back_off {
+                if now < until && uavs[k].position.is_some() {
+                    uavs[k].traffic.restriction.back_off = Some(target);
+                    continue;
+                }
+                uavs[k].traffic.back_off = None;
+            }
+            let (Some(pos), Some(mine)) = (uavs[k].position, uavs[k].traffic.progress.stalled_for(now))
+            else {
+                continue;
+            };
+            if mine < DEADLOCK_AFTER_S || uavs[k].traffic.restriction.hold_at.is_some() {
+                continue;
+            }
+            // The stalled neighbours with priority (the longer stall to a tick, then the smaller id):
+            // step off their way, as an arrived UAV does ([`crate::yielding`]).
+            let me = uavs[k].p;
+            let winners = neighbours[k].iter().filter_map(|&d| {
+                let other = &uavs[d];
+                let theirs = other.traffic.progress.stalled_for(now)?;
+                let first = if (theirs - mine).abs() > 1e-6 { theirs > mine } else { other.id < uavs[k].id };
+                let near = (other.p - me).norm() <= blocking;
+                // In each other's way: each heads towards the other (a queue behind a leader is not).
+                let facing = (other.target - other.p).dot(&(me - other.p)) > 0.0
+                    && (uavs[k].target - me).dot(&(other.p - me)) > 0.0;
+                let going = other.traffic.restriction.hold_at.is_none();
+                (near && facing && going && first && other.traffic.back_off.is_none())
+                    .then_some(Flying { p: other.p, goal: other.target })
+            });
+            let aside = make_way(me, me, winners, nav.d_c);
+            if aside != me {
+                let target = inside_lane(nav, &pos, aside);
+                uavs[k].traffic.back_off = Some((target, now + BACK_OFF_S));
+                uavs[k].traffic.restriction.back_off = Some(target);
+            }
+        }
+    }
+}
+
+/// `x` moved across the road, if needed, so that it keeps D_s plus a margin from both sides (at the
+/// arc length of `pos`).
+fn inside_lane(nav: &Navigator, pos: &RoutePosition, x: Vec2) -> Vec2 {
+    let line = nav.road.centerline();
+    let (right, left) = nav.road.profile().at(pos.s);
+    let keep = nav.d_s + roads::CLEARANCE_MARGIN_M;
+    let n = line.normal_at(pos.s);
+    let base = line.point_at(pos.s);
+    let along = x - base;
+    let lateral = n.dot(&along);
+    let clamped = if right + left < 2.0 * keep {
+        (left - right) / 2.0
+    } else {
+        lateral.clamp(keep - right, left - keep)
+    };
+    x + n * (clamped - lateral)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use roads::{NavMode, NavState, RoadLayout};
+    use uav::Params;
+
+    /// Two UAVs nose to nose on a 2 m wide road, each heading for the other's side.
+    fn head_on(ids: [&str; 2]) -> (Road, Vec<(String, Vec2, Vec2)>) {
+        let road = Road::new(RoadLayout::from_centerline(&[[0.0, 0.0], [20.0, 0.0]], &[2.0, 2.0])).unwrap();
+        let a = (ids[0].to_string(), Vec2::new(10.0, 0.0), Vec2::new(18.0, 0.0));
+        let b = (ids[1].to_string(), Vec2::new(10.4, 0.0), Vec2::new(2.0, 0.0));
+        (road, vec![a, b])
+    }
+
+    /// Runs the rules for `seconds` on UAVs that do not move; returns each one's standing.
+    fn stand_still(road: &Road, uavs: &[(String, Vec2, Vec2)], seconds: f64) -> Vec<UavTraffic> {
+        let params = Params::default();
+        let nav = Navigator::new(road, NavMode::Traffic, &params);
+        let mut rules = TrafficRules::default();
+        let mut standing = vec![UavTraffic::default(); uavs.len()];
+        let neighbours: Vec<Vec<usize>> =
+            (0..uavs.len()).map(|k| (0..uavs.len()).filter(|&d| d != k).collect()).collect();
+        let mut t = 0.0;
+        while t <= seconds {
+            let mut states: Vec<NavState> = uavs
+                .iter()
+                .map(|(_, p, g)| {
+                    let mut s = NavState::new(*p);
+                    s.set_goal(road, Some(*g), *p);
+                    nav.locate(&mut s, *p);
+                    s
+                })
+                .collect();
+            let mut participants: Vec<Participant> = uavs
+                .iter()
+                .zip(standing.iter_mut())
+                .zip(states.iter_mut())
+                .map(|(((id, p, g), traffic), state)| Participant {
+                    id,
+                    position: state.position,
+                    p: *p,
+                    target: *p + (*g - *p).normalize(),
+                    traffic,
+                })
+                .collect();
+            rules.plan(&nav, t, &mut participants, &neighbours);
+            t += params.dt;
+        }
+        standing
+    }
+
+    #[test]
+    fn of_two_stalled_uavs_nose_to_nose_the_lower_priority_one_steps_aside() {
+        for ids in [["a", "b"], ["b", "a"]] {
+            let (road, uavs) = head_on(ids);
+            // Before DEADLOCK_AFTER_S nobody moves aside.
+            let early = stand_still(&road, &uavs, DEADLOCK_AFTER_S - 0.2);
+            assert!(early.iter().all(|s| s.back_off.is_none()));
+            let late = stand_still(&road, &uavs, DEADLOCK_AFTER_S + 0.2);
+            // Equal stalls: the smaller id goes first, the other steps aside, inside the road.
+            let (winner, loser) = if ids[0] == "a" { (0, 1) } else { (1, 0) };
+            assert!(late[winner].back_off.is_none(), "{ids:?}: {late:?}");
+            let (target, _) = late[loser].back_off.expect("the other one steps aside");
+            assert!((target - uavs[loser].1).norm() > 0.2, "{target:?}");
+            assert!(road.boundary_distance(&target) >= 0.1 + 0.1 - 1e-9, "{target:?}");
+            // Off the winner's way: to the side of the line it flies along (y = 0).
+            assert!(target.y.abs() >= 0.2, "{target:?}");
+        }
+    }
+}

@@ -1,0 +1,213 @@
+//! Reservations of conflict zones. A zone is a part of the road that UAVs from different entries may
+//! not use at the same time: today a single-file section (entries: its two ends), later a junction
+//! or a merge (entries: its arms). The ground station sees every UAV, so it admits UAVs from one
+//! entry at a time: the zone opens to the entry whose first UAV has waited longest, admits from it
+//! while others wait less than [`MAX_WAIT_S`] or until [`MAX_BATCH`] went in while others wait, and
+//! once everyone admitted has left, opens to the longest waiting entry again. Invariants: UAVs from
+//! two entries never hold grants of one zone at once, and a waiting UAV is admitted after at most
+//! one batch from each other entry (no starvation), given that admitted UAVs leave. Admitted UAVs
+//! go in one after another: the next is admitted once the previous one is clear of the entry.
+
+/// Most UAVs admitted from one entry in a row while another entry has UAVs waiting.
+pub const MAX_BATCH: u32 = 6;
+
+/// Longest wait (s) at one entry before the zone stops admitting from the others.
+pub const MAX_WAIT_S: f64 = 20.0;
+
+/// The state of one zone.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+struct Zone {
+    /// The entry admitted in the current phase, while the zone is in use.
+    open: Option<usize>,
+    /// UAVs admitted in the current phase.
+    admitted: u32,
+    /// No more admissions in this phase: another entry has waited long enough.
+    closed: bool,
+    /// Grants held now (UAVs inside or on their way in), counted each tick.
+    held: u32,
+    /// The entry grants are held for (all holders share it).
+    held_entry: Option<usize>,
+    /// Holders not yet clear of their entry (the next UAV waits for them).
+    entering: u32,
+}
+
+/// A UAV that asks to enter a zone from one of its entries.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Request {
+    /// Index of the zone.
+    pub zone: usize,
+    /// Its entry.
+    pub entry: usize,
+    /// When it started waiting (s): another entry's oldest wait closes the open entry.
+    pub since: f64,
+    /// Its place in the queue of its entry, lower first (the caller's order: waiting time, or how
+    /// far along it is).
+    pub order: f64,
+    /// Tie break, lower first (the UAV's index in id order, for determinism).
+    pub rank: usize,
+    /// Who asks (the caller's index).
+    pub who: usize,
+    /// It is already past the place where it should have waited (pushed, or too fast to stop):
+    /// admitted at once if its entry is open (or the zone free), since sending it back would put it
+    /// in the way of those admitted behind it; the caller lines such UAVs up (they follow each other).
+    pub past_hold: bool,
+    /// It is already inside the zone: it cannot wait there, so it is admitted at once if its entry
+    /// is open (or the zone free).
+    pub inside: bool,
+}
+
+/// The reservations of every zone.
+#[derive(Debug, Clone, Default)]
+pub struct Reservations {
+    zones: Vec<Zone>,
+}
+
+impl Reservations {
+    /// Reservations of `zones` zones, all free.
+    pub fn new(zones: usize) -> Self {
+        Self { zones: vec![Zone::default(); zones] }
+    }
+
+    /// The entry `zone` admits from now, if it is in use.
+    pub fn open(&self, zone: usize) -> Option<usize> {
+        self.zones[zone].open
+    }
+
+    /// Number of zones.
+    pub fn len(&self) -> usize {
+        self.zones.len()
+    }
+
+    /// True with no zone.
+    pub fn is_empty(&self) -> bool {
+        self.zones.is_empty()
+    }
+
+    /// Starts a tick: the caller then reports every grant still held with [`Reservations::held`].
+    pub fn begin(&mut self) {
+        for z in &mut self.zones {
+            (z.held, z.held_entry, z.entering) = (0, None, 0);
+        }
+    }
+
+    /// A UAV still holds its grant to `zone` from `entry`: on its way in (`entering`), or inside.
+    pub fn held(&mut self, zone: usize, entry: usize, entering: bool) {
+        let z = &mut self.zones[zone];
+        z.held += 1;
+        z.held_entry = Some(entry);
+        z.entering += u32::from(entering);
+    }
+
+    /// Decides this tick's `requests` at time `now` and calls `grant(who)` for each one admitted.
+    /// `requests` is sorted in place (zone, then waiting time, then rank).
+    pub fn decide(&mut self, requests: &mut [Request], now: f64, mut grant: impl FnMut(usize)) {
+        requests.sort_by(|a, b| {
+            (a.zone, a.since, a.rank)
+                .partial_cmp(&(b.zone, b.since, b.rank))
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
+        for z in &mut self.zones {
+            if z.held == 0 {
+                // Everyone admitted has left: the phase is over.
+                (z.open, z.admitted, z.closed) = (None, 0, false);
+            } else if z.open.is_none() {
+                // Grants held without a phase (a UAV that started inside): their entry is open.
+                z.open = z.held_entry;
+            }
+        }
+        let mut start = 0;
+        while start < requests.len() {
+            let zone = requests[start].zone;
+            let end = start + requests[start..].iter().take_while(|r| r.zone == zone).count();
+            self.decide_zone(&requests[start..end], now, &mut grant);
+            start = end;
+        }
+    }
+
+    fn decide_zone(&mut self, requests: &[Request], now: f64, grant: &mut impl FnMut(usize)) {
+        let z = &mut self.zones[requests[0].zone];
+        // A free zone opens to the entry of the longest waiting request.
+        let first = requests.iter().min_by(|a, b| a.since.total_cmp(&b.since).then(a.rank.cmp(&b.rank)));
+        let open = *z.open.get_or_insert(first.map_or(requests[0].entry, |r| r.entry));
+        let oldest_other =
+            requests.iter().filter(|r| r.entry != open).map(|r| now - r.since).max_by(f64::total_cmp);
+        if oldest_other.is_some_and(|w| w >= MAX_WAIT_S)
+            || (oldest_other.is_some() && z.admitted >= MAX_BATCH)
+        {
+            z.closed = true;
+        }
+        for r in requests.iter().filter(|r| r.entry == open && r.inside) {
+            z.admitted += 1;
+            z.held += 1;
+            grant(r.who);
+        }
+        for r in requests.iter().filter(|r| r.entry == open && r.past_hold && !r.inside) {
+            z.admitted += 1;
+            z.held += 1;
+            z.entering += 1;
+            grant(r.who);
+        }
+        // One at a time: the first UAV waiting at the open entry's hold point, once the previous one
+        // is in.
+        let queue = requests.iter().find(|r| r.entry == open && !r.inside && !r.past_hold);
+        if let Some(r) = queue.filter(|_| !z.closed && z.entering == 0) {
+            z.admitted += 1;
+            z.held += 1;
+            z.entering += 1;
+            grant(r.who);
+            if oldest_other.is_some() && z.admitted >= MAX_BATCH {
+                z.closed = true;
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn request(entry: usize, since: f64, who: usize) -> Request {
+        Request { zone: 0, entry, since, order: since, rank: who, who, past_hold: false, inside: false }
+    }
+
+    /// Simulates a zone that each admitted UAV leaves `stay` ticks after its grant.
+    fn simulate(arrivals: &[(usize, usize)], stay: usize, ticks: usize) -> (Vec<Option<usize>>, usize) {
+        let mut zone = Reservations::new(1);
+        let mut granted_at: Vec<Option<usize>> = vec![None; arrivals.len()];
+        let mut max_concurrent_entries = 0;
+        for t in 0..ticks {
+            zone.begin();
+            let mut entries = std::collections::BTreeSet::new();
+            for (who, g) in granted_at.iter().enumerate() {
+                if let Some(g) = g.filter(|g| t < g + stay) {
+                    // Clear of the entry one tick after the grant.
+                    zone.held(0, arrivals[who].1, t == g);
+                    entries.insert(arrivals[who].1);
+                }
+            }
+            max_concurrent_entries = max_concurrent_entries.max(entries.len());
+            let mut requests: Vec<Request> = arrivals
+                .iter()
+                .enumerate()
+                .filter(|(who, (arrive, _))| *arrive <= t && granted_at[*who].is_none())
+                .map(|(who, (arrive, entry))| request(*entry, *arrive as f64, who))
+                .collect();
+            zone.decide(&mut requests, t as f64, |who| granted_at[who] = Some(t));
+        }
+        (granted_at, max_concurrent_entries)
+    }
+
+    #[test]
+    fn one_direction_at_a_time_in_batches_and_nobody_starves() {
+        // 20 UAVs keep arriving at entry 0, one per tick; 3 wait at entry 1 from tick 2.
+        let mut arrivals: Vec<(usize, usize)> = (0..20).map(|t| (t, 0)).collect();
+        arrivals.extend([(2, 1), (2, 1), (3, 1)]);
+        let (granted, entries) = simulate(&arrivals, 4, 200);
+        assert_eq!(entries, 1, "two entries held grants at once");
+        assert!(granted.iter().all(Option::is_some), "{granted:?}");
+        // Entry 1 went in after at most one batch from entry 0.
+        let first_from_1 = granted[20..].iter().flatten().min().copied().unwrap();
+        let before = granted[..20].iter().flatten().filter(|&&g| g < first_from_1).count();
+        assert!(before <= MAX_BATCH as usize, "{before} went first");
+    }
+}

@@ -1,0 +1,85 @@
+//! Liveness with the traffic rules: stalls are measured, tight bends no longer trap UAVs, and a
+//! single-file section lets both directions through in turn.
+
+use fleet::{FleetConfig, RunMetrics, RunOptions, Scenario, ScenarioUav, ValidScenario, run_scenario};
+use policies::PolicyRegistry;
+use roads::{NavMode, RoadLayout};
+use uav::Params;
+
+fn load(name: &str) -> ValidScenario {
+    let path = format!("{}/../scenarios/{name}.json", env!("CARGO_MANIFEST_DIR"));
+    let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{path}: {e}"));
+    Scenario::from_json(&text).and_then(|s| s.validate()).unwrap_or_else(|e| panic!("{path}: {e}"))
+}
+
+fn fly(scenario: &ValidScenario, nav: NavMode, policy: &str) -> RunMetrics {
+    let config = FleetConfig { nav, ..FleetConfig::default() };
+    let options = RunOptions { config, policy: policy.into(), trajectory: None };
+    let policies = PolicyRegistry::standard(scenario.params.delta).expect("the shipped model loads");
+    run_scenario(scenario, options, policies).expect("no I/O without a trajectory").metrics
+}
+
+fn uav(id: &str, start: [f64; 2], goal: [f64; 2]) -> ScenarioUav {
+    ScenarioUav { id: id.into(), start, goal, link: None }
+}
+
+#[test]
+fn stall_time_counts_a_uav_that_hovers_with_a_goal_and_nothing_else() {
+    // The literal Algorithm 1 dead-locks against the wall of a U-turn (erratum E8): one UAV, stalled
+    // from about its first seconds to t_max.
+    let layout = RoadLayout::from_centerline(&[[0.0, 0.0], [12.0, 0.0], [12.0, 8.0], [0.0, 8.0]], &[3.0; 4]);
+    let params = Params { t_max: 30.0, ..Params::default() };
+    let stuck = Scenario {
+        name: "u-turn".into(),
+        params,
+        segments: layout.segments.clone(),
+        uavs: vec![uav("a", [1.0, -0.5], [1.0, 8.5])],
+    };
+    let m = fly(&stuck.validate().unwrap(), NavMode::Alg1, "pd");
+    assert!(!m.all_arrived);
+    assert!(m.max_stall_s > 20.0 && m.max_stall_s <= 30.0, "{m:#?}");
+    assert!((m.stall_s - m.max_stall_s).abs() < 0.2, "one UAV, one stall: {m:#?}");
+    // The same UAV with the traffic rules flies round both bends without stopping.
+    let free = fly(&stuck.validate().unwrap(), NavMode::Traffic, "pd");
+    assert!(free.all_arrived && free.safe, "{free:#?}");
+    assert_eq!((free.stall_s, free.max_stall_s), (0.0, 0.0), "{free:#?}");
+}
+
+#[test]
+fn tight_bends_with_traffic_both_ways_do_not_trap_anyone() {
+    let s = load("bends10");
+    for policy in ["pd", "rl"] {
+        let m = fly(&s, NavMode::Traffic, policy);
+        assert!(m.safe && m.all_arrived, "{policy}: {m:#?}");
+        assert!(m.sim_time_s < 60.0, "{policy}: {m:#?}");
+    }
+}
+
+#[test]
+fn a_single_file_section_passes_both_directions_in_turn() {
+    // A 0.6 m wide, 4 m long section between 3 m wide roads: too narrow for two opposite lanes
+    // (D_s + D_c/2 + margins on each side), so it is reserved for one direction at a time.
+    let layout = RoadLayout::from_centerline(
+        &[[-12.0, 0.0], [-5.0, 0.0], [-2.0, 0.0], [2.0, 0.0], [5.0, 0.0], [12.0, 0.0]],
+        &[3.0, 3.0, 0.6, 0.6, 3.0, 3.0],
+    );
+    let mut uavs = Vec::new();
+    for i in 0..4 {
+        let y = -0.9 + 0.6 * i as f64;
+        uavs.push(uav(&format!("w{i}"), [-10.5, y], [10.0, y]));
+        uavs.push(uav(&format!("e{i}"), [10.5, y], [-10.0, y]));
+    }
+    let params = Params { t_max: 120.0, ..Params::default() };
+    let s =
+        Scenario { name: "single-file".into(), params, segments: layout.segments, uavs }.validate().unwrap();
+    let nav = roads::Navigator::new(&s.road, NavMode::Traffic, &s.params);
+    let sections = fleet::traffic::sections(&s.road, &nav);
+    assert_eq!(sections.len(), 1, "{sections:?}");
+    assert!(sections[0].start > 8.0 && sections[0].end < 16.0, "{sections:?}");
+    for policy in ["pd", "rl"] {
+        let m = fly(&s, NavMode::Traffic, policy);
+        assert!(m.safe && m.all_arrived, "{policy}: {m:#?}");
+    }
+    // Without the reservation (plain route targets) the two groups meet in the section and stay.
+    assert!(!fly(&s, NavMode::Route, "pd").all_arrived);
+}

@@ -1,0 +1,116 @@
+//! The `traffic` target (README "Traffic rules"): a point in the UAV's keep-right lane at most r_s
+//! of arc length ahead, the farthest one whose straight path keeps a clearance from every wall and
+//! vertex along the route, never past a hold point; the goal itself once it is that close and clear.
+
+use crate::lanes::PROFILE_STEP_M;
+use crate::nav::{Navigator, Restriction, RoutePosition};
+use uav::Vec2;
+
+/// Clearance (m) kept from walls beyond D_s and the braking distance, by paths and lanes.
+pub const CLEARANCE_MARGIN_M: f64 = 0.1;
+
+/// Gap (m) kept beyond D_c/2 between a lane and the centre line, so two opposite lanes are at
+/// least D_c + 2·this apart.
+pub const LANE_GAP_MARGIN_M: f64 = 0.1;
+
+/// Lane width (m) beyond its narrowest that opposite UAVs need to pass each other at speed without
+/// stopping; narrower parts are single file.
+pub const PASSING_MARGIN_M: f64 = 0.05;
+
+/// One UAV's situation on its route.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Route {
+    /// Position.
+    pub p: Vec2,
+    /// Velocity.
+    pub v: Vec2,
+    /// Its segment.
+    pub segment: usize,
+    /// Its goal.
+    pub goal: Vec2,
+    /// The goal's segment.
+    pub goal_segment: usize,
+    /// Road coordinates of both.
+    pub position: RoutePosition,
+}
+
+impl Navigator<'_> {
+    /// The clearance a path must keep at speed `speed`: D_s, the braking distance v²/(2δ) and a margin.
+    pub fn clearance_at(&self, speed: f64) -> f64 {
+        self.d_s + speed * speed / (2.0 * self.delta) + CLEARANCE_MARGIN_M
+    }
+
+    /// The lateral offset ℓ of the lane at arc length `s` for a UAV travelling towards `direction`
+    /// (±1) that is now at offset `lateral`: its own offset kept within the right half of the road,
+    /// between D_c/2 + margin from the centre and D_s + margin from the wall; where the right half is
+    /// narrower than that (a single-file part), the middle of the road.
+    pub fn lane_offset(&self, s: f64, direction: f64, lateral: f64) -> f64 {
+        let (right, left) = self.road.profile().at(s);
+        let (near, far) = if direction > 0.0 { (right, left) } else { (left, right) };
+        let outer = near - self.d_s - CLEARANCE_MARGIN_M;
+        let inner = self.d_c / 2.0 + LANE_GAP_MARGIN_M;
+        let towards_right =
+            if outer >= inner { (-direction * lateral).clamp(inner, outer) } else { (near - far) / 2.0 };
+        -direction * towards_right
+    }
+
+    /// True when two opposite UAVs fit side by side at arc length `s` (both lanes exist there).
+    pub fn two_way_at(&self, s: f64) -> bool {
+        let (right, left) = self.road.profile().at(s);
+        let inner = self.d_c / 2.0 + LANE_GAP_MARGIN_M;
+        right.min(left) - self.d_s - CLEARANCE_MARGIN_M >= inner + PASSING_MARGIN_M
+    }
+
+    pub(crate) fn traffic_target(&self, route: &Route, restriction: &Restriction) -> Vec2 {
+        if let Some(back_off) = restriction.back_off {
+            return back_off;
+        }
+        let pos = route.position;
+        let direction = pos.direction();
+        let need = self.clearance_at(route.v.norm());
+        let line = self.road.centerline();
+        let mut ahead = (pos.goal_s - pos.s).abs().min(self.r_s);
+        let held = restriction.hold_at.map(|h| (direction * (h - pos.s)).max(0.0));
+        let goal_allowed = held.is_none_or(|room| (pos.goal_s - pos.s).abs() <= room);
+        // Level with the goal there is no lane point left to aim at: any path that crosses no wall.
+        let goal_need = if (pos.goal_s - pos.s).abs() <= PROFILE_STEP_M { 0.0 } else { need };
+        if goal_allowed
+            && (route.goal - route.p).norm() <= self.r_s
+            && self.road.path_clear(&route.p, route.segment, &route.goal, route.goal_segment, goal_need)
+        {
+            return route.goal;
+        }
+        if let Some(hold) = restriction.hold_at {
+            let room = direction * (hold - pos.s);
+            if room <= 0.0 {
+                // Past the hold point (pushed, or too fast to stop): back to it, in the lane, or
+                // stay level with where it is.
+                let at = if restriction.wait_here { pos.s } else { hold };
+                return line.point_beside(at, self.lane_offset(at, direction, pos.lateral));
+            }
+            ahead = ahead.min(room);
+        }
+        // Candidate k of `count`, with its segment (piece i of the centre line runs through segment i;
+        // an offset point may lie in a neighbour, which the route's walls include).
+        let candidate = |k: usize, count: usize| {
+            let s = pos.s + direction * ahead * (k as f64 / count as f64);
+            (line.point_beside(s, self.lane_offset(s, direction, pos.lateral)), line.piece_at(s))
+        };
+        let clear =
+            |(c, segment): (Vec2, usize)| self.road.path_clear(&route.p, route.segment, &c, segment, need);
+        // The farthest clear candidate, by bisection: a candidate behind an occluding vertex hides the
+        // ones beyond it too, so "clear" holds for a prefix of the candidates (up to the rare exception).
+        let count = (ahead / PROFILE_STEP_M).ceil() as usize;
+        // Most of the time (straight or gentle roads) the farthest one is clear: one test.
+        if count > 0 && clear(candidate(count, count)) {
+            return candidate(count, count).0;
+        }
+        let (mut lo, mut hi) = (0, count.saturating_sub(1));
+        while lo < hi {
+            let mid = (lo + hi).div_ceil(2);
+            if clear(candidate(mid, count)) { lo = mid } else { hi = mid - 1 }
+        }
+        // lo = 0: the lane point beside the UAV (it and the UAV share a segment, or nearly).
+        candidate(lo, count.max(1)).0
+    }
+}

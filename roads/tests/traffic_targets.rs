@@ -1,0 +1,95 @@
+//! `traffic` navigation targets: corner clearance and keep-right lanes, as properties over random
+//! positions, speeds and roads.
+
+use proptest::prelude::*;
+use roads::{
+    CLEARANCE_MARGIN_M, LANE_GAP_MARGIN_M, NavMode, NavState, Navigator, Restriction, Road, RoadLayout,
+};
+use uav::{Params, Vec2};
+
+/// A winding road: a 2 m wide entry, a tight bend of `turn_deg`, a width change, another bend back.
+fn winding(turn_deg: f64, width: f64) -> Road {
+    let a = turn_deg.to_radians();
+    let p2 = [6.0 + 5.0 * a.cos(), 5.0 * a.sin()];
+    let p3 = [p2[0] + 6.0, p2[1]];
+    Road::new(RoadLayout::from_centerline(&[[0.0, 0.0], [6.0, 0.0], p2, p3], &[2.0, 2.0, width, width]))
+        .unwrap()
+}
+
+/// Distance from `x` to the nearest wall (the road's own definition).
+fn wall_distance(road: &Road, x: &Vec2) -> f64 {
+    road.boundary_distance(x)
+}
+
+/// The smallest distance from a point of the straight path a→b to any wall vertex or wall.
+fn path_distance_to_walls(road: &Road, a: &Vec2, b: &Vec2) -> f64 {
+    road.walls().iter().map(|w| roads::segment_distance(a, b, &w.a, &w.b)).fold(f64::INFINITY, f64::min)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(3000))]
+
+    /// The straight path to a `traffic` target never comes closer to a wall than the clearance
+    /// D_s + v²/(2δ) + margin, or than the nearer of its two ends: in particular it never grazes an
+    /// inner vertex, which is what left UAVs hovering at bends.
+    #[test]
+    fn targets_keep_their_clearance_from_walls_and_vertices(
+        turn in 20.0f64..130.0, width in 1.0f64..4.0, along in 0.0f64..1.0, across in -1.0f64..1.0,
+        speed in 0.0f64..3.0, heading in 0.0f64..std::f64::consts::TAU,
+    ) {
+        let road = winding(turn, width);
+        let params = Params::default();
+        let nav = Navigator::new(&road, NavMode::Traffic, &params);
+        let line = road.centerline();
+        let s = along * line.length();
+        let (right, left) = road.profile().at(s);
+        let p = line.point_beside(s, if across >= 0.0 { across * left } else { across * right });
+        prop_assume!(wall_distance(&road, &p) > params.d_s);
+        let goal = line.point_beside(line.length() - 0.5, 0.0);
+        let mut state = NavState::new(p);
+        state.set_goal(&road, Some(goal), p);
+        let v = Vec2::new(heading.cos(), heading.sin()) * speed;
+        let t = nav.target_with(&mut state, p, v, &Restriction::default());
+        prop_assert!(road.contains(&t), "target {t:?} outside the road");
+        let need = params.d_s + speed * speed / (2.0 * params.delta) + CLEARANCE_MARGIN_M;
+        let ends = wall_distance(&road, &p).min(wall_distance(&road, &t));
+        let path = path_distance_to_walls(&road, &p, &t);
+        prop_assert!(path >= need.min(ends) - 1e-6, "path {p:?} → {t:?} passes {path:.3} m from a wall (need {need:.3}, ends {ends:.3})");
+    }
+
+    /// Lanes: where both exist, opposite lanes are at least D_c + 2·margin apart and each keeps
+    /// D_s + margin from its wall, whatever lateral offset the UAVs are at.
+    #[test]
+    fn opposite_lanes_are_apart_and_inside(turn in 20.0f64..130.0, width in 1.0f64..4.0, along in 0.0f64..1.0,
+                                           lat_a in -2.0f64..2.0, lat_b in -2.0f64..2.0) {
+        let road = winding(turn, width);
+        let params = Params::default();
+        let nav = Navigator::new(&road, NavMode::Traffic, &params);
+        let s = along * road.centerline().length();
+        prop_assume!(nav.two_way_at(s));
+        let (east, west) = (nav.lane_offset(s, 1.0, lat_a), nav.lane_offset(s, -1.0, lat_b));
+        prop_assert!(west - east >= params.d_c + 2.0 * LANE_GAP_MARGIN_M - 1e-9, "east {east} west {west}");
+        let (right, left) = road.profile().at(s);
+        prop_assert!(east >= -(right - params.d_s - CLEARANCE_MARGIN_M) - 1e-9);
+        prop_assert!(west <= left - params.d_s - CLEARANCE_MARGIN_M + 1e-9);
+    }
+}
+
+#[test]
+fn a_hold_keeps_the_target_before_the_hold_point() {
+    let road = Road::new(RoadLayout::from_centerline(&[[0.0, 0.0], [20.0, 0.0]], &[3.0, 3.0])).unwrap();
+    let nav = Navigator::new(&road, NavMode::Traffic, &Params::default());
+    let p = Vec2::new(2.0, -0.5);
+    let mut state = NavState::new(p);
+    state.set_goal(&road, Some(Vec2::new(18.0, 0.0)), p);
+    let free = nav.target_with(&mut state, p, Vec2::zeros(), &Restriction::default());
+    assert!(free.x > 6.5, "{free:?}");
+    // Traffic keeps right: eastbound targets lie south of the centre line.
+    assert!(free.y < -0.15 - 0.1 + 1e-9, "{free:?}");
+    let held = Restriction { hold_at: Some(4.0), ..Restriction::default() };
+    let t = nav.target_with(&mut state, p, Vec2::zeros(), &held);
+    assert!((t.x - 4.0).abs() < 1e-9, "{t:?}");
+    let away = Vec2::new(1.0, 1.0);
+    let backing = Restriction { back_off: Some(away), ..Restriction::default() };
+    assert_eq!(nav.target_with(&mut state, p, Vec2::zeros(), &backing), away);
+}
