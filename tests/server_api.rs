@@ -38,6 +38,13 @@ async fn health_openapi_state_and_metrics() {
     assert!(metrics["ticks"].as_u64().unwrap() >= 3, "{metrics}");
     assert!(metrics["tick"]["p99_us"].as_f64().unwrap() > 0.0, "{metrics}");
     assert_eq!(metrics["qp"]["failures"], 0);
+    // Stalls are measured (nothing stalls here in the first ticks).
+    assert_eq!(
+        (metrics["stalled_uavs"].as_u64(), metrics["longest_stall_s"].as_f64()),
+        (Some(0), Some(0.0)),
+        "{metrics}"
+    );
+    assert!(metrics["stall_s"].as_f64().is_some_and(|s| s >= 0.0), "{metrics}");
     let (status, body) = server.call("GET", "/api/nowhere", None).await;
     assert_eq!((status, body["error"]["code"].as_str()), (404, Some("not_found")));
     server.stop().await;

@@ -63,6 +63,13 @@ pub struct LoopMetrics {
     pub min_road_margin_m: Option<f64>,
     /// Commands (REST changes) applied between ticks.
     pub commands_applied: u64,
+    /// UAV-seconds stalled since the server started: flying with a goal and no progress towards it
+    /// for at least 1 s (as `stall_s` in METRICS.json).
+    pub stall_s: f64,
+    /// UAVs stalled now.
+    pub stalled_uavs: u64,
+    /// The longest stall going on now (s).
+    pub longest_stall_s: f64,
 }
 
 /// Accumulates [`LoopMetrics`] tick by tick without allocating.
@@ -118,8 +125,16 @@ impl TickStats {
             self.window.pop_front();
         }
         self.window.push_back(duration_us);
+        (m.stalled_uavs, m.longest_stall_s) = (0, 0.0);
         for u in fleet.uavs() {
             let l = &u.last;
+            if l.stall_s > 0.0 {
+                // As in METRICS.json: the first stalled tick adds the second without progress.
+                let first = l.stall_s < fleet::progress::STALL_AFTER_S + m.dt / 2.0;
+                m.stall_s += if first { l.stall_s } else { m.dt };
+                m.stalled_uavs += 1;
+                m.longest_stall_s = m.longest_stall_s.max(l.stall_s);
+            }
             m.qp.solves += u64::from(l.solved);
             m.qp.slack_used += u64::from(l.max_slack > 1e-6);
             m.qp.max_slack = m.qp.max_slack.max(l.max_slack);
