@@ -5,6 +5,7 @@
 //! No async, no I/O beyond what a [`links::Link`] does: the server wraps this in its 20 Hz task.
 
 mod edit;
+pub mod families;
 mod fleet;
 mod lost;
 mod margins;

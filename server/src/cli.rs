@@ -182,6 +182,10 @@ pub struct StressArgs {
     /// Seed of the first scenario (case i uses seed + i).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Which random scenarios: `mixed` (bends, widths, hairpins, crowds), `bends` (one-way along
+    /// tight bends) or `bottleneck` (two-way through a narrow section).
+    #[arg(long, default_value = "mixed", value_parser = ["mixed", "bends", "bottleneck"])]
+    pub family: String,
     /// Save the scenario file of every violating case into this directory.
     #[arg(long)]
     pub save_failing: Option<PathBuf>,

@@ -1,7 +1,6 @@
 //! `airroads stress`: random valid scenarios, run in parallel, violations reported with their seeds.
 
 use crate::cli::StressArgs;
-use fleet::stress::random_scenario;
 use fleet::{RunMetrics, RunOptions, run_scenario};
 use std::process::ExitCode;
 use std::sync::Mutex;
@@ -49,9 +48,11 @@ pub fn main(args: StressArgs) -> ExitCode {
 }
 
 fn run_case(args: &StressArgs, seed: u64) -> CaseResult {
-    let scenario = random_scenario(seed);
+    // The value parser only lets known families through.
+    let family: fleet::families::Family = args.family.parse().unwrap_or_default();
+    let scenario = family.scenario(seed);
     let (uavs, segments) = (scenario.uavs.len(), scenario.segments.len());
-    // random_scenario only returns validated scenarios.
+    // The generators only return validated scenarios.
     let valid = scenario.validate().expect("stress scenarios are valid by construction");
     // Checked in `main` before any case runs.
     let policies = args.flight.policies(valid.params.delta).expect("policies were checked at start");
@@ -84,8 +85,9 @@ fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
     let arrived = results.iter().filter(|r| r.metrics.all_arrived).count();
     let min = |f: fn(&RunMetrics) -> f64| results.iter().map(|r| f(&r.metrics)).fold(f64::INFINITY, f64::min);
     say!(
-        "stress: {} scenarios (seeds {}..{}), road rule {}, nav {}, policy {}, share {}, slack weights {}",
+        "stress: {} {} scenarios (seeds {}..{}), road rule {}, nav {}, policy {}, share {}, slack weights {}",
         results.len(),
+        args.family,
         args.seed,
         args.seed.wrapping_add(args.scenarios),
         args.flight.road_rule,
@@ -110,7 +112,7 @@ fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
     say!("  stalls {stalls:.1} UAV-s in total, longest {longest:.1} s");
     let unfinished: Vec<&CaseResult> = results.iter().filter(|r| !r.metrics.all_arrived).collect();
     if !unfinished.is_empty() {
-        say!("  not all arrived (replay with: airroads stress --scenarios 1 --seed SEED):");
+        say!("  not all arrived (replay with: airroads stress --family FAMILY --scenarios 1 --seed SEED):");
         say!("  {:>20} {:>5} {:>5} {:>8} {:>12}", "seed", "uavs", "segs", "arrived", "longest_s");
         for r in &unfinished {
             let m = &r.metrics;
@@ -122,7 +124,10 @@ fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
         say!("  violations 0");
         return ExitCode::SUCCESS;
     }
-    say!("  violations {} (replay with: airroads stress --scenarios 1 --seed SEED)", violations.len());
+    say!(
+        "  violations {} (replay with: airroads stress --family FAMILY --scenarios 1 --seed SEED)",
+        violations.len()
+    );
     say!(
         "  {:>20} {:>5} {:>5} {:>12} {:>12} {:>8} {:>8}",
         "seed",
