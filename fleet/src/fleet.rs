@@ -3,6 +3,7 @@
 
 use crate::lost::obstacle_row;
 use crate::neighbours::NeighbourSearch;
+use crate::speed::{govern, speed_limit};
 use crate::traffic::{Participant, TrafficRules, UavTraffic};
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::{Link, LinkPhase};
@@ -400,6 +401,15 @@ impl Fleet {
                     self.uavs[k].last.u_ref = uav::saturate(*u, delta);
                     self.uavs[k].last.policy_fallback = false;
                 }
+            }
+        }
+        if self.config.nav == NavMode::Traffic {
+            // The traffic rules' speed limit: narrower road, slower flight (`fleet::speed`).
+            for uav in &mut self.uavs {
+                let Some(pos) = uav.nav.position.filter(|_| !uav.nav.arrived) else { continue };
+                let (right, left) = self.road.profile().at(pos.s);
+                let limit = speed_limit(right + left);
+                uav.last.u_ref = govern(uav.state.v, uav.last.u_ref, limit, delta, dt);
             }
         }
     }

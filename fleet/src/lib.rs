@@ -14,6 +14,7 @@ mod neighbours;
 pub mod progress;
 mod run;
 mod scenario;
+pub mod speed;
 pub mod stress;
 pub mod traffic;
 mod undo;
