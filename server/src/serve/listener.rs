@@ -145,6 +145,7 @@ pub async fn run(
                 tracing::warn!("accept failed: {e}");
                 if table.evict_one() {
                     counters.evicted.fetch_add(1, Relaxed);
+                    counters.open.fetch_sub(1, Relaxed);
                 }
                 tokio::time::sleep(Duration::from_millis(10)).await;
                 continue;
@@ -152,7 +153,10 @@ pub async fn run(
         };
         if table.len() >= limits.max_connections {
             if table.evict_one() {
+                // Counted closed now (it left the table), not when its task gets round to it: `open`
+                // never exceeds the cap.
                 counters.evicted.fetch_add(1, Relaxed);
+                counters.open.fetch_sub(1, Relaxed);
             } else {
                 counters.refused.fetch_add(1, Relaxed);
                 drop(stream);
@@ -193,8 +197,10 @@ pub async fn run(
                     let _ = tokio::time::timeout(drain, connection).await;
                 }
             }
-            table.0.lock().unwrap_or_else(PoisonError::into_inner).remove(&id);
-            counters.open.fetch_sub(1, Relaxed);
+            // An evicted connection was already taken out of the table and the count.
+            if table.0.lock().unwrap_or_else(PoisonError::into_inner).remove(&id).is_some() {
+                counters.open.fetch_sub(1, Relaxed);
+            }
         });
     }
     let deadline = tokio::time::Instant::now() + drain;
