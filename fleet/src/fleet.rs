@@ -4,7 +4,7 @@
 use crate::lost::obstacle_row;
 use crate::neighbours::NeighbourSearch;
 use crate::speed::{govern, speed_limit};
-use crate::traffic::{Participant, TrafficRules, UavTraffic};
+use crate::traffic::{TrafficRules, UavTraffic};
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::{Link, LinkPhase};
 use policies::{Observation, PolicyRegistry, observation};
@@ -316,22 +316,15 @@ impl Fleet {
         let mut segments = std::mem::take(&mut self.segments);
         segments.clear();
         let hold = self.hold;
-        let mut participants: Vec<Participant> = Vec::with_capacity(self.uavs.len());
         for uav in &mut self.uavs {
             segments.push(nav.locate(&mut uav.nav, uav.state.p));
             let tracked = !hold && uav.flying() && !uav.nav.arrived;
-            let position = uav.nav.position.filter(|_| tracked);
-            let (p, target) = (uav.state.p, uav.last.target);
-            participants.push(Participant { id: &uav.id, position, p, target, traffic: &mut uav.traffic });
+            uav.traffic.route = uav.nav.position.filter(|_| tracked);
+            uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
         }
         if self.config.nav == NavMode::Traffic {
-            self.traffic.plan(&nav, now, &mut participants, &self.neighbours.lists);
-        } else {
-            for p in &mut participants {
-                p.traffic.progress.update(p.position.map(|pos| pos.remaining()), now);
-            }
+            self.traffic.plan(&nav, now, &mut self.uavs, &self.neighbours.lists);
         }
-        drop(participants);
         for (uav, &segment) in self.uavs.iter_mut().zip(&segments) {
             let restriction = uav.traffic.restriction;
             uav.last.target = nav.choose(&mut uav.nav, uav.state.p, uav.state.v, segment, &restriction);

@@ -2,7 +2,7 @@
 
 use crate::fleet::Fleet;
 use crate::margins::{collision_margin, road_margin};
-use crate::progress::STALL_AFTER_S;
+use crate::progress::stall_time_added;
 use serde::Serialize;
 use std::collections::BTreeMap;
 
@@ -37,7 +37,7 @@ pub struct RunMetrics {
     /// Arrival time per UAV id (s), null if it never arrived.
     pub arrival_time_s: BTreeMap<String, Option<f64>>,
     /// UAV-seconds spent stalled: with a goal, flying, and no progress towards it for at least
-    /// [`STALL_AFTER_S`] (counted from the last progress).
+    /// [`crate::progress::STALL_AFTER_S`] (counted from the last progress).
     pub stall_s: f64,
     /// The longest single stall (s).
     pub max_stall_s: f64,
@@ -88,8 +88,8 @@ pub struct MetricsRecorder {
     arrival: BTreeMap<String, Option<f64>>,
     stall_s: f64,
     max_stall_s: f64,
-    /// Stalls going on, by UAV id, and those that ended.
-    ongoing: BTreeMap<String, Stall>,
+    /// Stalls going on, by UAV index (a headless run never removes UAVs), and those that ended.
+    ongoing: Vec<Option<Stall>>,
     stalls: Vec<Stall>,
 }
 
@@ -119,22 +119,19 @@ impl MetricsRecorder {
                 self.min_separation = min_opt(self.min_separation, (u.state.p - d.state.p).norm());
             }
             let last = &u.last;
-            if last.stall_s > 0.0 {
-                // The first stalled tick adds the whole second without progress before it.
-                let first = last.stall_s < STALL_AFTER_S + p.dt / 2.0;
-                self.stall_s += if first { last.stall_s } else { p.dt };
-                self.max_stall_s = self.max_stall_s.max(last.stall_s);
-                let at = [u.state.p.x, u.state.p.y];
-                let start_s = t - last.stall_s;
-                let stall = self.ongoing.entry(u.id.clone()).or_insert(Stall {
-                    id: u.id.clone(),
-                    start_s,
-                    duration_s: 0.0,
-                    at,
-                });
-                stall.duration_s = last.stall_s;
-            } else if let Some(stall) = self.ongoing.remove(&u.id) {
-                self.stalls.push(stall);
+            self.stall_s += stall_time_added(last.stall_s, p.dt);
+            self.max_stall_s = self.max_stall_s.max(last.stall_s);
+            if self.ongoing.len() <= k {
+                self.ongoing.resize(k + 1, None);
+            }
+            match (&mut self.ongoing[k], last.stall_s > 0.0) {
+                (Some(stall), true) => stall.duration_s = last.stall_s,
+                (slot @ None, true) => {
+                    let (id, at) = (u.id.clone(), [u.state.p.x, u.state.p.y]);
+                    *slot = Some(Stall { id, start_s: t - last.stall_s, duration_s: last.stall_s, at });
+                }
+                (slot @ Some(_), false) => self.stalls.extend(slot.take()),
+                (None, false) => {}
             }
             if last.solved {
                 self.solves += 1;
@@ -153,7 +150,7 @@ impl MetricsRecorder {
 
     /// Every stall so far (those going on included), longest first.
     pub fn stalls(&self) -> Vec<Stall> {
-        let mut all: Vec<Stall> = self.stalls.iter().chain(self.ongoing.values()).cloned().collect();
+        let mut all: Vec<Stall> = self.stalls.iter().chain(self.ongoing.iter().flatten()).cloned().collect();
         all.sort_by(|a, b| b.duration_s.total_cmp(&a.duration_s));
         all
     }

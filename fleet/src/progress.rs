@@ -9,6 +9,16 @@ pub const PROGRESS_STEP_M: f64 = 0.05;
 /// A UAV without progress for this long (s) is stalled.
 pub const STALL_AFTER_S: f64 = 1.0;
 
+/// What a tick adds to a stall total for a UAV stalled `stall_s` seconds now (0 when it is not):
+/// the whole time since its last progress on its first stalled tick, one `dt` after that.
+pub fn stall_time_added(stall_s: f64, dt: f64) -> f64 {
+    match stall_s {
+        s if s <= 0.0 => 0.0,
+        s if s < STALL_AFTER_S + dt / 2.0 => s,
+        _ => dt,
+    }
+}
+
 /// One UAV's progress towards its current goal.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Progress {
@@ -75,5 +85,15 @@ mod tests {
         // A new goal, arrival or landing restarts tracking.
         p.update(None, 4.0);
         assert_eq!(p.without_progress(10.0), 0.0);
+    }
+
+    #[test]
+    fn a_stall_adds_up_to_its_length() {
+        // Last progress at t = 0, detected at t = 1, last stalled tick at t = 2.45: the total is
+        // the stall's length at its last tick, as `max_stall_s` reports it.
+        let dt = 0.05;
+        let total: f64 = (20..50).map(|k| stall_time_added(k as f64 * dt, dt)).sum();
+        assert!((total - 2.45).abs() < 1e-9, "{total}");
+        assert_eq!(stall_time_added(0.0, dt), 0.0);
     }
 }

@@ -7,6 +7,7 @@
 //!   with priority (stalled longer, then the smaller id) backs off for [`BACK_OFF_S`] to the far
 //!   right of its lane, or, in a single-file part, back to the nearest place where two fit.
 
+use crate::fleet::Uav;
 use crate::progress::Progress;
 use crate::yielding::{Flying, make_way};
 use crate::zones::{Request, Reservations};
@@ -55,6 +56,9 @@ pub struct UavTraffic {
     pub grant: Option<(usize, usize)>,
     /// Since when (s) it waits for a zone.
     pub waiting_since: Option<f64>,
+    /// Where it is along its route this tick, while the rules apply to it (flying towards a goal,
+    /// not arrived, not held by the operator); set by the fleet before [`TrafficRules::plan`].
+    pub route: Option<RoutePosition>,
     /// It backs off towards this point until the time given.
     pub back_off: Option<(Vec2, f64)>,
     /// What the rules ask of its target this tick.
@@ -120,27 +124,16 @@ fn next_section(sections: &[Section], pos: &RoutePosition, approach: f64) -> Opt
     }
 }
 
-/// Everything the rules need to know of one UAV this tick.
-pub struct Participant<'a> {
-    /// Its id (the deadlock rule's tie break).
-    pub id: &'a str,
-    /// Where it is along its route, when it flies towards a goal (not arrived, following commands).
-    pub position: Option<RoutePosition>,
-    /// Its position.
-    pub p: Vec2,
-    /// Its temporary target in the last tick.
-    pub target: Vec2,
-    /// Its standing.
-    pub traffic: &'a mut UavTraffic,
-}
-
 /// The rules' state between ticks.
 #[derive(Debug, Default)]
 pub struct TrafficRules {
     road_id: u64,
     sections: Vec<Section>,
     zones: Reservations,
+    /// Scratch (kept between ticks, so the loop does not allocate): this tick's requests, and the
+    /// admitted UAVs on their way in as (zone, entry, −progress, UAV).
     requests: Vec<Request>,
+    entering: Vec<(usize, usize, f64, usize)>,
 }
 
 impl TrafficRules {
@@ -149,30 +142,30 @@ impl TrafficRules {
         &self.sections
     }
 
-    /// Applies the rules at time `now` and sets each participant's restriction. `neighbours[k]`
-    /// lists the UAVs near participant k.
-    pub fn plan(&mut self, nav: &Navigator, now: f64, uavs: &mut [Participant], neighbours: &[Vec<usize>]) {
+    /// Applies the rules at time `now` and sets each UAV's `traffic.restriction`, from its
+    /// `traffic.route` and progress (updated by the fleet). `neighbours[k]` lists the UAVs near UAV k.
+    pub fn plan(&mut self, nav: &Navigator, now: f64, uavs: &mut [Uav], neighbours: &[Vec<usize>]) {
         if self.road_id != nav.road.id() {
             self.road_id = nav.road.id();
             self.sections = sections(nav.road, nav);
             self.zones = Reservations::new(self.sections.len());
         }
         for u in uavs.iter_mut() {
-            u.traffic.progress.update(u.position.map(|p| p.remaining()), now);
             u.traffic.restriction = Restriction::default();
         }
         self.reserve(nav, now, uavs);
         self.resolve_deadlocks(nav, now, uavs, neighbours);
     }
 
-    fn reserve(&mut self, nav: &Navigator, now: f64, uavs: &mut [Participant]) {
+    fn reserve(&mut self, nav: &Navigator, now: f64, uavs: &mut [Uav]) {
         self.zones.begin();
         self.requests.clear();
         let approach = 2.0 * nav.r_s + HOLD_M;
         for (k, u) in uavs.iter_mut().enumerate() {
-            let wanted = u.position.and_then(|p| next_section(&self.sections, &p, approach));
+            let position = u.traffic.route;
+            let wanted = position.and_then(|p| next_section(&self.sections, &p, approach));
             if let Some((zone, entry)) = wanted.filter(|_| u.traffic.grant == wanted)
-                && let Some(pos) = u.position
+                && let Some(pos) = position
             {
                 // Clear of its entry once D_c inside the section.
                 let z = self.sections[zone];
@@ -188,25 +181,20 @@ impl TrafficRules {
             let since = *u.traffic.waiting_since.get_or_insert(now);
             let z = self.sections[zone];
             let past_hold =
-                u.position.is_some_and(|p| if entry == 0 { p.s > z.hold_before } else { p.s < z.hold_after });
+                position.is_some_and(|p| if entry == 0 { p.s > z.hold_before } else { p.s < z.hold_after });
             // Past the hold point the queue is by how far along it is; at it, by waiting time.
-            let order = match u.position {
+            let order = match position {
                 Some(p) if past_hold => -p.direction() * p.s,
                 _ => since,
             };
-            let inside = u.position.is_some_and(|p| (z.start..=z.end).contains(&p.s));
+            let inside = position.is_some_and(|p| (z.start..=z.end).contains(&p.s));
             self.requests.push(Request { zone, entry, since, order, rank: k, who: k, past_hold, inside });
         }
         self.line_up(nav, uavs);
-        let mut granted = Vec::new();
-        self.zones.decide(&mut self.requests, now, |who| granted.push(who));
-        for &k in &granted {
-            let r = self.requests.iter().find(|r| r.who == k).copied();
-            if let Some(r) = r {
-                uavs[k].traffic.grant = Some((r.zone, r.entry));
-                uavs[k].traffic.waiting_since = None;
-            }
-        }
+        self.zones.decide(&mut self.requests, now, |r| {
+            uavs[r.who].traffic.grant = Some((r.zone, r.entry));
+            uavs[r.who].traffic.waiting_since = None;
+        });
         for r in &self.requests {
             let u = &mut uavs[r.who];
             if u.traffic.grant.is_none() {
@@ -219,10 +207,11 @@ impl TrafficRules {
     /// UAVs admitted to a zone and still on their way in go in single file: each one but the first
     /// (the farthest along) waits [`FOLLOW_GAP_IN_DC`]·D_c behind the one ahead of it, so a group
     /// admitted together does not squeeze into the entry side by side and clog it.
-    fn line_up(&mut self, nav: &Navigator, uavs: &mut [Participant]) {
-        let mut entering: Vec<(usize, usize, f64, usize)> = Vec::new();
+    fn line_up(&mut self, nav: &Navigator, uavs: &mut [Uav]) {
+        let entering = &mut self.entering;
+        entering.clear();
         for (k, u) in uavs.iter().enumerate() {
-            if let (Some((zone, entry)), Some(pos)) = (u.traffic.grant, u.position) {
+            if let (Some((zone, entry)), Some(pos)) = (u.traffic.grant, u.traffic.route) {
                 let z = self.sections[zone];
                 let along = if entry == 0 { pos.s } else { -pos.s };
                 let edge = if entry == 0 { z.start } else { -z.end };
@@ -243,23 +232,17 @@ impl TrafficRules {
         }
     }
 
-    fn resolve_deadlocks(
-        &self,
-        nav: &Navigator,
-        now: f64,
-        uavs: &mut [Participant],
-        neighbours: &[Vec<usize>],
-    ) {
+    fn resolve_deadlocks(&self, nav: &Navigator, now: f64, uavs: &mut [Uav], neighbours: &[Vec<usize>]) {
         let blocking = BLOCKING_IN_DC * nav.d_c;
         for k in 0..uavs.len() {
             if let Some((target, until)) = uavs[k].traffic.back_off {
-                if now < until && uavs[k].position.is_some() {
+                if now < until && uavs[k].traffic.route.is_some() {
                     uavs[k].traffic.restriction.back_off = Some(target);
                     continue;
                 }
                 uavs[k].traffic.back_off = None;
             }
-            let (Some(pos), Some(mine)) = (uavs[k].position, uavs[k].traffic.progress.stalled_for(now))
+            let (Some(pos), Some(mine)) = (uavs[k].traffic.route, uavs[k].traffic.progress.stalled_for(now))
             else {
                 continue;
             };
@@ -268,18 +251,18 @@ impl TrafficRules {
             }
             // The stalled neighbours with priority (the longer stall to a tick, then the smaller id):
             // step off their way, as an arrived UAV does ([`crate::yielding`]).
-            let me = uavs[k].p;
+            let (me, my_target) = (uavs[k].state.p, uavs[k].last.target);
             let winners = neighbours[k].iter().filter_map(|&d| {
                 let other = &uavs[d];
+                let (p, target) = (other.state.p, other.last.target);
                 let theirs = other.traffic.progress.stalled_for(now)?;
                 let first = if (theirs - mine).abs() > 1e-6 { theirs > mine } else { other.id < uavs[k].id };
-                let near = (other.p - me).norm() <= blocking;
+                let near = (p - me).norm() <= blocking;
                 // In each other's way: each heads towards the other (a queue behind a leader is not).
-                let facing = (other.target - other.p).dot(&(me - other.p)) > 0.0
-                    && (uavs[k].target - me).dot(&(other.p - me)) > 0.0;
+                let facing = (target - p).dot(&(me - p)) > 0.0 && (my_target - me).dot(&(p - me)) > 0.0;
                 let going = other.traffic.restriction.hold_at.is_none();
                 (near && facing && going && first && other.traffic.back_off.is_none())
-                    .then_some(Flying { p: other.p, goal: other.target })
+                    .then_some(Flying { p, goal: target })
             });
             let aside = make_way(me, me, winners, nav.d_c);
             if aside != me {
@@ -312,7 +295,7 @@ fn inside_lane(nav: &Navigator, pos: &RoutePosition, x: Vec2) -> Vec2 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use roads::{NavMode, NavState, RoadLayout};
+    use roads::{NavMode, RoadLayout};
     use uav::Params;
 
     /// Two UAVs nose to nose on a 2 m wide road, each heading for the other's side.
@@ -326,38 +309,36 @@ mod tests {
     /// Runs the rules for `seconds` on UAVs that do not move; returns each one's standing.
     fn stand_still(road: &Road, uavs: &[(String, Vec2, Vec2)], seconds: f64) -> Vec<UavTraffic> {
         let params = Params::default();
-        let nav = Navigator::new(road, NavMode::Traffic, &params);
+        let config = crate::FleetConfig { params, ..crate::FleetConfig::default() };
+        let mut fleet =
+            crate::Fleet::new(config, road.clone(), policies::PolicyRegistry::with_pd(params.delta));
+        for (id, p, goal) in uavs {
+            let state = uav::UavState::at_rest(*p);
+            fleet.add(
+                id.clone(),
+                "pd".into(),
+                Box::new(links::SimLink::new(state, params.dt)),
+                state,
+                Some(*goal),
+            );
+        }
+        let nav = Navigator::new(&fleet.road, NavMode::Traffic, &params);
         let mut rules = TrafficRules::default();
-        let mut standing = vec![UavTraffic::default(); uavs.len()];
         let neighbours: Vec<Vec<usize>> =
             (0..uavs.len()).map(|k| (0..uavs.len()).filter(|&d| d != k).collect()).collect();
         let mut t = 0.0;
         while t <= seconds {
-            let mut states: Vec<NavState> = uavs
-                .iter()
-                .map(|(_, p, g)| {
-                    let mut s = NavState::new(*p);
-                    s.set_goal(road, Some(*g), *p);
-                    nav.locate(&mut s, *p);
-                    s
-                })
-                .collect();
-            let mut participants: Vec<Participant> = uavs
-                .iter()
-                .zip(standing.iter_mut())
-                .zip(states.iter_mut())
-                .map(|(((id, p, g), traffic), state)| Participant {
-                    id,
-                    position: state.position,
-                    p: *p,
-                    target: *p + (*g - *p).normalize(),
-                    traffic,
-                })
-                .collect();
-            rules.plan(&nav, t, &mut participants, &neighbours);
+            for u in &mut fleet.uavs {
+                nav.locate(&mut u.nav, u.state.p);
+                u.traffic.route = u.nav.position;
+                u.traffic.progress.update(u.traffic.route.map(|r| r.remaining()), t);
+                let goal = u.nav.goal().unwrap_or(u.state.p);
+                u.last.target = u.state.p + (goal - u.state.p).normalize();
+            }
+            rules.plan(&nav, t, &mut fleet.uavs, &neighbours);
             t += params.dt;
         }
-        standing
+        fleet.uavs.iter().map(|u| u.traffic).collect()
     }
 
     #[test]

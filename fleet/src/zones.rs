@@ -98,9 +98,9 @@ impl Reservations {
         z.entering += u32::from(entering);
     }
 
-    /// Decides this tick's `requests` at time `now` and calls `grant(who)` for each one admitted.
+    /// Decides this tick's `requests` at time `now` and calls `grant` with each one admitted.
     /// `requests` is sorted in place (zone, then waiting time, then rank).
-    pub fn decide(&mut self, requests: &mut [Request], now: f64, mut grant: impl FnMut(usize)) {
+    pub fn decide(&mut self, requests: &mut [Request], now: f64, mut grant: impl FnMut(&Request)) {
         requests.sort_by(|a, b| {
             (a.zone, a.since, a.rank)
                 .partial_cmp(&(b.zone, b.since, b.rank))
@@ -124,7 +124,7 @@ impl Reservations {
         }
     }
 
-    fn decide_zone(&mut self, requests: &[Request], now: f64, grant: &mut impl FnMut(usize)) {
+    fn decide_zone(&mut self, requests: &[Request], now: f64, grant: &mut impl FnMut(&Request)) {
         let z = &mut self.zones[requests[0].zone];
         // A free zone opens to the entry of the longest waiting request.
         let first = requests.iter().min_by(|a, b| a.since.total_cmp(&b.since).then(a.rank.cmp(&b.rank)));
@@ -139,13 +139,13 @@ impl Reservations {
         for r in requests.iter().filter(|r| r.entry == open && r.inside) {
             z.admitted += 1;
             z.held += 1;
-            grant(r.who);
+            grant(r);
         }
         for r in requests.iter().filter(|r| r.entry == open && r.past_hold && !r.inside) {
             z.admitted += 1;
             z.held += 1;
             z.entering += 1;
-            grant(r.who);
+            grant(r);
         }
         // One at a time: the first UAV waiting at the open entry's hold point, once the previous one
         // is in.
@@ -154,7 +154,7 @@ impl Reservations {
             z.admitted += 1;
             z.held += 1;
             z.entering += 1;
-            grant(r.who);
+            grant(r);
             if oldest_other.is_some() && z.admitted >= MAX_BATCH {
                 z.closed = true;
             }
@@ -192,7 +192,7 @@ mod tests {
                 .filter(|(who, (arrive, _))| *arrive <= t && granted_at[*who].is_none())
                 .map(|(who, (arrive, entry))| request(*entry, *arrive as f64, who))
                 .collect();
-            zone.decide(&mut requests, t as f64, |who| granted_at[who] = Some(t));
+            zone.decide(&mut requests, t as f64, |r| granted_at[r.who] = Some(t));
         }
         (granted_at, max_concurrent_entries)
     }

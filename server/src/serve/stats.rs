@@ -128,13 +128,10 @@ impl TickStats {
         (m.stalled_uavs, m.longest_stall_s) = (0, 0.0);
         for u in fleet.uavs() {
             let l = &u.last;
-            if l.stall_s > 0.0 {
-                // As in METRICS.json: the first stalled tick adds the second without progress.
-                let first = l.stall_s < fleet::progress::STALL_AFTER_S + m.dt / 2.0;
-                m.stall_s += if first { l.stall_s } else { m.dt };
-                m.stalled_uavs += 1;
-                m.longest_stall_s = m.longest_stall_s.max(l.stall_s);
-            }
+            // As METRICS.json counts it.
+            m.stall_s += fleet::progress::stall_time_added(l.stall_s, m.dt);
+            m.stalled_uavs += u64::from(l.stall_s > 0.0);
+            m.longest_stall_s = m.longest_stall_s.max(l.stall_s);
             m.qp.solves += u64::from(l.solved);
             m.qp.slack_used += u64::from(l.max_slack > 1e-6);
             m.qp.max_slack = m.qp.max_slack.max(l.max_slack);
