@@ -163,7 +163,8 @@ impl Firmware {
     }
 }
 
-/// Bits of `supervisor.info`, as the firmware's `supervisor.c` (`updateLogData`) sets them.
+/// Bits of `supervisor.info`, as the firmware's `supervisor.c` (`updateLogData`) sets them (the
+/// relay reads them through crazyflie-lib's `SupervisorInfo`; a test checks they agree).
 pub mod supervisor {
     /// Bit 0: can be armed (state "pre-flight checks passed").
     pub const CAN_BE_ARMED: u16 = 1 << 0;
@@ -327,6 +328,26 @@ mod tests {
             d.extend_from_slice(&x.to_le_bytes());
         }
         Packet::new(PORT_SETPOINT_GENERIC, 0, d)
+    }
+
+    #[test]
+    fn every_supervisor_bit_means_what_crazyflie_lib_reads() {
+        use supervisor::*;
+        let lib = crazyflie_lib::subsystems::supervisor::SupervisorInfo::from_bits;
+        let one = |bit: u16, read: fn(&crazyflie_lib::subsystems::supervisor::SupervisorInfo) -> bool| {
+            assert!(read(&lib(bit)) && !read(&lib(!bit & 0x07ff)), "bit {bit:#06x}");
+        };
+        one(CAN_BE_ARMED, |i| i.can_be_armed());
+        one(IS_ARMED, |i| i.is_armed());
+        one(AUTO_ARM, |i| i.is_auto_armed());
+        one(CAN_FLY, |i| i.can_fly());
+        one(IS_FLYING, |i| i.is_flying());
+        one(IS_TUMBLED, |i| i.is_tumbled());
+        one(IS_LOCKED, |i| i.is_locked());
+        one(IS_CRASHED, |i| i.is_crashed());
+        one(HL_ACTIVE, |i| i.hl_control_active());
+        one(HL_FINISHED, |i| i.hl_traj_finished());
+        one(HL_DISABLED, |i| i.hl_control_disabled());
     }
 
     #[test]

@@ -30,6 +30,8 @@
 //!   to be off"), or the is-flying bit clear (which the firmware clears 2 s after the thrust went
 //!   to idle).
 
+use crazyflie_lib::subsystems::supervisor::SupervisorInfo;
+
 /// The log variables that confirm a stop or a landing, in the order of [`Status`].
 pub const STATUS_VARIABLES: [&str; 2] = ["supervisor.info", "stabilizer.thrust"];
 
@@ -38,32 +40,6 @@ pub const ON_GROUND_M: f64 = 0.1;
 
 /// Below this collective thrust (PWM units of 65535) the motors are off.
 pub const THRUST_OFF: f64 = 1.0;
-
-/// Bits of the firmware's `supervisor.info` (see the module documentation).
-pub mod bits {
-    /// The system can be armed.
-    pub const CAN_BE_ARMED: u16 = 1 << 0;
-    /// The system is armed.
-    pub const IS_ARMED: u16 = 1 << 1;
-    /// The firmware arms itself.
-    pub const AUTO_ARM: u16 = 1 << 2;
-    /// The motors are allowed to run.
-    pub const CAN_FLY: u16 = 1 << 3;
-    /// The supervisor considers the Crazyflie flying.
-    pub const IS_FLYING: u16 = 1 << 4;
-    /// Upside down or tilted for too long.
-    pub const IS_TUMBLED: u16 = 1 << 5;
-    /// Locked after an emergency stop: motors off until a reboot.
-    pub const IS_LOCKED: u16 = 1 << 6;
-    /// Crashed.
-    pub const IS_CRASHED: u16 = 1 << 7;
-    /// The high-level commander is flying or landing.
-    pub const HL_ACTIVE: u16 = 1 << 8;
-    /// The high-level trajectory has finished.
-    pub const HL_FINISHED: u16 = 1 << 9;
-    /// The high-level commander is disabled.
-    pub const HL_DISABLED: u16 = 1 << 10;
-}
 
 /// What the Crazyflie's log says about its motors (each field only if the firmware logs it and a
 /// sample arrived in this session).
@@ -80,14 +56,15 @@ impl Status {
         self.thrust.map(|t| t.abs() < THRUST_OFF)
     }
 
-    fn bit(&self, mask: u16) -> Option<bool> {
-        self.info.map(|i| i & mask != 0)
+    /// `supervisor.info` decoded by crazyflie-lib (the layout above).
+    fn supervisor(&self) -> Option<SupervisorInfo> {
+        self.info.map(SupervisorInfo::from_bits)
     }
 
     /// The emergency stop is confirmed: locked (and zero thrust when logged), or, on a firmware
     /// without `supervisor.info`, zero thrust.
     pub fn confirms_stop(&self) -> bool {
-        match (self.bit(bits::IS_LOCKED), self.thrust_off()) {
+        match (self.supervisor().map(|s| s.is_locked()), self.thrust_off()) {
             (Some(locked), off) => locked && off != Some(false),
             (None, Some(off)) => off,
             (None, None) => false,
@@ -97,7 +74,7 @@ impl Status {
     /// A landing is confirmed at estimated height `z` (m): on the ground with the motors off (zero
     /// thrust) or the supervisor no longer flying.
     pub fn confirms_landed(&self, z: f64) -> bool {
-        let off = self.thrust_off() == Some(true) || self.bit(bits::IS_FLYING) == Some(false);
+        let off = self.thrust_off() == Some(true) || self.supervisor().is_some_and(|s| !s.is_flying());
         z < ON_GROUND_M && off
     }
 }
@@ -105,22 +82,11 @@ impl Status {
 #[cfg(test)]
 mod tests {
     use super::*;
+    // The simulated firmware's bits, checked against crazyflie-lib in cfsim's own tests.
+    use cfsim::firmware::supervisor as bits;
 
     const FLYING: u16 = bits::IS_ARMED | bits::AUTO_ARM | bits::CAN_FLY | bits::IS_FLYING;
     const LOCKED: u16 = bits::AUTO_ARM | bits::IS_LOCKED;
-
-    #[test]
-    fn bits_match_crazyflie_lib() {
-        let info = crazyflie_lib::subsystems::supervisor::SupervisorInfo::from_bits(LOCKED);
-        assert!(info.is_locked() && info.is_auto_armed() && !info.can_fly() && !info.is_flying());
-        let info = crazyflie_lib::subsystems::supervisor::SupervisorInfo::from_bits(FLYING | bits::HL_ACTIVE);
-        assert!(info.is_flying() && info.can_fly() && info.is_armed() && info.hl_control_active());
-        let all = crazyflie_lib::subsystems::supervisor::SupervisorInfo::from_bits(
-            bits::CAN_BE_ARMED | bits::IS_TUMBLED | bits::IS_CRASHED | bits::HL_FINISHED | bits::HL_DISABLED,
-        );
-        assert!(all.can_be_armed() && all.is_tumbled() && all.is_crashed());
-        assert!(all.hl_traj_finished() && all.hl_control_disabled() && !all.is_locked());
-    }
 
     #[test]
     fn a_stop_needs_the_lock_and_no_thrust() {
