@@ -95,9 +95,9 @@ fn random_fleet(rng: &mut StdRng, road: &Road, params: &Params, wanted: usize) -
         .collect()
 }
 
-/// A dense two-way crowd of `n` UAVs (BENCHMARKS.md, "Admission" and "Fleet stages"): a straight
-/// road 12 m wide, two blocks on a 1.2 m grid 30 m apart, each flying through the other to the far
-/// side (as `scripts/crowd_scenario.py`).
+/// A dense two-way crowd of `n` UAVs (BENCHMARKS.md, "Admission" and "Fleet stages";
+/// `airroads bench server --crowd N`, `airroads bench fleet`): a straight road 12 m wide, two
+/// blocks on a 1.2 m grid 30 m apart, each flying through the other to the far side.
 pub fn crowd_scenario(n: usize) -> Scenario {
     let (width, rows, spacing) = (12.0, 9usize, 1.2);
     let per_block = n.div_ceil(2).max(1);

@@ -15,14 +15,7 @@ use std::time::{Duration, Instant};
 
 /// Runs the subcommand.
 pub fn main(args: &BenchArgs) -> ExitCode {
-    let Some(runtime) = crate::bench::runtime() else { return ExitCode::FAILURE };
-    match runtime.block_on(bench(args)) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    crate::bench::block_on(bench(args))
 }
 
 struct Row {

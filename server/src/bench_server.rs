@@ -18,14 +18,7 @@ const REST_WORKERS: usize = 8;
 
 /// Runs the benchmark.
 pub fn main(args: &BenchArgs) -> ExitCode {
-    let Some(runtime) = crate::bench::runtime() else { return ExitCode::FAILURE };
-    match runtime.block_on(bench(args)) {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("error: {e:#}");
-            ExitCode::FAILURE
-        }
-    }
+    crate::bench::block_on(bench(args))
 }
 
 /// What one phase measured.
@@ -41,9 +34,10 @@ struct Phase {
 }
 
 async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
-    let initial = match &args.scenario {
-        Some(path) => load_scenario(path).map_err(anyhow::Error::msg)?,
-        None => airroads::serve::demo_scenario()?,
+    let initial = match (&args.scenario, args.crowd) {
+        (Some(path), _) => load_scenario(path).map_err(anyhow::Error::msg)?,
+        (None, Some(n)) => fleet::stress::crowd_scenario(usize::try_from(n)?).validate()?,
+        (None, None) => airroads::serve::demo_scenario()?,
     };
     let policies = policies::PolicyRegistry::standard(initial.params.delta)?;
     let uavs = initial.uavs.len();

@@ -216,8 +216,11 @@ pub struct BenchArgs {
     #[arg(long, default_value_t = 200)]
     pub clients: usize,
     /// Scenario the server flies (`server`; default: the embedded demo).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "crowd")]
     pub scenario: Option<PathBuf>,
+    /// Fly the dense two-way crowd of N UAVs instead (`server`; the crowd of `fleet`).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u64).range(2..=100_000))]
+    pub crowd: Option<u64>,
     /// Fleet sizes to measure (`crazyflie`), comma-separated.
     #[arg(long, value_delimiter = ',', default_values_t = [1, 10, 25, 50, 100])]
     pub crazyflies: Vec<usize>,

@@ -46,7 +46,7 @@ use tokio::sync::{mpsc, watch};
 use uav::{UavState, Vec2};
 
 /// Most UAVs by default: what the fleet loop ticks within dt on the development machine with the
-/// default policy in a dense crowd, with room to spare (BENCHMARKS.md, "Admission").
+/// default policy in a dense crowd, with either navigation (BENCHMARKS.md, "Admission").
 pub const DEFAULT_MAX_UAVS: usize = 120;
 
 /// The scenario `airroads serve` flies when it has no saved state and no `--scenario`.
