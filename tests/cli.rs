@@ -197,3 +197,78 @@ fn track_benchmark_rows_and_rl_regression_guard() {
         assert!(pd["rmse_m"].as_f64().unwrap() > rmse);
     }
 }
+
+#[test]
+fn run_plot_draws_the_road_every_path_and_where_uavs_waited_into_an_svg() {
+    // The narrow section: one side waits for the single-file section within the first 30 s.
+    let text = std::fs::read_to_string(repo().join("scenarios/narrow16.json")).unwrap();
+    let mut s: serde_json::Value = serde_json::from_str(&text).unwrap();
+    s["params"]["t_max"] = serde_json::json!(30.0);
+    let path = write_scenario("narrow-30s.json", &s);
+    let svg_path = scratch("narrow.svg");
+    let run =
+        airroads(&["run", path.to_str().unwrap(), "--policy", "pd", "--plot", svg_path.to_str().unwrap()]);
+    assert!(run.status.code().is_some_and(|c| c <= 1), "{}", String::from_utf8_lossy(&run.stderr));
+    let svg = std::fs::read_to_string(&svg_path).expect("the plot is written");
+    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"), "an SVG document");
+    assert!(svg.contains("narrow16: ") && svg.contains("arrived in"), "the title gives the arrivals");
+    // Every UAV's path, labelled with its id at its start.
+    for uav in s["uavs"].as_array().unwrap() {
+        let id = uav["id"].as_str().unwrap();
+        assert!(svg.contains(&format!("\n{id}\n</text>")), "{id} is labelled");
+    }
+    assert!(svg.matches("<polyline").count() >= 16, "a path per UAV");
+    assert!(svg.contains("single_file "), "where the single-file rule held a UAV");
+}
+
+#[test]
+fn run_plot_to_an_unwritable_place_fails_with_the_file_named() {
+    let path = write_scenario("lab3-plot.json", &lab3());
+    let run = airroads(&["run", path.to_str().unwrap(), "--plot", "/nonexistent/dir/p.svg"]);
+    assert_eq!(run.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&run.stderr).contains("/nonexistent/dir/p.svg"));
+}
+
+#[test]
+fn stress_reports_time_to_arrival_and_saves_unfinished_cases_with_save_failing() {
+    let dir = scratch("stress-saved");
+    let _ = std::fs::remove_dir_all(&dir);
+    let run = airroads(&[
+        "stress",
+        "--family",
+        "bottleneck",
+        "--scenarios",
+        "4",
+        "--seed",
+        "1",
+        "--policy",
+        "pd",
+        "--save-failing",
+        dir.to_str().unwrap(),
+    ]);
+    let out = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.code().is_some_and(|c| c <= 1), "{out}");
+    let line = out.lines().find(|l| l.contains("time until all arrived")).expect("the arrival line");
+    assert!(line.contains("p50") && line.contains("p99"), "{line}");
+    // The cases listed as unfinished are exactly the ones saved as such.
+    let listed: Vec<String> = out
+        .lines()
+        .skip_while(|l| !l.contains("not all arrived"))
+        .skip(2)
+        .take_while(|l| l.split_whitespace().count() == 5)
+        .map(|l| format!("stress-{}-unfinished.json", l.split_whitespace().next().unwrap()))
+        .collect();
+    let mut saved: Vec<String> = std::fs::read_dir(&dir)
+        .map(|d| d.map(|e| e.unwrap().file_name().to_string_lossy().into_owned()).collect())
+        .unwrap_or_default();
+    saved.retain(|f| f.ends_with("-unfinished.json"));
+    saved.sort();
+    let mut listed = listed;
+    listed.sort();
+    assert_eq!(saved, listed, "{out}");
+    for f in &saved {
+        let scenario = std::fs::read_to_string(dir.join(f)).unwrap();
+        let rerun = airroads(&["run", dir.join(f).to_str().unwrap(), "--policy", "pd"]);
+        assert_eq!(rerun.status.code(), Some(1), "{f} replays as unfinished: {scenario:.80}");
+    }
+}

@@ -104,7 +104,12 @@ async fn a_scenario_loaded_over_rest_flies_as_airroads_run_flies_it() {
     let lab3 = support::shipped("lab3.json");
     let headless = fleet::run_scenario(
         &support::scenario(&lab3),
-        fleet::RunOptions { config: fleet::FleetConfig::default(), policy: "pd".into(), trajectory: None },
+        fleet::RunOptions {
+            config: fleet::FleetConfig::default(),
+            policy: "pd".into(),
+            trajectory: None,
+            paths: false,
+        },
         policies::PolicyRegistry::standard(5.0).unwrap(),
     )
     .unwrap()

@@ -7,7 +7,8 @@ import { Camera, bounds } from "./camera.js";
 import { RoadEditor } from "./editor.js";
 import { Trails } from "./trails.js";
 import { MarginPlot } from "./plot.js";
-import { STATUS_COLOURS, drawBox, drawEditor, drawFleet, drawRoad } from "./render.js";
+import { STATUS_COLOURS, drawBox, drawEditor, drawFleet, drawReservations, drawRoad } from "./render.js";
+import { showDetails } from "./details.js";
 import { segmentAt } from "./geometry.js";
 import { attachInput } from "./input.js";
 import { bindControls, showMessage } from "./controls.js";
@@ -95,6 +96,7 @@ export class App {
     s.push([now, snap.tick]);
     while (s.length > 2 && s[0][0] < now - 2000) s.shift();
     this.updateHeader(snap);
+    showDetails($("details"), snap, this.selection);
     this.dirty = true;
   }
 
@@ -207,6 +209,7 @@ export class App {
     const editing = this.mode === "edit";
     drawRoad(ctx, this.camera, this.geometry, editing);
     if (editing) drawEditor(ctx, this.camera, this.editor, this.mouse);
+    drawReservations(ctx, this.camera, this.snapshot);
     drawFleet(ctx, this.camera, this.snapshot, this.trails, this.selection);
     drawBox(ctx, this.box);
     if (this.snapshot) this.plot.draw();

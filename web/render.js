@@ -16,7 +16,10 @@ export const STATUS_COLOURS = {
   landed: "#5b6570",
   stopped: "#3b0d0d",
   stopping: "#961e1e",
+  waiting: "#e6c619",
 };
+/** Single-file sections: grey while free, green while admitting from their start, blue from their end. */
+const RESERVATION_COLOURS = { free: "rgba(120,120,120,0.35)", start: "rgba(46,157,79,0.45)", end: "rgba(47,111,214,0.45)" };
 const LABEL_LIMIT = 250; // more UAVs on screen than this: labels only for the selected ones
 
 function polygon(ctx, cam, pts) {
@@ -150,6 +153,24 @@ function drawCallout(ctx, x, y, text) {
   ctx.fillStyle = "#fff";
   ctx.textAlign = "center";
   ctx.fillText(text, x, y, 520);
+}
+
+/** The single-file sections as wide bands along the centre line, coloured by the end they admit from. */
+export function drawReservations(ctx, cam, snapshot) {
+  if (!snapshot || !snapshot.reservations) return;
+  ctx.lineWidth = Math.max(4, 0.3 * cam.scale);
+  ctx.lineCap = "round";
+  for (const z of snapshot.reservations) {
+    ctx.strokeStyle = RESERVATION_COLOURS[z.open_from || "free"];
+    ctx.beginPath();
+    z.path.forEach((p, i) => {
+      const [x, y] = cam.toScreen(p[0], p[1]);
+      if (i === 0) ctx.moveTo(x, y);
+      else ctx.lineTo(x, y);
+    });
+    ctx.stroke();
+  }
+  ctx.lineCap = "butt";
 }
 
 /** Every UAV: trail, target and goal, velocity arrow, body by status, selection ring and label. */

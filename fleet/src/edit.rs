@@ -102,9 +102,10 @@ impl Fleet {
         Ok(())
     }
 
-    /// Checks that `goal` is a finite point inside the road.
+    /// Checks that `goal` is a finite point inside the road, at least D_s from every wall (the
+    /// filter keeps UAVs that far from the walls, so a goal nearer to one is never reached).
     pub fn check_goal(&self, goal: Vec2, field: &str) -> Result<(), EditError> {
-        check_goal_on(&self.road, goal, field)
+        check_goal_on(&self.road, goal, field, self.config.params.d_s)
     }
 
     /// Checks what [`Fleet::try_add`] checks: a valid and new id, a loaded policy, a safe start, a
@@ -215,7 +216,7 @@ impl Fleet {
         }
         let mut cleared = Vec::new();
         for uav in &mut self.uavs {
-            let goal = uav.nav.goal().filter(|g| check_goal_on(&road, *g, "goal").is_ok());
+            let goal = uav.nav.goal().filter(|g| check_goal_on(&road, *g, "goal", p.d_s).is_ok());
             if goal.is_none() && uav.nav.goal().is_some() {
                 cleared.push(uav.id.clone());
             }
@@ -229,12 +230,20 @@ impl Fleet {
     }
 }
 
-fn check_goal_on(road: &Road, goal: Vec2, field: &str) -> Result<(), EditError> {
+fn check_goal_on(road: &Road, goal: Vec2, field: &str, d_s: f64) -> Result<(), EditError> {
     if !uav::is_finite(&goal) {
         return Err(unsafe_at(field, "must be two finite numbers".into()));
     }
-    if !road.contains(&goal) {
+    let d = road.boundary_distance(&goal);
+    if d < 0.0 {
         return Err(unsafe_at(field, format!("[{}, {}] is outside the road", goal.x, goal.y)));
+    }
+    if d < d_s {
+        let reason = format!(
+            "[{}, {}] is {d:.3} m from a wall, closer than D_s = {d_s} m: no UAV can get there",
+            goal.x, goal.y
+        );
+        return Err(unsafe_at(field, reason));
     }
     Ok(())
 }

@@ -1,7 +1,9 @@
 //! Families of random stress scenarios (`airroads stress --family`): `mixed` (the general generator
 //! of [`crate::stress`]), `bends` (one-way traffic along winding roads with tight bends: the
-//! inner-vertex stall) and `bottleneck` (two-way traffic through one narrow section). Case i of a
-//! run with seed S uses seed S + i in every family.
+//! inner-vertex stall), `bottleneck` (two-way traffic through one narrow section), `headon` (two
+//! groups swapping ends through a long part 0.5–5 m wide), `hairpin` (opposite traffic through a
+//! U-turn) and `crowd` (two dense blocks flying through each other). Case i of a run with seed S
+//! uses seed S + i in every family.
 
 use crate::scenario::{Scenario, ScenarioUav};
 use crate::stress::{STRESS_T_MAX_S, random_scenario};
@@ -21,7 +23,20 @@ pub enum Family {
     /// A straight-ish road 3–5 m wide with one section 0.5–1.2 m wide and 2–6 m long in its middle;
     /// 2–8 UAVs on each side flying through it to the other.
     Bottleneck,
+    /// Two groups (2–60 UAVs in all) swapping ends through a gently bending part 0.5–5 m wide and
+    /// 10–30 m long between waiting areas 5 m wide.
+    HeadOn,
+    /// A road 1.5–4 m wide that turns back on itself (a U-turn of 150–180° in three short pieces);
+    /// 2–10 UAVs from each end to the other.
+    Hairpin,
+    /// A straight road 4–10 m wide; two blocks of 10–30 UAVs each, packed D_c + 0.3 m apart, fly
+    /// through each other to the far side.
+    Crowd,
 }
+
+/// Every family, in the order of the CLI's list.
+pub const FAMILIES: [Family; 6] =
+    [Family::Mixed, Family::Bends, Family::Bottleneck, Family::HeadOn, Family::Hairpin, Family::Crowd];
 
 impl Family {
     /// The CLI name.
@@ -30,6 +45,9 @@ impl Family {
             Family::Mixed => "mixed",
             Family::Bends => "bends",
             Family::Bottleneck => "bottleneck",
+            Family::HeadOn => "headon",
+            Family::Hairpin => "hairpin",
+            Family::Crowd => "crowd",
         }
     }
 
@@ -39,6 +57,9 @@ impl Family {
             Family::Mixed => random_scenario(seed),
             Family::Bends => bends(seed),
             Family::Bottleneck => bottleneck(seed),
+            Family::HeadOn => head_on(seed),
+            Family::Hairpin => hairpin(seed),
+            Family::Crowd => crowd(seed),
         }
     }
 }
@@ -46,14 +67,18 @@ impl Family {
 impl std::str::FromStr for Family {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "mixed" => Ok(Family::Mixed),
-            "bends" => Ok(Family::Bends),
-            "bottleneck" => Ok(Family::Bottleneck),
-            other => Err(format!("unknown family `{other}` (expected mixed, bends or bottleneck)")),
-        }
+        FAMILIES.iter().copied().find(|f| f.name() == s).ok_or_else(|| {
+            let names: Vec<&str> = FAMILIES.iter().map(|f| f.name()).collect();
+            format!("unknown family `{s}` (expected one of {})", names.join(", "))
+        })
     }
 }
+
+/// Simulated time limit (s) of a `bottleneck` case: up to 16 UAVs go through the section one at a
+/// time, and the funnels slow each one down (the road barrier lets a UAV approach converging walls
+/// only as fast as it can still brake away from them), so a crowd needs longer than the 60 s of the
+/// other families; the same limit as the narrow-section scenario (scenarios/narrow16.json).
+pub const BOTTLENECK_T_MAX_S: f64 = 120.0;
 
 fn params() -> Params {
     Params { t_max: STRESS_T_MAX_S, ..Params::default() }
@@ -123,7 +148,7 @@ fn bends(seed: u64) -> Scenario {
 
 fn bottleneck(seed: u64) -> Scenario {
     let mut rng = StdRng::seed_from_u64(seed);
-    let p = params();
+    let p = Params { t_max: BOTTLENECK_T_MAX_S, ..params() };
     loop {
         let (wide, narrow) = (rng.random_range(3.0..=5.0), rng.random_range(0.5..=1.2));
         let (approach, length) = (rng.random_range(8.0..12.0), rng.random_range(2.0..6.0));
@@ -137,27 +162,123 @@ fn bottleneck(seed: u64) -> Scenario {
         let widths = [wide, wide, narrow, narrow, wide, wide];
         let layout = RoadLayout::from_centerline(&points, &widths);
         let Ok(road) = Road::new(layout.clone()) else { continue };
-        let total = road.centerline().length();
-        let spacing = p.d_c + 0.3;
         let (west, east) = (rng.random_range(2..=8usize), rng.random_range(2..=8usize));
-        let west_starts = rows(&road, 1.0, spacing, west, &p);
-        let east_starts = rows(&road, total - 1.0, -spacing, east, &p);
-        let west_goals = rows(&road, total - 1.0, -spacing, west_starts.len(), &p);
-        let east_goals = rows(&road, 1.0, spacing, east_starts.len(), &p);
-        if west_goals.len() < west_starts.len() || east_goals.len() < east_starts.len() {
-            continue;
-        }
-        let mut uavs: Vec<ScenarioUav> =
-            west_starts.iter().zip(&west_goals).enumerate().map(|(i, (s, g))| uav(i, "w", *s, *g)).collect();
-        // Each side's goals are where the other side starts: the groups swap ends.
-        uavs.extend(east_starts.iter().zip(&east_goals).enumerate().map(|(i, (s, g))| uav(i, "e", *s, *g)));
-        let scenario =
-            Scenario { name: format!("bottleneck-{seed}"), params: p, segments: layout.segments, uavs };
-        if scenario.validate().is_ok() {
-            return scenario;
+        let Some(uavs) = swap_ends(&road, west, east, &p) else { continue };
+        if let Some(s) = valid(format!("bottleneck-{seed}"), p, layout, uavs) {
+            return s;
         }
     }
 }
+
+/// Simulated time limit (s) of a `headon` case with `n` UAVs: 60 s, and 3 s more per UAV, the time
+/// one UAV takes to clear a single-file part (its funnel crawl included) while the others wait.
+pub fn head_on_t_max(n: usize) -> f64 {
+    60.0 + 3.0 * n as f64
+}
+
+/// Two groups swapping ends; each side's goals are where the other side starts.
+fn swap_ends(road: &Road, west: usize, east: usize, p: &Params) -> Option<Vec<ScenarioUav>> {
+    let total = road.centerline().length();
+    let spacing = p.d_c + 0.3;
+    let west_starts = rows(road, 1.0, spacing, west, p);
+    let east_starts = rows(road, total - 1.0, -spacing, east, p);
+    let west_goals = rows(road, total - 1.0, -spacing, west_starts.len(), p);
+    let east_goals = rows(road, 1.0, spacing, east_starts.len(), p);
+    if west_goals.len() < west_starts.len() || east_goals.len() < east_starts.len() {
+        return None;
+    }
+    let mut uavs: Vec<ScenarioUav> =
+        west_starts.iter().zip(&west_goals).enumerate().map(|(i, (s, g))| uav(i, "w", *s, *g)).collect();
+    uavs.extend(east_starts.iter().zip(&east_goals).enumerate().map(|(i, (s, g))| uav(i, "e", *s, *g)));
+    Some(uavs)
+}
+
+/// The scenario if it validates with at least two UAVs.
+fn valid(name: String, params: Params, layout: RoadLayout, uavs: Vec<ScenarioUav>) -> Option<Scenario> {
+    let scenario = Scenario { name, params, segments: layout.segments, uavs };
+    (scenario.uavs.len() >= 2 && scenario.validate().is_ok()).then_some(scenario)
+}
+
+fn head_on(seed: u64) -> Scenario {
+    let mut rng = StdRng::seed_from_u64(seed);
+    loop {
+        let width = rng.random_range(0.5..=5.0);
+        let n = rng.random_range(2..=60usize);
+        let west = rng.random_range(1..n);
+        // Waiting areas 5 m wide and 8 m long, funnels of 2 m, the long part in 2–4 gently bending pieces.
+        let mut points = vec![[0.0, 0.0], [8.0, 0.0], [10.0, 0.0]];
+        let mut widths = vec![5.0, 5.0, width];
+        let (mut at, mut heading) = (Vec2::new(10.0, 0.0), 0.0f64);
+        let pieces = rng.random_range(2..=4usize);
+        let length: f64 = rng.random_range(10.0..30.0);
+        for _ in 0..pieces {
+            heading += rng.random_range(-0.3..0.3);
+            at += Vec2::new(heading.cos(), heading.sin()) * (length / pieces as f64);
+            points.push([at.x, at.y]);
+            widths.push(width);
+        }
+        for step in [2.0, 8.0] {
+            at += Vec2::new(heading.cos(), heading.sin()) * step;
+            points.push([at.x, at.y]);
+            widths.push(5.0);
+        }
+        let layout = RoadLayout::from_centerline(&points, &widths);
+        let Ok(road) = Road::new(layout.clone()) else { continue };
+        let p = Params { t_max: head_on_t_max(n), ..params() };
+        let Some(uavs) = swap_ends(&road, west, n - west, &p) else { continue };
+        if let Some(s) = valid(format!("headon-{seed}"), p, layout, uavs) {
+            return s;
+        }
+    }
+}
+
+fn hairpin(seed: u64) -> Scenario {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let p = params();
+    loop {
+        let width = rng.random_range(1.5..=4.0);
+        let (first, back) = (rng.random_range(8.0..12.0), rng.random_range(8.0..12.0));
+        let turn: f64 = rng.random_range(150f64..=180.0).to_radians();
+        let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
+        let (mut at, mut heading) = (Vec2::new(first, 0.0), 0.0f64);
+        let mut points = vec![[0.0, 0.0], [at.x, at.y]];
+        // The U-turn: three short pieces a road's width or two long, then back beside the way out.
+        for _ in 0..3 {
+            heading += sign * turn / 3.0;
+            at += Vec2::new(heading.cos(), heading.sin()) * rng.random_range(1.0..2.0) * width;
+            points.push([at.x, at.y]);
+        }
+        at += Vec2::new(heading.cos(), heading.sin()) * back;
+        points.push([at.x, at.y]);
+        let layout = RoadLayout::from_centerline(&points, &vec![width; points.len()]);
+        let Ok(road) = Road::new(layout.clone()) else { continue };
+        let (west, east) = (rng.random_range(1..=10usize), rng.random_range(1..=10usize));
+        let Some(uavs) = swap_ends(&road, west, east, &p) else { continue };
+        if let Some(s) = valid(format!("hairpin-{seed}"), p, layout, uavs) {
+            return s;
+        }
+    }
+}
+
+fn crowd(seed: u64) -> Scenario {
+    let mut rng = StdRng::seed_from_u64(seed);
+    let p = Params { t_max: CROWD_T_MAX_S, ..params() };
+    loop {
+        let width = rng.random_range(4.0..=10.0);
+        let (west, east) = (rng.random_range(10..=30usize), rng.random_range(10..=30usize));
+        let length = rng.random_range(30.0..50.0);
+        let layout =
+            RoadLayout::from_centerline(&[[0.0, 0.0], [length / 2.0, 0.0], [length, 0.0]], &[width; 3]);
+        let Ok(road) = Road::new(layout.clone()) else { continue };
+        let Some(uavs) = swap_ends(&road, west, east, &p) else { continue };
+        if let Some(s) = valid(format!("crowd-{seed}"), p, layout, uavs) {
+            return s;
+        }
+    }
+}
+
+/// Simulated time limit (s) of a `crowd` case: up to 60 UAVs fly 30–50 m through each other.
+pub const CROWD_T_MAX_S: f64 = 90.0;
 
 #[cfg(test)]
 mod tests {
@@ -165,7 +286,7 @@ mod tests {
 
     #[test]
     fn every_family_generates_valid_reproducible_scenarios() {
-        for family in [Family::Mixed, Family::Bends, Family::Bottleneck] {
+        for family in FAMILIES {
             for seed in 0..30 {
                 let s = family.scenario(seed);
                 assert!(s.validate().is_ok(), "{} {seed}: {:?}", family.name(), s.validate().err());

@@ -3,7 +3,7 @@
 
 use crate::lost::obstacle_row;
 use crate::neighbours::NeighbourSearch;
-use crate::speed::{govern, speed_limit};
+use crate::speed::{govern, keep_distance, speed_limit};
 use crate::traffic::{TrafficRules, UavTraffic};
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::{Link, LinkPhase};
@@ -229,6 +229,13 @@ impl Fleet {
         &self.road
     }
 
+    /// The single-file sections of the road and their use as of the last tick (`traffic`
+    /// navigation only; none otherwise).
+    pub fn section_use(&self) -> impl Iterator<Item = crate::traffic::SectionUse> + '_ {
+        let rules = (self.config.nav == NavMode::Traffic).then_some(&self.traffic);
+        rules.into_iter().flat_map(|r| r.section_use(&self.uavs))
+    }
+
     /// The UAVs.
     pub fn uavs(&self) -> &[Uav] {
         &self.uavs
@@ -320,6 +327,7 @@ impl Fleet {
             segments.push(nav.locate(&mut uav.nav, uav.state.p));
             let tracked = !hold && uav.flying() && !uav.nav.arrived;
             uav.traffic.route = uav.nav.position.filter(|_| tracked);
+            uav.traffic.waiting = None;
             uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
         }
         if self.config.nav == NavMode::Traffic {
@@ -403,6 +411,21 @@ impl Fleet {
                 let (right, left) = self.road.profile().at(pos.s);
                 let limit = speed_limit(right + left);
                 uav.last.u_ref = govern(uav.state.v, uav.last.u_ref, limit, delta, dt);
+            }
+            // And the distance kept to every neighbour (`fleet::speed::keep_distance`).
+            let d_c = self.config.params.d_c;
+            for k in 0..self.uavs.len() {
+                let me = &self.uavs[k];
+                if me.nav.position.is_none() || me.nav.arrived || !me.flying() {
+                    continue;
+                }
+                let (p, v) = (me.state.p, me.state.v);
+                let mut u = me.last.u_ref;
+                for &d in &self.neighbours.lists[k] {
+                    let other = &self.uavs[d].state;
+                    u = keep_distance(v, u, other.p - p, other.v, d_c, delta, dt);
+                }
+                self.uavs[k].last.u_ref = u;
             }
         }
     }

@@ -3,6 +3,7 @@
 
 use crate::fleet::{Fleet, FleetConfig};
 use crate::metrics::{MetricsRecorder, RunMetrics, Stall};
+use crate::paths::{PathRecorder, UavPath};
 use crate::scenario::{UavSpec, ValidScenario};
 use links::{Link, LinkPhase, SimLink};
 use policies::PolicyRegistry;
@@ -17,6 +18,8 @@ pub struct RunOptions {
     pub policy: String,
     /// Where to write the trajectory CSV, if anywhere.
     pub trajectory: Option<Box<dyn Write>>,
+    /// Record every UAV's path and waits ([`RunOutcome::paths`]).
+    pub paths: bool,
 }
 
 /// What a headless run produced.
@@ -28,6 +31,8 @@ pub struct RunOutcome {
     pub policy_fallbacks: u64,
     /// Every stall, longest first.
     pub stalls: Vec<Stall>,
+    /// Every UAV's path and waits, in the scenario's order (empty unless [`RunOptions::paths`]).
+    pub paths: Vec<UavPath>,
 }
 
 /// Header of the trajectory CSV.
@@ -92,12 +97,16 @@ pub fn run_scenario_on(
         writeln!(w, "{TRAJECTORY_HEADER}")?;
     }
     let mut recorder = MetricsRecorder::new();
+    let mut paths = options.paths.then(|| PathRecorder::new(&fleet));
     let n = scenario.uavs.len();
     for tick in 0..params.max_ticks() {
         let t = tick as f64 * params.dt;
         wait_tick();
         let arrived = fleet.tick();
         recorder.record(&fleet, t);
+        if let Some(p) = paths.as_mut() {
+            p.record(&fleet, t + params.dt);
+        }
         if let Some(w) = options.trajectory.as_mut() {
             for u in fleet.uavs() {
                 let (s, l) = (&u.state, &u.last);
@@ -129,7 +138,8 @@ pub fn run_scenario_on(
     }
     land(&mut fleet, wait_tick, params.dt);
     let (policy_fallbacks, stalls) = (recorder.policy_fallbacks, recorder.stalls());
-    Ok(RunOutcome { metrics: recorder.finish(&fleet, &scenario.name), policy_fallbacks, stalls })
+    let paths = paths.map(PathRecorder::finish).unwrap_or_default();
+    Ok(RunOutcome { metrics: recorder.finish(&fleet, &scenario.name), policy_fallbacks, stalls, paths })
 }
 
 /// Lands every UAV whose link takes off and ticks until they are down (at most 10 s).

@@ -130,7 +130,8 @@ impl Scenario {
                 return Err(invalid(field("id"), format!("duplicate id `{}` (also uavs[{j}])", u.id)));
             }
             let start = check_point(&road, || field("start"), u.start, p.d_s)?;
-            let goal = check_point(&road, || field("goal"), u.goal, 0.0)?;
+            // The filter keeps every UAV D_s from the walls: a goal nearer to one is never reached.
+            let goal = check_point(&road, || field("goal"), u.goal, p.d_s)?;
             if let Some(j) = starts.first_closer_than(&uavs, start) {
                 let reason = format!("closer than D_c = {} m to uavs[{j}].start", p.d_c);
                 return Err(invalid(field("start"), reason));

@@ -2,6 +2,9 @@
 //! cannot also give the UAV behind it its share of their pair row (docs/safety.md §10.3), and the
 //! `bends` and `bottleneck` stress families showed collision margins a few millimetres below D_c
 //! from that; flying slower where the road is narrow keeps the braking terms small enough.
+//! The second limit is the distance kept: a UAV closes on each neighbour no faster than it could
+//! stop from, braking at δ, well before D_c (the `crowd` family showed blocks pressing into each
+//! other at full δ until the filter ran out of input and used slack).
 
 use uav::Vec2;
 
@@ -40,6 +43,44 @@ pub fn govern(v: Vec2, u_ref: Vec2, limit: f64, delta: f64, dt: f64) -> Vec2 {
     -v / v_norm * ((v_norm - limit).max(0.0) / dt).min(delta)
 }
 
+/// Distance (m) beyond D_c that the closing-speed limit of [`keep_distance`] aims to stop at.
+pub const KEEP_MARGIN_M: f64 = 0.1;
+
+/// The nominal input `u_ref` of a UAV at velocity `v`, changed so that it closes on a neighbour at
+/// offset `rel` (from it to the neighbour) moving at `other_v` no faster than √(δ·gap) relative to
+/// it, gap = ‖rel‖ − D_c − [`KEEP_MARGIN_M`]: braking at δ, both would stop within gap/4. Only the
+/// velocity component towards the neighbour is limited (the UAV may still pass beside it), and the
+/// result stays within δ.
+pub fn keep_distance(v: Vec2, u_ref: Vec2, rel: Vec2, other_v: Vec2, d_c: f64, delta: f64, dt: f64) -> Vec2 {
+    let distance = rel.norm();
+    if distance <= 1e-9 {
+        return u_ref;
+    }
+    let dir = rel / distance;
+    let gap = (distance - d_c - KEEP_MARGIN_M).max(0.0);
+    let limit = other_v.dot(&dir) + (delta * gap).sqrt();
+    govern_along(v, u_ref, dir, limit, delta, dt)
+}
+
+/// `u_ref` changed as little as possible so that the next velocity's component along the unit
+/// vector `dir` is at most `limit` (or comes down towards it at up to δ); the rest of `u_ref` is
+/// kept as far as δ allows.
+fn govern_along(v: Vec2, u_ref: Vec2, dir: Vec2, limit: f64, delta: f64, dt: f64) -> Vec2 {
+    let excess = (v + u_ref * dt).dot(&dir) - limit;
+    if excess <= 0.0 {
+        return u_ref;
+    }
+    let u = u_ref - dir * (excess / dt);
+    if u.norm() <= delta {
+        return u;
+    }
+    let along = u.dot(&dir).max(-delta);
+    let across = u - dir * u.dot(&dir);
+    let room = (delta * delta - along * along).max(0.0).sqrt();
+    let across = if across.norm() > room { across * (room / across.norm()) } else { across };
+    dir * along + across
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -63,6 +104,34 @@ mod tests {
                 prop_assert!(next <= limit + 1e-9, "next speed {next} over {limit}");
             }
             prop_assert!(next <= (v + u_ref * dt).norm().max(limit) + 1e-9);
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(3000))]
+
+        /// Keeping distance never exceeds δ, never speeds the UAV up towards its neighbour, leaves a
+        /// closing speed within the limit whenever δ can reach it in one tick, and changes nothing
+        /// when the UAV is not closing in faster than the limit.
+        #[test]
+        fn keeping_distance_limits_only_the_closing_speed(
+            vx in -4.0f64..4.0, vy in -4.0f64..4.0, ux in -5.0f64..5.0, uy in -5.0f64..5.0,
+            rx in -3.0f64..3.0, ry in -3.0f64..3.0, ox in -3.0f64..3.0, oy in -3.0f64..3.0,
+        ) {
+            let (v, u_ref, rel, other) = (Vec2::new(vx, vy), uav::saturate(Vec2::new(ux, uy), 5.0), Vec2::new(rx, ry), Vec2::new(ox, oy));
+            prop_assume!(rel.norm() > 1e-3);
+            let (d_c, delta, dt) = (0.3, 5.0, 0.05);
+            let u = keep_distance(v, u_ref, rel, other, d_c, delta, dt);
+            prop_assert!(u.norm() <= delta + 1e-9);
+            let dir = rel / rel.norm();
+            let limit = other.dot(&dir) + (delta * (rel.norm() - d_c - KEEP_MARGIN_M).max(0.0)).sqrt();
+            let (asked, got) = ((v + u_ref * dt).dot(&dir), (v + u * dt).dot(&dir));
+            prop_assert!(got <= asked.max(limit) + 1e-9, "faster towards it: {got} > {asked}");
+            if asked <= limit {
+                prop_assert!((u - u_ref).norm() < 1e-12);
+            } else if v.dot(&dir) <= limit + delta * dt {
+                prop_assert!(got <= limit + 1e-9, "closing at {got} over {limit}");
+            }
         }
     }
 

@@ -9,9 +9,10 @@
 
 use crate::fleet::Uav;
 use crate::progress::Progress;
+use crate::sections::{HOLD_M, Section, next_section, sections};
 use crate::yielding::{Flying, make_way};
 use crate::zones::{Request, Reservations};
-use roads::{Navigator, PROFILE_STEP_M, Restriction, Road, RoutePosition};
+use roads::{Navigator, Restriction, RoutePosition};
 use uav::Vec2;
 
 /// A stall this long (s) next to a stalled neighbour with priority makes a UAV back off.
@@ -20,31 +21,42 @@ pub const DEADLOCK_AFTER_S: f64 = 3.0;
 /// How long (s) a back-off lasts.
 pub const BACK_OFF_S: f64 = 3.0;
 
-/// Distance (m) from a single-file section's end at which UAVs wait for their turn.
-pub const HOLD_M: f64 = 1.0;
-
-/// A grant is kept until its UAV is this far (m) beyond the section's far end.
-pub const EXIT_M: f64 = 0.5;
-
 /// Gap (in D_c) a UAV admitted to a zone keeps behind the one ahead of it on the way in.
 pub const FOLLOW_GAP_IN_DC: f64 = 2.0;
 
 /// Neighbours closer than this many D_c count as blocking each other in the deadlock rule.
 const BLOCKING_IN_DC: f64 = 3.0;
 
-/// A part of the road's centre line, [start, end] in arc length, where two opposite UAVs do not
-/// fit side by side, with the hold points where UAVs wait for their turn on either side.
+/// Why the traffic rules keep a UAV from its way this tick (the snapshot's `wait_reason`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WaitReason {
+    /// It waits for its turn at a single-file section, or behind the UAV admitted before it.
+    SingleFile,
+    /// It backs off out of a deadlocked neighbour's way.
+    DeadlockBackoff,
+}
+
+impl WaitReason {
+    /// The name in the API (`single_file`, `deadlock_backoff`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            WaitReason::SingleFile => "single_file",
+            WaitReason::DeadlockBackoff => "deadlock_backoff",
+        }
+    }
+}
+
+/// The state of one single-file section this tick (dashboard, Rerun).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Section {
-    /// Arc length where it starts.
-    pub start: f64,
-    /// Arc length where it ends.
-    pub end: f64,
-    /// Where UAVs coming from its start wait: [`HOLD_M`] before the nearest place (within r_s) wide
-    /// enough for a waiting UAV beside the lane of those leaving.
-    pub hold_before: f64,
-    /// Where UAVs coming from its end wait.
-    pub hold_after: f64,
+pub struct SectionUse {
+    /// The section.
+    pub section: Section,
+    /// The entry it admits from (0: its start, 1: its end), while in use.
+    pub open: Option<usize>,
+    /// UAVs holding a grant (inside or on their way in).
+    pub admitted: u32,
+    /// UAVs waiting for their turn.
+    pub waiting: u32,
 }
 
 /// One UAV's standing with the traffic rules.
@@ -63,65 +75,8 @@ pub struct UavTraffic {
     pub back_off: Option<(Vec2, f64)>,
     /// What the rules ask of its target this tick.
     pub restriction: Restriction,
-}
-
-/// The single-file sections of `road` for `nav`'s parameters: maximal runs of profile samples where
-/// the two lanes do not fit, merged when the two-way gap between them is too short to wait in.
-pub fn sections(road: &Road, nav: &Navigator) -> Vec<Section> {
-    let length = road.centerline().length();
-    let mut out: Vec<Section> = Vec::new();
-    let samples = road.profile().len();
-    let mut k = 0;
-    while k < samples {
-        let s = |k: usize| (k as f64 * PROFILE_STEP_M).min(length);
-        if nav.two_way_at(s(k)) {
-            k += 1;
-            continue;
-        }
-        let first = k;
-        while k < samples && !nav.two_way_at(s(k)) {
-            k += 1;
-        }
-        let (start, end) = (s(first), s(k - 1));
-        match out.last_mut() {
-            Some(last) if start - last.end < 2.0 * HOLD_M + nav.d_c => last.end = end,
-            _ => out.push(Section { start, end, hold_before: start, hold_after: end }),
-        }
-    }
-    for z in &mut out {
-        z.hold_before = wide_place(nav, z.start, -1.0, length) - HOLD_M;
-        z.hold_after = wide_place(nav, z.end, 1.0, length) + HOLD_M;
-    }
-    out
-}
-
-/// The nearest arc length from `s` towards `direction` (at most r_s away) where each side of the
-/// road has room for a lane and a UAV waiting beside it: D_s + margin + D_c/2 + gap + D_c.
-fn wide_place(nav: &Navigator, s: f64, direction: f64, length: f64) -> f64 {
-    let room = nav.d_s + roads::CLEARANCE_MARGIN_M + nav.d_c / 2.0 + roads::LANE_GAP_MARGIN_M + nav.d_c;
-    let steps = (nav.r_s / PROFILE_STEP_M).ceil() as usize;
-    (0..=steps)
-        .map(|k| (s + direction * k as f64 * PROFILE_STEP_M).clamp(0.0, length))
-        .find(|&x| {
-            let (right, left) = nav.road.profile().at(x);
-            right.min(left) >= room
-        })
-        .unwrap_or(s + direction * nav.r_s)
-}
-
-/// The section a UAV at `pos` must cross next (or is in), with its entry (0: from its start, going
-/// towards increasing arc length; 1: from its end), when it is within `approach` of it.
-fn next_section(sections: &[Section], pos: &RoutePosition, approach: f64) -> Option<(usize, usize)> {
-    let (lo, hi) = (pos.s.min(pos.goal_s), pos.s.max(pos.goal_s));
-    if pos.direction() > 0.0 {
-        let z = sections.partition_point(|z| z.end + EXIT_M < pos.s);
-        let zone = sections.get(z)?;
-        (zone.start <= hi && zone.start - pos.s <= approach).then_some((z, 0))
-    } else {
-        let z = sections.partition_point(|z| z.start - EXIT_M <= pos.s).checked_sub(1)?;
-        let zone = sections[z];
-        (zone.end >= lo && pos.s - zone.end <= approach).then_some((z, 1))
-    }
+    /// Why the rules keep it from its way this tick, if they do.
+    pub waiting: Option<WaitReason>,
 }
 
 /// The rules' state between ticks.
@@ -134,12 +89,35 @@ pub struct TrafficRules {
     /// admitted UAVs on their way in as (zone, entry, −progress, UAV).
     requests: Vec<Request>,
     entering: Vec<(usize, usize, f64, usize)>,
+    /// Scratch: the UAVs not admitted as (zone, entry, −progress, UAV), to queue them up.
+    queue: Vec<(usize, usize, f64, usize)>,
 }
 
 impl TrafficRules {
     /// The single-file sections of the current road.
     pub fn sections(&self) -> &[Section] {
         &self.sections
+    }
+
+    /// Each single-file section with who uses it and who waits for it, as of the last tick.
+    pub fn section_use<'a>(&'a self, uavs: &'a [Uav]) -> impl Iterator<Item = SectionUse> + 'a {
+        let mut counts = vec![(0u32, 0u32); self.sections.len()];
+        for u in uavs {
+            if let Some((zone, _)) = u.traffic.grant {
+                counts[zone].0 += 1;
+            }
+        }
+        for r in &self.requests {
+            if uavs.get(r.who).is_some_and(|u| u.traffic.grant.is_none()) {
+                counts[r.zone].1 += 1;
+            }
+        }
+        self.sections.iter().zip(counts).enumerate().map(|(z, (&section, (admitted, waiting)))| SectionUse {
+            section,
+            open: if self.zones.len() > z { self.zones.open(z) } else { None },
+            admitted,
+            waiting,
+        })
     }
 
     /// Applies the rules at time `now` and sets each UAV's `traffic.restriction`, from its
@@ -152,6 +130,7 @@ impl TrafficRules {
         }
         for u in uavs.iter_mut() {
             u.traffic.restriction = Restriction::default();
+            u.traffic.waiting = None;
         }
         self.reserve(nav, now, uavs);
         self.resolve_deadlocks(nav, now, uavs, neighbours);
@@ -167,9 +146,12 @@ impl TrafficRules {
             if let Some((zone, entry)) = wanted.filter(|_| u.traffic.grant == wanted)
                 && let Some(pos) = position
             {
-                // Clear of its entry once D_c inside the section.
+                // Clear of its entry (the next may follow, lined up behind it) once a follow gap past
+                // its hold point.
                 let z = self.sections[zone];
-                let entering = if entry == 0 { pos.s < z.start + nav.d_c } else { pos.s > z.end - nav.d_c };
+                let gap = FOLLOW_GAP_IN_DC * nav.d_c;
+                let entering =
+                    if entry == 0 { pos.s < z.hold_before + gap } else { pos.s > z.hold_after - gap };
                 self.zones.held(zone, entry, entering);
                 continue;
             }
@@ -182,11 +164,8 @@ impl TrafficRules {
             let z = self.sections[zone];
             let past_hold =
                 position.is_some_and(|p| if entry == 0 { p.s > z.hold_before } else { p.s < z.hold_after });
-            // Past the hold point the queue is by how far along it is; at it, by waiting time.
-            let order = match position {
-                Some(p) if past_hold => -p.direction() * p.s,
-                _ => since,
-            };
+            // The queue of an entry is by how far along its route each UAV is (they wait in a column).
+            let order = position.map_or(f64::INFINITY, |p| -p.direction() * p.s);
             let inside = position.is_some_and(|p| (z.start..=z.end).contains(&p.s));
             self.requests.push(Request { zone, entry, since, order, rank: k, who: k, past_hold, inside });
         }
@@ -195,11 +174,36 @@ impl TrafficRules {
             uavs[r.who].traffic.grant = Some((r.zone, r.entry));
             uavs[r.who].traffic.waiting_since = None;
         });
+        self.queue_up(nav, uavs);
+    }
+
+    /// UAVs not admitted wait in a column in their lane: the k-th nearest to the section holds
+    /// k·[`FOLLOW_GAP_IN_DC`]·D_c before the hold point, so that a queue does not crowd the hold
+    /// point across the road and block those leaving the section in the other lane.
+    fn queue_up(&mut self, nav: &Navigator, uavs: &mut [Uav]) {
+        let queue = &mut self.queue;
+        queue.clear();
         for r in &self.requests {
-            let u = &mut uavs[r.who];
-            if u.traffic.grant.is_none() {
-                let z = self.sections[r.zone];
-                u.traffic.restriction.hold_at = Some(if r.entry == 0 { z.hold_before } else { z.hold_after });
+            let u = &uavs[r.who];
+            if let (None, Some(pos)) = (u.traffic.grant, u.traffic.route) {
+                let along = if r.entry == 0 { pos.s } else { -pos.s };
+                queue.push((r.zone, r.entry, -along, r.who));
+            }
+        }
+        queue.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)).then(a.2.total_cmp(&b.2)).then(a.3.cmp(&b.3)));
+        let gap = FOLLOW_GAP_IN_DC * nav.d_c;
+        let mut place = 0;
+        for k in 0..queue.len() {
+            let (zone, entry, _, who) = queue[k];
+            place = if k > 0 && (queue[k - 1].0, queue[k - 1].1) == (zone, entry) { place + 1 } else { 0 };
+            let z = self.sections[zone];
+            let (hold, direction) = if entry == 0 { (z.hold_before, 1.0) } else { (z.hold_after, -1.0) };
+            let hold = hold - direction * gap * place as f64;
+            let u = &mut uavs[who];
+            u.traffic.restriction.hold_at = Some(hold);
+            // Waiting once its place limits its target (within r_s), not while far away.
+            if u.traffic.route.is_some_and(|p| (hold - p.s) * p.direction() <= nav.r_s) {
+                u.traffic.waiting = Some(WaitReason::SingleFile);
             }
         }
     }
@@ -228,6 +232,7 @@ impl TrafficRules {
                 let wait = -ahead.2 * direction - direction * FOLLOW_GAP_IN_DC * nav.d_c;
                 uavs[behind.3].traffic.restriction.hold_at = Some(wait);
                 uavs[behind.3].traffic.restriction.wait_here = true;
+                uavs[behind.3].traffic.waiting = Some(WaitReason::SingleFile);
             }
         }
     }
@@ -238,6 +243,7 @@ impl TrafficRules {
             if let Some((target, until)) = uavs[k].traffic.back_off {
                 if now < until && uavs[k].traffic.route.is_some() {
                     uavs[k].traffic.restriction.back_off = Some(target);
+                    uavs[k].traffic.waiting = Some(WaitReason::DeadlockBackoff);
                     continue;
                 }
                 uavs[k].traffic.back_off = None;
@@ -246,12 +252,15 @@ impl TrafficRules {
             else {
                 continue;
             };
-            if mine < DEADLOCK_AFTER_S || uavs[k].traffic.restriction.hold_at.is_some() {
+            if mine < DEADLOCK_AFTER_S {
                 continue;
             }
             // The stalled neighbours with priority (the longer stall to a tick, then the smaller id):
-            // step off their way, as an arrived UAV does ([`crate::yielding`]).
+            // step off their way, as an arrived UAV does ([`crate::yielding`]). A UAV held by a rule
+            // gives way to every stalled neighbour that is not held and heads towards it (one
+            // leaving a single-file section, say), whatever their stalls.
             let (me, my_target) = (uavs[k].state.p, uavs[k].last.target);
+            let held = uavs[k].traffic.restriction.hold_at.is_some();
             let winners = neighbours[k].iter().filter_map(|&d| {
                 let other = &uavs[d];
                 let (p, target) = (other.state.p, other.last.target);
@@ -259,9 +268,11 @@ impl TrafficRules {
                 let first = if (theirs - mine).abs() > 1e-6 { theirs > mine } else { other.id < uavs[k].id };
                 let near = (p - me).norm() <= blocking;
                 // In each other's way: each heads towards the other (a queue behind a leader is not).
-                let facing = (target - p).dot(&(me - p)) > 0.0 && (my_target - me).dot(&(p - me)) > 0.0;
+                let towards_me = (target - p).dot(&(me - p)) > 0.0;
+                let facing = towards_me && (my_target - me).dot(&(p - me)) > 0.0;
                 let going = other.traffic.restriction.hold_at.is_none();
-                (near && facing && going && first && other.traffic.back_off.is_none())
+                let gives_way = if held { towards_me } else { facing && first };
+                (near && going && gives_way && other.traffic.back_off.is_none())
                     .then_some(Flying { p, goal: target })
             });
             let aside = make_way(me, me, winners, nav.d_c);
@@ -269,6 +280,7 @@ impl TrafficRules {
                 let target = inside_lane(nav, &pos, aside);
                 uavs[k].traffic.back_off = Some((target, now + BACK_OFF_S));
                 uavs[k].traffic.restriction.back_off = Some(target);
+                uavs[k].traffic.waiting = Some(WaitReason::DeadlockBackoff);
             }
         }
     }
@@ -295,7 +307,7 @@ fn inside_lane(nav: &Navigator, pos: &RoutePosition, x: Vec2) -> Vec2 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use roads::{NavMode, RoadLayout};
+    use roads::{NavMode, Road, RoadLayout};
     use uav::Params;
 
     /// Two UAVs nose to nose on a 2 m wide road, each heading for the other's side.

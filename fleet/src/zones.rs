@@ -40,8 +40,7 @@ pub struct Request {
     pub entry: usize,
     /// When it started waiting (s): another entry's oldest wait closes the open entry.
     pub since: f64,
-    /// Its place in the queue of its entry, lower first (the caller's order: waiting time, or how
-    /// far along it is).
+    /// Its place in the queue of its entry, lower first (the caller's order: how far along it is).
     pub order: f64,
     /// Tie break, lower first (the UAV's index in id order, for determinism).
     pub rank: usize,
@@ -131,8 +130,11 @@ impl Reservations {
         let open = *z.open.get_or_insert(first.map_or(requests[0].entry, |r| r.entry));
         let oldest_other =
             requests.iter().filter(|r| r.entry != open).map(|r| now - r.since).max_by(f64::total_cmp);
-        if oldest_other.is_some_and(|w| w >= MAX_WAIT_S)
-            || (oldest_other.is_some() && z.admitted >= MAX_BATCH)
+        // A phase admits at least one UAV: closing a fresh one would hand the zone to nobody when
+        // both sides have waited MAX_WAIT_S (each would close the other's phase at once).
+        if z.admitted > 0
+            && (oldest_other.is_some_and(|w| w >= MAX_WAIT_S)
+                || (oldest_other.is_some() && z.admitted >= MAX_BATCH))
         {
             z.closed = true;
         }
@@ -149,7 +151,10 @@ impl Reservations {
         }
         // One at a time: the first UAV waiting at the open entry's hold point, once the previous one
         // is in.
-        let queue = requests.iter().find(|r| r.entry == open && !r.inside && !r.past_hold);
+        let queue = requests
+            .iter()
+            .filter(|r| r.entry == open && !r.inside && !r.past_hold)
+            .min_by(|a, b| a.order.total_cmp(&b.order).then(a.rank.cmp(&b.rank)));
         if let Some(r) = queue.filter(|_| !z.closed && z.entering == 0) {
             z.admitted += 1;
             z.held += 1;
@@ -195,6 +200,22 @@ mod tests {
             zone.decide(&mut requests, t as f64, |r| granted_at[r.who] = Some(t));
         }
         (granted_at, max_concurrent_entries)
+    }
+
+    #[test]
+    fn a_free_zone_admits_even_when_both_sides_waited_longer_than_the_maximum() {
+        // Both sides have waited 30 s (> MAX_WAIT_S) when the zone becomes free.
+        let arrivals = [(0, 0), (0, 0), (0, 1), (0, 1)];
+        let mut zone = Reservations::new(1);
+        let mut requests: Vec<Request> =
+            arrivals.iter().enumerate().map(|(who, &(_, entry))| request(entry, 0.0, who)).collect();
+        let mut granted = Vec::new();
+        zone.decide(&mut requests, 30.0, |r| granted.push(r.who));
+        assert_eq!(granted, vec![0], "the longest waiting (then lowest rank) goes in");
+        // And the zone keeps admitting until everyone is through.
+        let (granted, entries) = simulate(&[(0, 0), (0, 0), (0, 1), (0, 1)], 3, 200);
+        assert_eq!(entries, 1);
+        assert!(granted.iter().all(Option::is_some), "{granted:?}");
     }
 
     #[test]

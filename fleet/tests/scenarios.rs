@@ -18,7 +18,7 @@ fn fly(scenario: &ValidScenario, config: FleetConfig) -> RunMetrics {
 
 /// Flies every UAV with `policy` from the standard registry (`pd`, or the shipped `rl` model).
 fn fly_policy(scenario: &ValidScenario, config: FleetConfig, policy: &str) -> RunMetrics {
-    let options = RunOptions { config, policy: policy.into(), trajectory: None };
+    let options = RunOptions { config, policy: policy.into(), trajectory: None, paths: false };
     let policies = PolicyRegistry::standard(scenario.params.delta).expect("the shipped model loads");
     run_scenario(scenario, options, policies).expect("no I/O without a trajectory").metrics
 }

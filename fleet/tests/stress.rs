@@ -22,8 +22,12 @@ fn stress_scenarios_have_no_safety_violation() {
                         break;
                     }
                     let valid = random_scenario(seed).validate().unwrap();
-                    let options =
-                        RunOptions { config: FleetConfig::default(), policy: "pd".into(), trajectory: None };
+                    let options = RunOptions {
+                        config: FleetConfig::default(),
+                        policy: "pd".into(),
+                        trajectory: None,
+                        paths: false,
+                    };
                     let policies = PolicyRegistry::with_pd(valid.params.delta);
                     let m = run_scenario(&valid, options, policies).unwrap().metrics;
                     if !m.safe {

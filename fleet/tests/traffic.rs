@@ -14,7 +14,7 @@ fn load(name: &str) -> ValidScenario {
 
 fn fly(scenario: &ValidScenario, nav: NavMode, policy: &str) -> RunMetrics {
     let config = FleetConfig { nav, ..FleetConfig::default() };
-    let options = RunOptions { config, policy: policy.into(), trajectory: None };
+    let options = RunOptions { config, policy: policy.into(), trajectory: None, paths: false };
     let policies = PolicyRegistry::standard(scenario.params.delta).expect("the shipped model loads");
     run_scenario(scenario, options, policies).expect("no I/O without a trajectory").metrics
 }
@@ -73,7 +73,7 @@ fn a_single_file_section_passes_both_directions_in_turn() {
     let s =
         Scenario { name: "single-file".into(), params, segments: layout.segments, uavs }.validate().unwrap();
     let nav = roads::Navigator::new(&s.road, NavMode::Traffic, &s.params);
-    let sections = fleet::traffic::sections(&s.road, &nav);
+    let sections = fleet::sections::sections(&s.road, &nav);
     assert_eq!(sections.len(), 1, "{sections:?}");
     assert!(sections[0].start > 8.0 && sections[0].end < 16.0, "{sections:?}");
     for policy in ["pd", "rl"] {

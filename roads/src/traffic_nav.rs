@@ -13,9 +13,14 @@ pub const CLEARANCE_MARGIN_M: f64 = 0.1;
 /// least D_c + 2·this apart.
 pub const LANE_GAP_MARGIN_M: f64 = 0.1;
 
-/// Lane width (m) beyond its narrowest that opposite UAVs need to pass each other at speed without
-/// stopping; narrower parts are single file.
+/// Lane width (m) beyond its narrowest that opposite UAVs need to pass each other at all (slowly);
+/// narrower parts are single file.
 pub const PASSING_MARGIN_M: f64 = 0.05;
+
+/// Lane width (m) beyond its narrowest from which crowds pass each other without jamming: a tight
+/// part (between this and [`PASSING_MARGIN_M`]) is reserved like a single-file section where there
+/// are places to wait on both sides of it.
+pub const ROOMY_MARGIN_M: f64 = 0.2;
 
 /// One UAV's situation on its route.
 #[derive(Debug, Clone, Copy)]
@@ -56,9 +61,19 @@ impl Navigator<'_> {
 
     /// True when two opposite UAVs fit side by side at arc length `s` (both lanes exist there).
     pub fn two_way_at(&self, s: f64) -> bool {
+        self.lane_room_at(s) >= PASSING_MARGIN_M
+    }
+
+    /// True when the lanes at arc length `s` are wide enough for crowds to pass ([`ROOMY_MARGIN_M`]).
+    pub fn roomy_at(&self, s: f64) -> bool {
+        self.lane_room_at(s) >= ROOMY_MARGIN_M
+    }
+
+    /// Width (m) of the narrower lane at arc length `s`, beyond its smallest (negative: no lanes).
+    fn lane_room_at(&self, s: f64) -> f64 {
         let (right, left) = self.road.profile().at(s);
         let inner = self.d_c / 2.0 + LANE_GAP_MARGIN_M;
-        right.min(left) - self.d_s - CLEARANCE_MARGIN_M >= inner + PASSING_MARGIN_M
+        right.min(left) - self.d_s - CLEARANCE_MARGIN_M - inner
     }
 
     pub(crate) fn traffic_target(&self, route: &Route, restriction: &Restriction) -> Vec2 {

@@ -163,6 +163,9 @@ pub struct RunArgs {
     /// Write the trajectory (CSV, one row per UAV and tick) here.
     #[arg(long)]
     pub trajectory: Option<PathBuf>,
+    /// Draw the road, every UAV's path and where each stalled or waited into this SVG file.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
     /// `sim`: the in-process simulator, as fast as it computes. `cfsim`: every UAV a simulated
     /// Crazyflie flown through the real CRTP path over UDP, in real time (take-off first, landing
     /// after); the metrics count from the moment all fly.
@@ -183,13 +186,17 @@ pub struct StressArgs {
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Which random scenarios: `mixed` (bends, widths, hairpins, crowds), `bends` (one-way along
-    /// tight bends) or `bottleneck` (two-way through a narrow section).
-    #[arg(long, default_value = "mixed", value_parser = ["mixed", "bends", "bottleneck"])]
+    /// tight bends), `bottleneck` (two-way through a narrow section), `headon` (two groups swapping
+    /// ends through a part 0.5–5 m wide), `hairpin` (two-way through a U-turn) or `crowd` (two
+    /// dense blocks flying through each other).
+    #[arg(long, default_value = "mixed", value_parser = ["mixed", "bends", "bottleneck", "headon", "hairpin", "crowd"])]
     pub family: String,
-    /// Save the scenario file of every violating case into this directory.
+    /// Save the scenario file of every violating case (stress-SEED.json) and of every case in which
+    /// not every UAV arrived (stress-SEED-unfinished.json) into this directory.
     #[arg(long)]
     pub save_failing: Option<PathBuf>,
-    /// Save the scenario file of every safe case in which not every UAV arrived into this directory.
+    /// Save the scenario file of every safe case in which not every UAV arrived into this directory
+    /// (`--save-failing` saves those too, as stress-SEED-unfinished.json, unless this is given).
     #[arg(long)]
     pub save_unfinished: Option<PathBuf>,
     /// Worker threads (default: all cores).

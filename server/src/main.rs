@@ -16,6 +16,7 @@ mod bench_durability;
 mod bench_fleet;
 mod bench_server;
 mod cli;
+mod plot;
 mod run_cmd;
 mod serve_cmd;
 mod stress_cmd;

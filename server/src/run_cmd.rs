@@ -148,14 +148,33 @@ fn execute(args: &RunArgs, scenario: &ValidScenario, policies: PolicyRegistry) -
         }
         None => None,
     };
-    let options =
-        RunOptions { config: args.flight.fleet_config(), policy: args.flight.policy.clone(), trajectory };
+    let options = RunOptions {
+        config: args.flight.fleet_config(),
+        policy: args.flight.policy.clone(),
+        trajectory,
+        paths: args.plot.is_some(),
+    };
     let outcome = if args.link == "cfsim" {
         run_on_cfsim(scenario, options, policies)?
     } else {
         run_scenario(scenario, options, policies).context("writing the trajectory")?
     };
     print_summary(&outcome.metrics, outcome.policy_fallbacks, &outcome.stalls);
+    if let Some(path) = &args.plot {
+        let m = &outcome.metrics;
+        let arrived = m.arrival_time_s.values().filter(|t| t.is_some()).count();
+        let title = format!(
+            "{}: {arrived}/{} arrived in {:.1} s, policy {}, nav {}; longest stall {:.1} s",
+            m.scenario,
+            m.arrival_time_s.len(),
+            m.sim_time_s,
+            args.flight.policy,
+            args.flight.nav,
+            m.max_stall_s
+        );
+        crate::plot::draw(path, &scenario.road, &outcome.paths, &outcome.stalls, &title)
+            .with_context(|| format!("{}: cannot draw the plot", path.display()))?;
+    }
     if let Some(path) = &args.out {
         let json = serde_json::to_string_pretty(&outcome.metrics)?;
         std::fs::write(path, json + "\n").with_context(|| format!("{}: cannot write", path.display()))?;

@@ -60,16 +60,23 @@ fn run_case(args: &StressArgs, seed: u64) -> CaseResult {
         config: args.flight.fleet_config(),
         policy: args.flight.policy.clone(),
         trajectory: None,
+        paths: false,
     };
     // Without a trajectory writer the run does no I/O and cannot fail.
     let outcome = run_scenario(&valid, options, policies).expect("no I/O without a trajectory");
-    let dir = if outcome.metrics.safe {
-        args.save_unfinished.as_ref().filter(|_| !outcome.metrics.all_arrived)
+    // Unsafe cases keep their historic name; safe cases in which not everyone arrived say so.
+    let (dir, name) = if !outcome.metrics.safe {
+        (args.save_failing.as_ref(), format!("stress-{seed}.json"))
+    } else if !outcome.metrics.all_arrived {
+        (
+            args.save_unfinished.as_ref().or(args.save_failing.as_ref()),
+            format!("stress-{seed}-unfinished.json"),
+        )
     } else {
-        args.save_failing.as_ref()
+        (None, String::new())
     };
     if let Some(dir) = dir {
-        let path = dir.join(format!("stress-{seed}.json"));
+        let path = dir.join(name);
         let written = std::fs::create_dir_all(dir).and_then(|()| {
             std::fs::write(&path, serde_json::to_string_pretty(&scenario).unwrap_or_default())
         });
@@ -78,6 +85,40 @@ fn run_case(args: &StressArgs, seed: u64) -> CaseResult {
         }
     }
     CaseResult { seed, uavs, segments, metrics: outcome.metrics }
+}
+
+/// Per case, when its last UAV arrived (s), infinite where not all arrived; sorted.
+fn all_arrived_times(results: &[CaseResult]) -> Vec<f64> {
+    let mut times: Vec<f64> = results
+        .iter()
+        .map(|r| {
+            let m = &r.metrics;
+            let last = m.arrival_time_s.values().try_fold(0.0, |last: f64, t| t.map(|t| last.max(t)));
+            last.filter(|_| m.all_arrived).unwrap_or(f64::INFINITY)
+        })
+        .collect();
+    times.sort_by(f64::total_cmp);
+    times
+}
+
+/// The nearest-rank percentile `q` of sorted values (NaN when there are none).
+fn percentile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = ((q * sorted.len() as f64).ceil() as usize).clamp(1, sorted.len());
+    sorted[rank - 1]
+}
+
+/// A time for the summary: seconds, or "never" when not everyone arrived.
+fn seconds(t: f64) -> String {
+    if t.is_finite() {
+        format!("{t:.1} s")
+    } else if t.is_nan() {
+        "-".into()
+    } else {
+        "never".into()
+    }
 }
 
 fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
@@ -106,6 +147,12 @@ fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
         "  qp failures {}, max slack {:.3e}",
         results.iter().map(|r| r.metrics.qp.failures).sum::<u64>(),
         results.iter().map(|r| r.metrics.qp.max_slack).fold(0.0, f64::max)
+    );
+    let done = all_arrived_times(results);
+    say!(
+        "  time until all arrived: p50 {}, p99 {} (over all cases; unfinished count as never)",
+        seconds(percentile(&done, 0.50)),
+        seconds(percentile(&done, 0.99))
     );
     let stalls: f64 = results.iter().map(|r| r.metrics.stall_s).sum();
     let longest = results.iter().map(|r| r.metrics.max_stall_s).fold(0.0, f64::max);

@@ -9,6 +9,7 @@ import { join } from "node:path";
 import { ARTIFACTS, api, clickWorld, launchBrowser, openDashboard, screenshot, startServer, until } from "./harness.mjs";
 
 const STRAIGHT = join(import.meta.dirname, "fixtures", "straight.json");
+const NARROW = join(import.meta.dirname, "..", "..", "scenarios", "narrow16.json");
 let browser;
 
 before(async () => {
@@ -122,6 +123,33 @@ test("select a UAV by clicking it, click a goal on the road, and it arrives", as
     );
     assert.ok(near(arrived.p, set.goal, 0.15), `uav1 at ${arrived.p}, goal ${set.goal}`);
     await screenshot(page, "goal-arrived");
+  });
+});
+
+test("UAVs held by a traffic rule show as waiting: legend, reservation band and the reason in the details", async () => {
+  await withDashboard("waiting", ["--scenario", NARROW], async (page, { url }) => {
+    // Eight UAVs from each side meet at a 0.9 m section: one side waits for its turn.
+    const held = await until(
+      "a UAV to wait for the single-file section (GET /api/state)",
+      async () => {
+        const s = await api(url, "GET", "/api/state");
+        const open = s.reservations.length === 1 && s.reservations[0].open_from !== null;
+        const queue = s.uavs.filter((u) => u.status === "waiting" && u.wait_reason === "single_file");
+        return open && queue.length >= 2 && queue;
+      },
+      60000,
+      100,
+    );
+    await page.locator('#legend [data-status="waiting"]').waitFor();
+    // The last in its queue waits longest: select it (the fleet holds while it is clicked), fly on,
+    // and its details give the reason.
+    const last = held.reduce((a, b) => (Math.abs(a.p[0]) > Math.abs(b.p[0]) ? a : b));
+    await selectHovering(page, url, last.id);
+    await api(url, "POST", "/api/fleet/resume");
+    const reason = page.locator(`#details section[data-uav="${last.id}"] dd[data-field="reason"]`);
+    await reason.waitFor({ timeout: 15000 });
+    assert.match(await reason.textContent(), /^single_file: waits for its turn/);
+    await screenshot(page, "waiting");
   });
 });
 

@@ -3,7 +3,7 @@
 
 use super::engine::RoadView;
 use super::rerun_sink::{SinkStats, TICK_TIMELINE, TIME_TIMELINE, TRAIL_EVERY_TICKS, TRAIL_POINTS};
-use super::snapshot::{Snapshot, UavSnapshot, UavStatus};
+use super::snapshot::{ReservationSnapshot, Snapshot, UavSnapshot, UavStatus};
 use super::stats::LoopMetrics;
 use rerun::{
     Arrows2D, Clear, Color, EntityPath, EntityPathPart, LineStrip2D, LineStrips2D, Points2D, Radius,
@@ -54,6 +54,8 @@ impl UavLog {
 pub(super) struct Logger {
     road_version: Option<u64>,
     last_tick: Option<u64>,
+    /// Reservations were logged and must be cleared when the road has none any more.
+    had_reservations: bool,
     uavs: HashMap<String, UavLog>,
     pub(super) stats: SinkStats,
 }
@@ -76,7 +78,24 @@ fn color(status: UavStatus) -> Color {
         UavStatus::Landed => Color::from_rgb(91, 101, 112),
         UavStatus::Stopped => Color::from_rgb(59, 13, 13),
         UavStatus::Stopping => Color::from_rgb(150, 30, 30),
+        UavStatus::Waiting => Color::from_rgb(240, 210, 40),
     }
+}
+
+/// A single-file section's colour: grey while free, green while admitting from its start, blue
+/// from its end.
+fn reservation_color(r: &ReservationSnapshot) -> Color {
+    match r.open_from {
+        None => Color::from_rgb(150, 150, 150),
+        Some("start") => Color::from_rgb(60, 200, 90),
+        Some(_) => Color::from_rgb(70, 140, 255),
+    }
+}
+
+/// The label beside a single-file section: who it admits, how many are in and how many wait.
+fn reservation_label(r: &ReservationSnapshot) -> String {
+    let open = r.open_from.map_or("free".to_string(), |end| format!("from {end}"));
+    format!("single file: {open}, {} in, {} waiting", r.admitted, r.waiting)
 }
 
 impl Logger {
@@ -152,6 +171,19 @@ impl Logger {
                 rec.log(log.barrier, &Clear::flat())?;
                 rec.log(log.slack, &Clear::flat())?;
             }
+        }
+        if !snapshot.reservations.is_empty() {
+            let r = &snapshot.reservations;
+            let strips = r.iter().map(|z| LineStrip2D::from_iter(z.path.iter().map(|p| xy(*p))));
+            let strips = LineStrips2D::new(strips)
+                .with_colors(r.iter().map(reservation_color))
+                .with_labels(r.iter().map(reservation_label))
+                .with_radii([Radius::new_ui_points(4.0)]);
+            rec.log("world/road/reservations", &strips)?;
+            self.had_reservations = true;
+        } else if self.had_reservations {
+            rec.log("world/road/reservations", &Clear::flat())?;
+            self.had_reservations = false;
         }
         if let Some(m) = snapshot.min_collision_margin_m {
             rec.log("margins/collision", &Scalars::single(m))?;

@@ -4,6 +4,8 @@
 //! falls behind it takes the latest snapshot and counts the ones it skipped, so the fleet loop never
 //! waits for it. Everything is logged on the `tick` sequence timeline (and `time`, in seconds):
 //! - `world/road/walls`, `world/road/centerline`: line strips, logged again when the road changes;
+//! - `world/road/reservations`: the single-file sections, coloured by the end they admit from and
+//!   labelled with who is in and who waits, every tick while the road has any;
 //! - `world/uavs/{id}`: the position (labelled with the id, coloured by status, radius D_c/2), with
 //!   `trail`, `velocity`, `target` and `goal` below it; cleared when the UAV is removed;
 //! - scalar series `barrier/{id}` (smallest barrier value), `slack/{id}`, `margins/collision`,

@@ -33,6 +33,8 @@ pub enum UavStatus {
     Stopped,
     /// Emergency stop sent, not yet confirmed by the Crazyflie: it may still be in the air.
     Stopping,
+    /// Held back by a traffic rule (`wait_reason` says which).
+    Waiting,
 }
 
 /// One UAV in a snapshot. Vectors are `[x, y]` in metres, m/s and m/s².
@@ -64,6 +66,8 @@ pub struct UavSnapshot {
     pub phase: &'static str,
     /// Its link is lost (see `status`).
     pub lost: bool,
+    /// Why a traffic rule holds it back (`single_file`, `deadlock_backoff`), null when none does.
+    pub wait_reason: Option<&'static str>,
     /// CBF rows binding at u.
     pub active_rows: usize,
     /// Largest slack of its QP this tick (0 when none was needed).
@@ -97,6 +101,40 @@ pub struct Snapshot {
     pub d_s: f64,
     /// Every UAV, in the order they were added.
     pub uavs: Vec<UavSnapshot>,
+    /// The single-file sections of the road and their reservations (`traffic` navigation).
+    pub reservations: Vec<ReservationSnapshot>,
+}
+
+/// A single-file section: one direction at a time.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReservationSnapshot {
+    /// Its centre line from start to end, points about 0.5 m apart (m).
+    pub path: Vec<[f64; 2]>,
+    /// The end it admits from (`start` or `end` of `path`), null while free.
+    pub open_from: Option<&'static str>,
+    /// UAVs admitted (inside or on their way in).
+    pub admitted: u32,
+    /// UAVs waiting for their turn.
+    pub waiting: u32,
+}
+
+/// Distance between the points of a reservation's path (m).
+const PATH_STEP_M: f64 = 0.5;
+
+fn reservations(fleet: &Fleet) -> Vec<ReservationSnapshot> {
+    let line = fleet.road().centerline();
+    fleet
+        .section_use()
+        .map(|z| {
+            let (start, end) = (z.section.start, z.section.end);
+            let steps = ((end - start) / PATH_STEP_M).ceil().max(1.0) as usize;
+            let path = (0..=steps)
+                .map(|k| xy(&line.point_at(start + (end - start) * k as f64 / steps as f64)))
+                .collect();
+            let open_from = z.open.map(|entry| if entry == 0 { "start" } else { "end" });
+            ReservationSnapshot { path, open_from, admitted: z.admitted, waiting: z.waiting }
+        })
+        .collect()
 }
 
 fn xy(v: &Vec2) -> [f64; 2] {
@@ -123,7 +161,11 @@ fn status(u: &Uav, holding: bool) -> UavStatus {
         UavStatus::Failed
     } else if u.nav.arrived {
         UavStatus::Arrived
-    } else if l.max_slack > 1e-6 || l.policy_fallback || holding {
+    } else if l.policy_fallback || holding {
+        UavStatus::Braking
+    } else if u.traffic.waiting.is_some() {
+        UavStatus::Waiting
+    } else if l.max_slack > 1e-6 {
         UavStatus::Braking
     } else {
         UavStatus::Flying
@@ -164,6 +206,7 @@ impl Snapshot {
                     link: u.link.describe().to_string(),
                     phase: u.phase.name(),
                     lost: l.lost,
+                    wait_reason: u.traffic.waiting.map(|w| w.name()),
                     active_rows: l.active_rows,
                     slack: l.max_slack,
                     min_barrier: l.min_barrier.is_finite().then_some(l.min_barrier),
@@ -182,6 +225,7 @@ impl Snapshot {
             d_c: p.d_c,
             d_s: p.d_s,
             uavs,
+            reservations: reservations(fleet),
         }
     }
 }

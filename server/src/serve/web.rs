@@ -35,6 +35,7 @@ const ASSETS: &[Asset] = &[
     asset!("plot.js", JS),
     asset!("input.js", JS),
     asset!("controls.js", JS),
+    asset!("details.js", JS),
 ];
 
 fn route(asset: &'static Asset) -> axum::routing::MethodRouter<super::state::AppState> {

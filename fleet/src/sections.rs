@@ -1,0 +1,103 @@
+//! Single-file sections: the parts of a road where opposite UAVs cannot pass each other (or only
+//! slowly), found once per road from its clearance profile, with the hold points where UAVs wait
+//! for their turn on either side ([`crate::traffic`] reserves them through [`crate::zones`]).
+
+use roads::{Navigator, PROFILE_STEP_M, Road, RoutePosition};
+
+/// Distance (m) from a single-file section's end at which UAVs wait for their turn.
+pub const HOLD_M: f64 = 1.0;
+
+/// A grant is kept until its UAV is this far (m) beyond the section's far end.
+pub const EXIT_M: f64 = 0.5;
+
+/// A part of the road's centre line, [start, end] in arc length, where two opposite UAVs do not
+/// fit side by side, with the hold points where UAVs wait for their turn on either side.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Section {
+    /// Arc length where it starts.
+    pub start: f64,
+    /// Arc length where it ends.
+    pub end: f64,
+    /// Where UAVs coming from its start wait: [`HOLD_M`] before the nearest place (within r_s) wide
+    /// enough for a waiting UAV beside the lane of those leaving.
+    pub hold_before: f64,
+    /// Where UAVs coming from its end wait.
+    pub hold_after: f64,
+}
+
+/// The single-file sections of `road` for `nav`'s parameters: maximal runs of profile samples where
+/// the lanes are not roomy, merged when the two-way gap between them is too short to wait in. A run
+/// where both lanes exist throughout (tight, not single file) is kept only where there are places to
+/// wait on both sides of it; on a road that is tight end to end, traffic keeps to its lanes.
+pub fn sections(road: &Road, nav: &Navigator) -> Vec<Section> {
+    let length = road.centerline().length();
+    let mut out: Vec<(Section, bool)> = Vec::new();
+    let samples = road.profile().len();
+    let s = |k: usize| (k as f64 * PROFILE_STEP_M).min(length);
+    let mut k = 0;
+    while k < samples {
+        if nav.roomy_at(s(k)) {
+            k += 1;
+            continue;
+        }
+        let first = k;
+        let mut single_file = false;
+        while k < samples && !nav.roomy_at(s(k)) {
+            single_file |= !nav.two_way_at(s(k));
+            k += 1;
+        }
+        let (start, end) = (s(first), s(k - 1));
+        match out.last_mut() {
+            Some((last, one)) if start - last.end < 2.0 * HOLD_M + nav.d_c => {
+                last.end = end;
+                *one |= single_file;
+            }
+            _ => out.push((Section { start, end, hold_before: start, hold_after: end }, single_file)),
+        }
+    }
+    out.into_iter()
+        .filter_map(|(mut z, single_file)| {
+            let before = wide_place(nav, z.start, -1.0, length);
+            let after = wide_place(nav, z.end, 1.0, length);
+            if !single_file && (before.is_none() || after.is_none()) {
+                return None;
+            }
+            z.hold_before = before.unwrap_or(z.start - nav.r_s) - HOLD_M;
+            z.hold_after = after.unwrap_or(z.end + nav.r_s) + HOLD_M;
+            Some(z)
+        })
+        .collect()
+}
+
+/// The nearest arc length from `s` towards `direction` (at most r_s away, on the road) where each
+/// side of the road has room for a lane and a UAV waiting beside it: D_s + margin + D_c/2 + gap + D_c.
+fn wide_place(nav: &Navigator, s: f64, direction: f64, length: f64) -> Option<f64> {
+    let room = nav.d_s + roads::CLEARANCE_MARGIN_M + nav.d_c / 2.0 + roads::LANE_GAP_MARGIN_M + nav.d_c;
+    let steps = (nav.r_s / PROFILE_STEP_M).ceil() as usize;
+    (0..=steps)
+        .map(|k| s + direction * k as f64 * PROFILE_STEP_M)
+        .take_while(|x| (0.0..=length).contains(x))
+        .find(|&x| {
+            let (right, left) = nav.road.profile().at(x);
+            right.min(left) >= room
+        })
+}
+
+/// The section a UAV at `pos` must cross next (or is in), with its entry (0: from its start, going
+/// towards increasing arc length; 1: from its end), when it is within `approach` of it.
+pub(crate) fn next_section(
+    sections: &[Section],
+    pos: &RoutePosition,
+    approach: f64,
+) -> Option<(usize, usize)> {
+    let (lo, hi) = (pos.s.min(pos.goal_s), pos.s.max(pos.goal_s));
+    if pos.direction() > 0.0 {
+        let z = sections.partition_point(|z| z.end + EXIT_M < pos.s);
+        let zone = sections.get(z)?;
+        (zone.start <= hi && zone.start - pos.s <= approach).then_some((z, 0))
+    } else {
+        let z = sections.partition_point(|z| z.start - EXIT_M <= pos.s).checked_sub(1)?;
+        let zone = sections[z];
+        (zone.end >= lo && pos.s - zone.end <= approach).then_some((z, 1))
+    }
+}
