@@ -236,3 +236,38 @@ async fn connect_without_a_viewer_keeps_the_server_running() {
     assert_eq!((stats.logged, stats.errors), (0, 0));
     assert!(stats.skipped >= 20, "{stats:?}");
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn single_file_reservations_are_logged_with_who_is_in_and_who_waits() {
+    let rrd = temp_rrd();
+    let server = start(&format!("save={}", rrd.display())).await;
+    // The narrow-section scenario: a 0.9 m wide section between x = −2.5 and 2.5, 8 UAVs each side.
+    let scenario =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/narrow16.json")).unwrap();
+    let (status, body) = support::raw(server.addr, "POST", "/api/scenario", Some(&scenario), &[]).await;
+    assert_eq!(status, 200, "{body}");
+    tokio::time::sleep(Duration::from_millis(2500)).await;
+    let state = server.state.clone();
+    let stats = server.stop().await;
+    assert_eq!(stats.errors, 0);
+    let last = state.snapshots.borrow().clone();
+    assert_eq!(last.reservations.len(), 1, "one single-file section");
+
+    let rec = read_rrd(&rrd);
+    std::fs::remove_file(&rrd).unwrap();
+    let strips = rec.strips("world/road/reservations");
+    assert!(strips.len() >= 5, "logged every tick: {} rows", strips.len());
+    for (_, batch) in &strips {
+        assert_eq!(batch.len(), 1, "one strip per section");
+        // Along the centre line through the section (with the funnels where the lanes are tight).
+        assert!(batch[0].iter().all(|p| p[0].abs() < 6.0 && p[1].abs() < 1e-3), "{:?}", batch[0]);
+        assert!(batch[0].iter().any(|p| p[0] < -2.4) && batch[0].iter().any(|p| p[0] > 2.4));
+    }
+    let component = LineStrips2D::descriptor_labels().component;
+    let labels = rec.rows("world/road/reservations", component, |c| {
+        c.iter_slices::<String>(component).map(|s| s[0].to_string()).collect()
+    });
+    assert!(labels.iter().all(|(_, l)| l.starts_with("single file: ")), "{labels:?}");
+    // One side goes in while the other waits.
+    assert!(labels.iter().any(|(_, l)| l.contains(" in, ") && !l.ends_with(" 0 waiting")), "{labels:?}");
+}

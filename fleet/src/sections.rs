@@ -26,12 +26,13 @@ pub struct Section {
 }
 
 /// The single-file sections of `road` for `nav`'s parameters: maximal runs of profile samples where
-/// the lanes are not roomy, merged when the two-way gap between them is too short to wait in. A run
-/// where both lanes exist throughout (tight, not single file) is kept only where there are places to
-/// wait on both sides of it; on a road that is tight end to end, traffic keeps to its lanes.
+/// the lanes are not roomy (single file, or tight), merged when the two-way gap between them is too
+/// short to wait in, and kept only where there are places to wait on both sides: on a road that is
+/// narrow end to end nobody could wait for a turn, so traffic keeps to its lanes there (or to the
+/// middle, passing slowly under the filter) and the deadlock rule sorts out meetings.
 pub fn sections(road: &Road, nav: &Navigator) -> Vec<Section> {
     let length = road.centerline().length();
-    let mut out: Vec<(Section, bool)> = Vec::new();
+    let mut out: Vec<Section> = Vec::new();
     let samples = road.profile().len();
     let s = |k: usize| (k as f64 * PROFILE_STEP_M).min(length);
     let mut k = 0;
@@ -41,29 +42,19 @@ pub fn sections(road: &Road, nav: &Navigator) -> Vec<Section> {
             continue;
         }
         let first = k;
-        let mut single_file = false;
         while k < samples && !nav.roomy_at(s(k)) {
-            single_file |= !nav.two_way_at(s(k));
             k += 1;
         }
         let (start, end) = (s(first), s(k - 1));
         match out.last_mut() {
-            Some((last, one)) if start - last.end < 2.0 * HOLD_M + nav.d_c => {
-                last.end = end;
-                *one |= single_file;
-            }
-            _ => out.push((Section { start, end, hold_before: start, hold_after: end }, single_file)),
+            Some(last) if start - last.end < 2.0 * HOLD_M + nav.d_c => last.end = end,
+            _ => out.push(Section { start, end, hold_before: start, hold_after: end }),
         }
     }
     out.into_iter()
-        .filter_map(|(mut z, single_file)| {
-            let before = wide_place(nav, z.start, -1.0, length);
-            let after = wide_place(nav, z.end, 1.0, length);
-            if !single_file && (before.is_none() || after.is_none()) {
-                return None;
-            }
-            z.hold_before = before.unwrap_or(z.start - nav.r_s) - HOLD_M;
-            z.hold_after = after.unwrap_or(z.end + nav.r_s) + HOLD_M;
+        .filter_map(|mut z| {
+            z.hold_before = wide_place(nav, z.start, -1.0, length)? - HOLD_M;
+            z.hold_after = wide_place(nav, z.end, 1.0, length)? + HOLD_M;
             Some(z)
         })
         .collect()

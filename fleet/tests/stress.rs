@@ -1,27 +1,36 @@
-//! A few hundred random valid scenarios (roads with 20–120° bends, 1–5 m wide, hairpins; 2–30 UAVs)
-//! fly with zero safety violations: margins ≥ D_c and D_s, no step outside the road, no failed solve.
+//! Random valid scenarios fly with zero safety violations (margins ≥ D_c and D_s, no step outside the
+//! road, no failed solve): 300 of the general mix (roads with 20–120° bends, 1–5 m wide, hairpins;
+//! 2–30 UAVs) and 100 each of winding bends and bottlenecks; in those and in 100 hairpins with
+//! opposite traffic at least as many cases have every UAV arrive as measured (BENCHMARKS.md
+//! "Traffic rules"): a guard against a change that keeps everyone safe by keeping them from arriving.
 
-use fleet::stress::random_scenario;
-use fleet::{FleetConfig, RunOptions, run_scenario};
+use fleet::families::Family;
+use fleet::{FleetConfig, RunMetrics, RunOptions, run_scenario};
 use policies::PolicyRegistry;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-const CASES: u64 = 300;
+/// Cases (of seeds 1..=N, `pd`) in which every UAV arrived when last measured (`airroads stress
+/// --family F --scenarios N --seed 1 --policy pd`); a change may raise these, never lower them.
+const MIXED_ARRIVED: usize = 269;
+const BENDS_ARRIVED: usize = 97;
+const BOTTLENECK_ARRIVED: usize = 100;
+const HAIRPIN_ARRIVED: usize = 99;
 
-#[test]
-fn stress_scenarios_have_no_safety_violation() {
+/// Runs cases 1..=`cases` of `family` with `pd` on every core; returns the unsafe ones (seed and
+/// metrics) and how many cases had every UAV arrive.
+fn run_family(family: Family, cases: u64) -> (Vec<(u64, RunMetrics)>, usize) {
     let next = AtomicU64::new(0);
-    let failures = std::sync::Mutex::new(Vec::new());
+    let results = std::sync::Mutex::new(Vec::new());
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     std::thread::scope(|scope| {
         for _ in 0..threads {
             scope.spawn(|| {
                 loop {
                     let seed = next.fetch_add(1, Ordering::Relaxed) + 1;
-                    if seed > CASES {
+                    if seed > cases {
                         break;
                     }
-                    let valid = random_scenario(seed).validate().unwrap();
+                    let valid = family.scenario(seed).validate().unwrap();
                     let options = RunOptions {
                         config: FleetConfig::default(),
                         policy: "pd".into(),
@@ -30,23 +39,63 @@ fn stress_scenarios_have_no_safety_violation() {
                     };
                     let policies = PolicyRegistry::with_pd(valid.params.delta);
                     let m = run_scenario(&valid, options, policies).unwrap().metrics;
-                    if !m.safe {
-                        failures.lock().unwrap().push((seed, m));
-                    }
+                    results.lock().unwrap().push((seed, m));
                 }
             });
         }
     });
-    let failures = failures.into_inner().unwrap();
-    for (seed, m) in &failures {
+    let results = results.into_inner().unwrap();
+    let arrived = results.iter().filter(|(_, m)| m.all_arrived).count();
+    let unsafe_cases: Vec<(u64, RunMetrics)> = results.into_iter().filter(|(_, m)| !m.safe).collect();
+    for (seed, m) in &unsafe_cases {
         eprintln!(
-            "seed {seed}: collision margin {:?}, road margin {}, outside {}, failures {}",
-            m.min_collision_margin_m, m.min_road_margin_m, m.steps_outside_road, m.qp.failures
+            "{} seed {seed}: collision margin {:?}, road margin {}, outside {}, failures {}",
+            family.name(),
+            m.min_collision_margin_m,
+            m.min_road_margin_m,
+            m.steps_outside_road,
+            m.qp.failures
         );
     }
+    (unsafe_cases, arrived)
+}
+
+/// Asserts no violation (when `safe`) and at least `min_arrived` cases with everyone home.
+fn check(family: Family, cases: u64, min_arrived: usize, safe: bool) {
+    let (unsafe_cases, arrived) = run_family(family, cases);
     assert!(
-        failures.is_empty(),
-        "{} of {CASES} stress scenarios violated safety (replay: airroads stress --scenarios 1 --seed SEED)",
-        failures.len()
+        !safe || unsafe_cases.is_empty(),
+        "{} of {cases} `{}` scenarios violated safety (replay: airroads stress --family {} --scenarios 1 --seed SEED)",
+        unsafe_cases.len(),
+        family.name(),
+        family.name()
     );
+    assert!(
+        arrived >= min_arrived,
+        "`{}`: every UAV arrived in only {arrived} of {cases} cases (at least {min_arrived} did when measured)",
+        family.name()
+    );
+}
+
+#[test]
+fn stress_scenarios_have_no_safety_violation() {
+    check(Family::Mixed, 300, MIXED_ARRIVED, true);
+}
+
+#[test]
+fn bends_are_safe_and_arrive() {
+    check(Family::Bends, 100, BENDS_ARRIVED, true);
+}
+
+#[test]
+fn bottlenecks_are_safe_and_arrive() {
+    check(Family::Bottleneck, 100, BOTTLENECK_ARRIVED, true);
+}
+
+/// Arrivals only: seed 94 dips 22 µm below D_c in a dense meeting inside the U-turn (the filter's
+/// slack under chattering inputs; BENCHMARKS.md "Traffic rules" lists it), so safety is not claimed
+/// for this family yet.
+#[test]
+fn hairpins_with_opposite_traffic_arrive() {
+    check(Family::Hairpin, 100, HAIRPIN_ARRIVED, false);
 }

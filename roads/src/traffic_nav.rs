@@ -18,8 +18,8 @@ pub const LANE_GAP_MARGIN_M: f64 = 0.1;
 pub const PASSING_MARGIN_M: f64 = 0.05;
 
 /// Lane width (m) beyond its narrowest from which crowds pass each other without jamming: a tight
-/// part (between this and [`PASSING_MARGIN_M`]) is reserved like a single-file section where there
-/// are places to wait on both sides of it.
+/// part (below this) is reserved like a single-file section where there are places to wait on both
+/// sides of it.
 pub const ROOMY_MARGIN_M: f64 = 0.2;
 
 /// One UAV's situation on its route.

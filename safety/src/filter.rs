@@ -174,7 +174,13 @@ impl SafetyFilter {
             };
         }
         let sol = self.solver.solve(u_ref, &self.scratch, delta);
-        if sol.status != SolverStatus::Solved {
+        // Clarabel stops at reduced accuracy (`AlmostSolved`) on nearly degenerate problems (a
+        // feasible set that is a sliver at the δ-ball's edge); its answer is used only when every row
+        // holds at it with the slack it reports, to 1e-6, like a `Solved` one.
+        let usable = sol.status == SolverStatus::Solved
+            || (sol.status == SolverStatus::AlmostSolved
+                && holds_with_slack(&self.scratch, &sol.u, self.solver.slacks()));
+        if !usable {
             return FilterOutcome { status: sol.status, ..self.brake(v, delta, dt) };
         }
         FilterOutcome {
@@ -223,6 +229,11 @@ fn closed_form(u_ref: Vec2, rows: &[ConstraintRow], delta: f64) -> Option<Vec2> 
         let u = u_ref - r.a * lambda;
         (lambda > 0.0 && lambda <= r.rho && feasible(&u)).then_some(u)
     })
+}
+
+/// Every QP row holds at `u` with its slack: aᵀu ≤ c + r, to 1e-6.
+fn holds_with_slack(rows: &[ConstraintRow], u: &Vec2, slacks: &[f64]) -> bool {
+    rows.len() == slacks.len() && rows.iter().zip(slacks).all(|(r, s)| r.a.dot(u) <= r.c + s + 1e-6)
 }
 
 fn count_active(rows: &[Row], u: &Vec2) -> usize {

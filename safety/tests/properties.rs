@@ -5,6 +5,7 @@
 
 mod common;
 
+use clarabel::solver::SolverStatus;
 use common::hard_qp;
 use proptest::prelude::*;
 use safety::barrier::{H_MIN, collision_row, line_row, point_row};
@@ -21,6 +22,9 @@ const DT: f64 = 0.05;
 const ROUND_OFF: f64 = 1e-12;
 /// Row satisfaction and slack tolerance of the filter's output (solver tolerances 1e-9, docs/safety.md §6).
 const QP_TOL: f64 = 1e-6;
+
+/// Clarabel's reduced gap tolerance (`reduced_tol_gap_rel`), met by an `AlmostSolved` answer.
+const REDUCED_TOL: f64 = 5e-5;
 
 thread_local! {
     /// One warm filter per test thread, so its cached solvers are updated across cases as in a run.
@@ -253,9 +257,11 @@ proptest! {
         for r in &rows {
             prop_assert!(r.a.dot(&out.u) <= r.c + QP_TOL, "row {:?} violated by {:?}", r, out);
         }
-        // Optimal too: the objective matches the hard optimum's to the solver's tolerance.
+        // Optimal too: the objective matches the hard optimum's to the solver's tolerance (Clarabel's
+        // reduced one, 5e-5, when it stopped at `AlmostSolved` on a nearly degenerate problem).
         let (got, best) = ((out.u - u_ref).norm_squared() / 2.0, (hard.u - u_ref).norm_squared() / 2.0);
-        let optimal = got <= best + QP_TOL * best.max(1.0);
+        let tol = if out.status == SolverStatus::AlmostSolved { REDUCED_TOL } else { QP_TOL };
+        let optimal = got <= best + tol * best.max(1.0);
         prop_assert!(optimal, "objective {:e} > optimum {:e} at {:?}", got, best, hard.u);
     }
 
