@@ -233,14 +233,15 @@ fn run_plot_to_an_unwritable_place_fails_with_the_file_named() {
 fn stress_reports_time_to_arrival_and_saves_unfinished_cases_with_save_failing() {
     let dir = scratch("stress-saved");
     let _ = std::fs::remove_dir_all(&dir);
+    // Seeds 14–19 of `mixed`: seed 18 leaves one of its 8 UAVs short of its goal when measured.
     let run = airroads(&[
         "stress",
         "--family",
-        "bottleneck",
+        "mixed",
         "--scenarios",
-        "4",
+        "6",
         "--seed",
-        "1",
+        "14",
         "--policy",
         "pd",
         "--save-failing",
@@ -265,6 +266,7 @@ fn stress_reports_time_to_arrival_and_saves_unfinished_cases_with_save_failing()
     saved.sort();
     let mut listed = listed;
     listed.sort();
+    assert!(!listed.is_empty(), "no unfinished case among these seeds any more: pick others\n{out}");
     assert_eq!(saved, listed, "{out}");
     for f in &saved {
         let scenario = std::fs::read_to_string(dir.join(f)).unwrap();

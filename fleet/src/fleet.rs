@@ -405,22 +405,15 @@ impl Fleet {
             }
         }
         if self.config.nav == NavMode::Traffic {
-            // The traffic rules' speed limit: narrower road, slower flight (`fleet::speed`).
-            for uav in &mut self.uavs {
-                let Some(pos) = uav.nav.position.filter(|_| !uav.nav.arrived) else { continue };
-                let (right, left) = self.road.profile().at(pos.s);
-                let limit = speed_limit(right + left);
-                uav.last.u_ref = govern(uav.state.v, uav.last.u_ref, limit, delta, dt);
-            }
-            // And the distance kept to every neighbour (`fleet::speed::keep_distance`).
+            // The traffic rules' speed limit (narrower road, slower flight) and the distance kept to
+            // every neighbour (`fleet::speed`).
             let d_c = self.config.params.d_c;
             for k in 0..self.uavs.len() {
                 let me = &self.uavs[k];
-                if me.nav.position.is_none() || me.nav.arrived || !me.flying() {
-                    continue;
-                }
+                let Some(pos) = me.nav.position.filter(|_| !me.nav.arrived && me.flying()) else { continue };
+                let (right, left) = self.road.profile().at(pos.s);
                 let (p, v) = (me.state.p, me.state.v);
-                let mut u = me.last.u_ref;
+                let mut u = govern(v, me.last.u_ref, speed_limit(right + left), delta, dt);
                 for &d in &self.neighbours.lists[k] {
                     let other = &self.uavs[d].state;
                     u = keep_distance(v, u, other.p - p, other.v, d_c, delta, dt);

@@ -114,7 +114,8 @@ impl TrafficRules {
         }
         self.sections.iter().zip(counts).enumerate().map(|(z, (&section, (admitted, waiting)))| SectionUse {
             section,
-            open: if self.zones.len() > z { self.zones.open(z) } else { None },
+            // One zone per section: both are rebuilt together when the road changes.
+            open: self.zones.open(z),
             admitted,
             waiting,
         })
