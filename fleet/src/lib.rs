@@ -7,6 +7,7 @@
 mod edit;
 pub mod families;
 mod fleet;
+pub mod following;
 mod lost;
 mod margins;
 mod metrics;

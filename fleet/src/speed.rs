@@ -6,6 +6,7 @@
 //! stop from, braking at δ, well before D_c (the `crowd` family showed blocks pressing into each
 //! other at full δ until the filter ran out of input and used slack).
 
+use roads::{ClearanceProfile, PROFILE_STEP_M};
 use uav::Vec2;
 
 /// Speed limit (m/s) on a road part of width 0 (the floor of [`speed_limit`]).
@@ -20,6 +21,56 @@ pub const FREE_WIDTH_M: f64 = 4.0;
 /// The speed limit (m/s) where the road is `width` metres wide.
 pub fn speed_limit(width: f64) -> f64 {
     BASE_SPEED_MPS + SPEED_PER_WIDTH * width.clamp(0.0, FREE_WIDTH_M)
+}
+
+/// Deceleration (m/s²) at which the look-ahead of [`SpeedProfile`] slows a UAV down before a
+/// narrower part: a quarter of δ = 5, so that a queue slowing down together keeps most of δ for
+/// its collision rows (docs/safety.md §10.3).
+pub const LOOKAHEAD_DECEL: f64 = 1.25;
+
+/// The speed limit along the road for each direction of travel, looking ahead: at every sample it
+/// is at most [`speed_limit`] of the width there and of every narrower part ahead, minus what
+/// braking at [`LOOKAHEAD_DECEL`] takes off on the way (v² ≤ v_ahead² + 2·a·distance). A block of
+/// UAVs flying into a funnel slows down before it, not inside it at full δ (the `headon` family
+/// showed queues braking in the funnel, out of input for their pair rows).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SpeedProfile {
+    road_id: u64,
+    /// Towards increasing s.
+    forward: Vec<f64>,
+    /// Towards decreasing s.
+    backward: Vec<f64>,
+}
+
+impl SpeedProfile {
+    /// The profile of a road with clearance `profile` and identity `road_id`.
+    pub fn new(profile: &ClearanceProfile, road_id: u64) -> Self {
+        let plain: Vec<f64> = profile.widths().map(speed_limit).collect();
+        let gain = 2.0 * LOOKAHEAD_DECEL * PROFILE_STEP_M;
+        let mut forward = plain.clone();
+        for k in (0..forward.len().saturating_sub(1)).rev() {
+            forward[k] = forward[k].min((forward[k + 1] * forward[k + 1] + gain).sqrt());
+        }
+        let mut backward = plain;
+        for k in 1..backward.len() {
+            backward[k] = backward[k].min((backward[k - 1] * backward[k - 1] + gain).sqrt());
+        }
+        Self { road_id, forward, backward }
+    }
+
+    /// The identity of the road it was built for.
+    pub fn road_id(&self) -> u64 {
+        self.road_id
+    }
+
+    /// The limit (m/s) at arc length `s` for a UAV flying towards increasing s (`direction` > 0)
+    /// or decreasing s: the smaller of the two samples around s.
+    pub fn at(&self, s: f64, direction: f64) -> f64 {
+        let samples = if direction > 0.0 { &self.forward } else { &self.backward };
+        let Some(last) = samples.len().checked_sub(1) else { return BASE_SPEED_MPS };
+        let k = ((s.max(0.0) / PROFILE_STEP_M).floor() as usize).min(last);
+        samples[k].min(samples[(k + 1).min(last)])
+    }
 }
 
 /// The nominal input `u_ref` changed as little as possible so that the next velocity v + u·dt
@@ -133,6 +184,35 @@ mod tests {
                 prop_assert!(got <= limit + 1e-9, "closing at {got} over {limit}");
             }
         }
+    }
+
+    #[test]
+    fn the_limit_comes_down_before_a_narrow_part_in_the_direction_of_travel() {
+        // 4 m wide to x = 9, narrowing to 1 m at x = 10, 1 m wide to x = 14, 4 m wide from x = 15.
+        let layout = roads::RoadLayout::from_centerline(
+            &[[0.0, 0.0], [9.0, 0.0], [10.0, 0.0], [14.0, 0.0], [15.0, 0.0], [24.0, 0.0]],
+            &[4.0, 4.0, 1.0, 1.0, 4.0, 4.0],
+        );
+        let road = roads::Road::new(layout).unwrap();
+        let profile = SpeedProfile::new(road.profile(), road.id());
+        let narrow = speed_limit(1.0);
+        let far = profile.at(2.0, 1.0);
+        assert!((far - speed_limit(4.0)).abs() < 1e-9, "far from the narrow part: {far}");
+        // Flying towards it the limit falls to the narrow part's, never faster than a·dt per tick.
+        let mut previous = far;
+        for k in 0..40 {
+            let s = 2.0 + 0.2 * k as f64;
+            let limit = profile.at(s, 1.0);
+            assert!(limit <= previous + 1e-9);
+            previous = limit;
+        }
+        assert!(profile.at(9.5, 1.0) < speed_limit(2.5));
+        // Flying away from it (decreasing s, already behind the UAV) it does not.
+        assert!(profile.at(8.0, -1.0) > profile.at(8.0, 1.0) + 0.3);
+        assert!(profile.at(16.0, 1.0) > profile.at(16.0, -1.0) + 0.3);
+        assert!(
+            (profile.at(12.0, 1.0) - narrow).abs() < 1e-9 && (profile.at(12.0, -1.0) - narrow).abs() < 1e-9
+        );
     }
 
     #[test]

@@ -91,6 +91,8 @@ pub struct TrafficRules {
     entering: Vec<(usize, usize, f64, usize)>,
     /// Scratch: the UAVs not admitted as (zone, entry, −progress, UAV), to queue them up.
     queue: Vec<(usize, usize, f64, usize)>,
+    /// Scratch: where the UAVs are along the road by direction (`crate::following`).
+    along: crate::following::TrafficAlong,
 }
 
 impl TrafficRules {
@@ -134,6 +136,7 @@ impl TrafficRules {
             u.traffic.waiting = None;
         }
         self.reserve(nav, now, uavs);
+        crate::following::follow(nav, uavs, neighbours, &mut self.along);
         self.resolve_deadlocks(nav, now, uavs, neighbours);
     }
 

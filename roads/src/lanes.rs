@@ -56,6 +56,11 @@ impl ClearanceProfile {
         (k0..=k1).map(|k| self.right[k] + self.left[k]).fold(f64::INFINITY, f64::min)
     }
 
+    /// The width (right + left clearance) of every sample, in order of increasing s.
+    pub fn widths(&self) -> impl ExactSizeIterator<Item = f64> + '_ {
+        self.right.iter().zip(&self.left).map(|(r, l)| r + l)
+    }
+
     /// Number of samples.
     pub fn len(&self) -> usize {
         self.right.len()

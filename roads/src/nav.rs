@@ -156,6 +156,9 @@ pub struct Restriction {
     pub back_off: Option<Vec2>,
     /// When past `hold_at`: wait where it is (beside, in its lane) rather than go back to it.
     pub wait_here: bool,
+    /// Follow: the target may not pass this arc length in the direction of travel (a follow gap
+    /// behind the UAV ahead in its lane); when past it, wait where it is.
+    pub follow_at: Option<f64>,
 }
 
 /// Chooses temporary targets on one road.

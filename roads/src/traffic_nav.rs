@@ -85,7 +85,11 @@ impl Navigator<'_> {
         let need = self.clearance_at(route.v.norm());
         let line = self.road.centerline();
         let mut ahead = (pos.goal_s - pos.s).abs().min(self.r_s);
-        let held = restriction.hold_at.map(|h| (direction * (h - pos.s)).max(0.0));
+        let limit = |at: Option<f64>| at.map(|h| (direction * (h - pos.s)).max(0.0));
+        let held = match (limit(restriction.hold_at), limit(restriction.follow_at)) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        };
         let goal_allowed = held.is_none_or(|room| (pos.goal_s - pos.s).abs() <= room);
         // Level with the goal there is no lane point left to aim at: any path that crosses no wall.
         let goal_need = if (pos.goal_s - pos.s).abs() <= PROFILE_STEP_M { 0.0 } else { need };
@@ -102,6 +106,14 @@ impl Navigator<'_> {
                 // stay level with where it is.
                 let at = if restriction.wait_here { pos.s } else { hold };
                 return line.point_beside(at, self.lane_offset(at, direction, pos.lateral));
+            }
+            ahead = ahead.min(room);
+        }
+        if let Some(follow) = restriction.follow_at {
+            let room = direction * (follow - pos.s);
+            if room <= 0.0 {
+                // Too close behind the UAV ahead: stay level with where it is, in its lane.
+                return line.point_beside(pos.s, self.lane_offset(pos.s, direction, pos.lateral));
             }
             ahead = ahead.min(room);
         }
