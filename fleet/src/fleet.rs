@@ -3,7 +3,7 @@
 
 use crate::lost::obstacle_row;
 use crate::neighbours::NeighbourSearch;
-use crate::speed::{SpeedProfile, govern, keep_distance};
+use crate::speed::{govern, keep_distance};
 use crate::traffic::{TrafficRules, UavTraffic};
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::{Link, LinkPhase};
@@ -191,7 +191,6 @@ pub struct Fleet {
     filter: SafetyFilter,
     pub(crate) neighbours: NeighbourSearch,
     traffic: TrafficRules,
-    speeds: SpeedProfile,
     positions: Vec<Vec2>,
     segments: Vec<usize>,
     rows: Vec<Row>,
@@ -214,7 +213,6 @@ impl Fleet {
             hold: false,
             neighbours: NeighbourSearch::default(),
             traffic: TrafficRules::default(),
-            speeds: SpeedProfile::default(),
             positions: Vec::new(),
             segments: Vec::new(),
             rows: Vec::new(),
@@ -410,14 +408,11 @@ impl Fleet {
             // The traffic rules' speed limit (narrower road, slower flight) and the distance kept to
             // every neighbour (`fleet::speed`).
             let d_c = self.config.params.d_c;
-            if self.speeds.road_id() != self.road.id() {
-                self.speeds = SpeedProfile::new(self.road.profile(), self.road.id());
-            }
             for k in 0..self.uavs.len() {
                 let me = &self.uavs[k];
                 let Some(pos) = me.nav.position.filter(|_| !me.nav.arrived && me.flying()) else { continue };
                 let (p, v) = (me.state.p, me.state.v);
-                let limit = self.speeds.at(pos.s, pos.direction());
+                let limit = self.traffic.speed_limit(pos.s, pos.direction());
                 let mut u = govern(v, me.last.u_ref, limit, delta, dt);
                 for &d in &self.neighbours.lists[k] {
                     let other = &self.uavs[d].state;

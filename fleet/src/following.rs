@@ -13,7 +13,6 @@ use crate::fleet::Uav;
 use crate::speed::KEEP_MARGIN_M;
 use crate::traffic::FOLLOW_GAP_IN_DC;
 use roads::{Navigator, RoutePosition};
-use uav::Vec2;
 
 /// Lateral distance (m) beyond D_c under which the UAV ahead counts as in the same lane.
 pub const SAME_LANE_MARGIN_M: f64 = 0.15;
@@ -45,14 +44,14 @@ pub fn follow(nav: &Navigator, uavs: &mut [Uav], neighbours: &[Vec<usize>], traf
     for k in 0..uavs.len() {
         uavs[k].traffic.restriction.follow_at = None;
         let Some(me) = uavs[k].traffic.route else { continue };
-        if !applies(nav, k, &me, &neighbours[k], traffic) {
+        if !applies(nav, uavs, k, &me, &neighbours[k], traffic) {
             continue;
         }
         let direction = me.direction();
         let leader = neighbours[k]
             .iter()
             .filter_map(|&d| {
-                let other = traffic.routes[d]?;
+                let other = uavs[d].traffic.route?;
                 let ahead = direction * (other.s - me.s);
                 (leads(nav, &me, &other) && (ahead > 0.0 || (ahead == 0.0 && d < k))).then_some((ahead, d))
             })
@@ -73,18 +72,10 @@ pub struct TrafficAlong {
     forward: Vec<f64>,
     /// Towards decreasing s.
     backward: Vec<f64>,
-    /// Each UAV's `traffic.route`, side by side (the neighbour scans read these, not the UAVs).
-    routes: Vec<Option<RoutePosition>>,
-    /// Each UAV's position.
-    positions: Vec<Vec2>,
 }
 
 impl TrafficAlong {
     fn update(&mut self, uavs: &[Uav]) {
-        self.routes.clear();
-        self.routes.extend(uavs.iter().map(|u| u.traffic.route));
-        self.positions.clear();
-        self.positions.extend(uavs.iter().map(|u| u.state.p));
         self.forward.clear();
         self.backward.clear();
         for pos in uavs.iter().filter_map(|u| u.traffic.route) {
@@ -112,6 +103,7 @@ impl TrafficAlong {
 /// the road narrows ahead.
 fn applies(
     nav: &Navigator,
+    uavs: &[Uav],
     k: usize,
     me: &RoutePosition,
     neighbours: &[usize],
@@ -121,12 +113,9 @@ fn applies(
         return false;
     }
     let oncoming = traffic.oncoming_within(me, nav.r_s)
-        || neighbours.iter().any(|&d| traffic.routes[d].is_some_and(|o| o.direction() != me.direction()));
-    let p = traffic.positions[k];
-    let close = || {
-        let r2 = CROWD_RADIUS_M * CROWD_RADIUS_M;
-        neighbours.iter().filter(|&&d| (traffic.positions[d] - p).norm_squared() < r2).count()
-    };
+        || neighbours.iter().any(|&d| uavs[d].traffic.route.is_some_and(|o| o.direction() != me.direction()));
+    let p = uavs[k].state.p;
+    let close = || neighbours.iter().filter(|&&d| (uavs[d].state.p - p).norm() < CROWD_RADIUS_M).count();
     oncoming || (narrows_ahead(nav, me) && close() >= CROWD_NEIGHBOURS)
 }
 
@@ -157,7 +146,7 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
     use roads::{NavMode, Road, RoadLayout};
-    use uav::Params;
+    use uav::{Params, Vec2};
 
     /// `follow_at` of each UAV (start, goal) at rest on a straight road 4 m wide along x from 0 to 40.
     fn follow_points(uavs: &[(Vec2, Vec2)]) -> Vec<Option<f64>> {

@@ -35,7 +35,6 @@ pub const LOOKAHEAD_DECEL: f64 = 1.25;
 /// showed queues braking in the funnel, out of input for their pair rows).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct SpeedProfile {
-    road_id: u64,
     /// Towards increasing s.
     forward: Vec<f64>,
     /// Towards decreasing s.
@@ -43,8 +42,8 @@ pub struct SpeedProfile {
 }
 
 impl SpeedProfile {
-    /// The profile of a road with clearance `profile` and identity `road_id`.
-    pub fn new(profile: &ClearanceProfile, road_id: u64) -> Self {
+    /// The profile of a road with clearance `profile`.
+    pub fn new(profile: &ClearanceProfile) -> Self {
         let plain: Vec<f64> = profile.widths().map(speed_limit).collect();
         let gain = 2.0 * LOOKAHEAD_DECEL * PROFILE_STEP_M;
         let mut forward = plain.clone();
@@ -55,12 +54,7 @@ impl SpeedProfile {
         for k in 1..backward.len() {
             backward[k] = backward[k].min((backward[k - 1] * backward[k - 1] + gain).sqrt());
         }
-        Self { road_id, forward, backward }
-    }
-
-    /// The identity of the road it was built for.
-    pub fn road_id(&self) -> u64 {
-        self.road_id
+        Self { forward, backward }
     }
 
     /// The limit (m/s) at arc length `s` for a UAV flying towards increasing s (`direction` > 0)
@@ -194,7 +188,7 @@ mod tests {
             &[4.0, 4.0, 1.0, 1.0, 4.0, 4.0],
         );
         let road = roads::Road::new(layout).unwrap();
-        let profile = SpeedProfile::new(road.profile(), road.id());
+        let profile = SpeedProfile::new(road.profile());
         let narrow = speed_limit(1.0);
         let far = profile.at(2.0, 1.0);
         assert!((far - speed_limit(4.0)).abs() < 1e-9, "far from the narrow part: {far}");

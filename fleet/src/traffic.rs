@@ -10,6 +10,7 @@
 use crate::fleet::Uav;
 use crate::progress::Progress;
 use crate::sections::{HOLD_M, Section, next_section, sections};
+use crate::speed::SpeedProfile;
 use crate::yielding::{Flying, make_way};
 use crate::zones::{Request, Reservations};
 use roads::{Navigator, Restriction, RoutePosition};
@@ -91,6 +92,8 @@ pub struct TrafficRules {
     entering: Vec<(usize, usize, f64, usize)>,
     /// Scratch: the UAVs not admitted as (zone, entry, −progress, UAV), to queue them up.
     queue: Vec<(usize, usize, f64, usize)>,
+    /// The speed limit along the road (rebuilt with the sections when the road changes).
+    speeds: SpeedProfile,
     /// Scratch: where the UAVs are along the road by direction (`crate::following`).
     along: crate::following::TrafficAlong,
 }
@@ -99,6 +102,12 @@ impl TrafficRules {
     /// The single-file sections of the current road.
     pub fn sections(&self) -> &[Section] {
         &self.sections
+    }
+
+    /// The speed limit (m/s) at arc length `s` for a UAV flying towards `direction` (±1) on the
+    /// road of the last [`TrafficRules::plan`].
+    pub fn speed_limit(&self, s: f64, direction: f64) -> f64 {
+        self.speeds.at(s, direction)
     }
 
     /// Each single-file section with who uses it and who waits for it, as of the last tick.
@@ -130,6 +139,7 @@ impl TrafficRules {
             self.road_id = nav.road.id();
             self.sections = sections(nav.road, nav);
             self.zones = Reservations::new(self.sections.len());
+            self.speeds = SpeedProfile::new(nav.road.profile());
         }
         for u in uavs.iter_mut() {
             u.traffic.restriction = Restriction::default();

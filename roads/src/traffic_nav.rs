@@ -85,12 +85,16 @@ impl Navigator<'_> {
         let need = self.clearance_at(route.v.norm());
         let line = self.road.centerline();
         let mut ahead = (pos.goal_s - pos.s).abs().min(self.r_s);
-        let limit = |at: Option<f64>| at.map(|h| (direction * (h - pos.s)).max(0.0));
-        let held = match (limit(restriction.hold_at), limit(restriction.follow_at)) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
+        // The nearer of the hold point and the follow point binds; a hold point already passed binds
+        // first (back to it, or wait level with it). Past a follow point the UAV waits where it is.
+        let hold = restriction.hold_at.map(|at| (at, restriction.wait_here));
+        let follow = restriction.follow_at.map(|at| (at, true));
+        let room_to = |(at, _): (f64, bool)| direction * (at - pos.s);
+        let stop = match (hold, follow) {
+            (Some(h), Some(f)) if room_to(h) > 0.0 && room_to(f) < room_to(h) => Some(f),
+            (h, f) => h.or(f),
         };
-        let goal_allowed = held.is_none_or(|room| (pos.goal_s - pos.s).abs() <= room);
+        let goal_allowed = stop.is_none_or(|stop| (pos.goal_s - pos.s).abs() <= room_to(stop).max(0.0));
         // Level with the goal there is no lane point left to aim at: any path that crosses no wall.
         let goal_need = if (pos.goal_s - pos.s).abs() <= PROFILE_STEP_M { 0.0 } else { need };
         if goal_allowed
@@ -99,21 +103,13 @@ impl Navigator<'_> {
         {
             return route.goal;
         }
-        if let Some(hold) = restriction.hold_at {
-            let room = direction * (hold - pos.s);
+        if let Some((at, wait_here)) = stop {
+            let room = room_to((at, wait_here));
             if room <= 0.0 {
-                // Past the hold point (pushed, or too fast to stop): back to it, in the lane, or
-                // stay level with where it is.
-                let at = if restriction.wait_here { pos.s } else { hold };
+                // Past it (pushed, too fast to stop, or too close behind the UAV ahead): back to a
+                // hold point in the lane, or stay level with where it is.
+                let at = if wait_here { pos.s } else { at };
                 return line.point_beside(at, self.lane_offset(at, direction, pos.lateral));
-            }
-            ahead = ahead.min(room);
-        }
-        if let Some(follow) = restriction.follow_at {
-            let room = direction * (follow - pos.s);
-            if room <= 0.0 {
-                // Too close behind the UAV ahead: stay level with where it is, in its lane.
-                return line.point_beside(pos.s, self.lane_offset(pos.s, direction, pos.lateral));
             }
             ahead = ahead.min(room);
         }
