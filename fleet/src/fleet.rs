@@ -131,7 +131,9 @@ pub struct StageTimes {
     pub navigation_us: f64,
     /// The policies (batched).
     pub policies_us: f64,
-    /// Rows and CBF-QP filter of every UAV.
+    /// Building every UAV's rows (road, neighbours, lost UAVs' disks).
+    pub rows_us: f64,
+    /// The CBF-QP filter of every UAV (without building its rows).
     pub filter_us: f64,
     /// Sending every command.
     pub send_us: f64,
@@ -302,10 +304,11 @@ impl Fleet {
         self.stages.navigation_us = lap();
         self.run_policies();
         self.stages.policies_us = lap();
+        self.stages.rows_us = 0.0;
         for k in 0..self.uavs.len() {
             self.filter_one(k);
         }
-        self.stages.filter_us = lap();
+        self.stages.filter_us = lap() - self.stages.rows_us;
         for uav in &mut self.uavs {
             uav.link.send(uav.last.u);
         }
@@ -427,6 +430,7 @@ impl Fleet {
     fn filter_one(&mut self, k: usize) {
         let p = &self.config.params;
         let me = self.uavs[k].state;
+        let rows_started = Instant::now();
         self.rows.clear();
         if !self.uavs[k].flying() {
             // Not following commands (taking off, landing, lost): brake, which is also what its
@@ -465,6 +469,7 @@ impl Fleet {
             self.rows.push(row);
         }
         let started = Instant::now();
+        self.stages.rows_us += started.duration_since(rows_started).as_secs_f64() * 1e6;
         let out = self.filter.filter(self.uavs[k].last.u_ref, me.v, &self.rows, p.delta, p.dt);
         let last = &mut self.uavs[k].last;
         last.solve_us = if out.solved { started.elapsed().as_secs_f64() * 1e6 } else { 0.0 };

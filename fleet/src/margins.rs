@@ -16,11 +16,24 @@ pub fn collision_margin(k: &UavState, d: &UavState, delta_sum: f64) -> f64 {
 /// boundary if it brakes now. Walls are measured as the filter enforces them (rule R2): a wall's
 /// line distance in its slab from either side, its end points as points. Negative distance when outside.
 pub fn road_margin(road: &Road, s: &UavState, delta: f64) -> f64 {
-    if !road.contains(&s.p) {
-        return road.boundary_distance(&s.p);
+    road_margin_at(road, s, delta, road.boundary_distance(&s.p))
+}
+
+/// [`road_margin`] given the UAV's [`Road::boundary_distance`] `boundary` (the metrics need both).
+pub fn road_margin_at(road: &Road, s: &UavState, delta: f64, boundary: f64) -> f64 {
+    // A positive distance is only ever returned inside; at 0 the sign does not tell.
+    let inside = boundary > 0.0 || (boundary == 0.0 && road.contains(&s.p));
+    if !inside {
+        return boundary;
     }
+    // A wall at distance d has a margin of at least d − v²/(2δ), and the nearest wall's is at most
+    // its distance: walls farther than that distance plus v²/(2δ) cannot hold the minimum.
+    let walls = road.walls();
+    let nearest = boundary;
+    let radius = nearest + s.v.norm_squared() / (2.0 * delta) + 1e-9 * (1.0 + nearest);
     let mut best = f64::INFINITY;
-    for w in road.walls() {
+    for k in road.walls_near(&s.p, radius) {
+        let w = &walls[k];
         let (c, t) = w.nearest(&s.p);
         let (dist, rate) = if t > 0.0 && t < 1.0 {
             let d = w.signed_distance(&s.p);
@@ -33,4 +46,62 @@ pub fn road_margin(road: &Road, s: &UavState, delta: f64) -> f64 {
         best = best.min(braking_margin(dist, rate, delta));
     }
     best
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// `road_margin` as a loop over every wall.
+    fn road_margin_scan(road: &Road, s: &UavState, delta: f64) -> f64 {
+        if !road.contains(&s.p) {
+            return road.boundary_distance(&s.p);
+        }
+        road.walls()
+            .iter()
+            .map(|w| {
+                let (c, t) = w.nearest(&s.p);
+                let (dist, rate) = if t > 0.0 && t < 1.0 {
+                    let d = w.signed_distance(&s.p);
+                    (d.abs(), d.signum() * w.n_in.dot(&s.v))
+                } else {
+                    let e: Vec2 = s.p - c;
+                    let n = e.norm();
+                    (n, if n > 0.0 { e.dot(&s.v) / n } else { 0.0 })
+                };
+                braking_margin(dist, rate, delta)
+            })
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(2000))]
+
+        /// The margin over the nearby walls equals the one over every wall, bit for bit, on a winding
+        /// road, anywhere around it and at any speed.
+        #[test]
+        fn road_margin_over_nearby_walls_equals_the_scan(
+            turns in proptest::collection::vec(-1.2f64..1.2, 3..30),
+            width in 0.5f64..6.0,
+            (u, w) in (0.0f64..1.0, 0.0f64..1.0),
+            (vx, vy) in (-12.0f64..12.0, -12.0f64..12.0),
+        ) {
+            let mut points = vec![[0.0, 0.0]];
+            let mut heading = 0.0f64;
+            for t in &turns {
+                heading += t;
+                let [x, y] = points[points.len() - 1];
+                points.push([x + 4.0 * heading.cos(), y + 4.0 * heading.sin()]);
+            }
+            let Ok(road) = Road::new(roads::RoadLayout::from_centerline(&points, &vec![width; points.len()])) else {
+                return Ok(());
+            };
+            let q = &road.quads()[((u * road.quads().len() as f64) as usize).min(road.quads().len() - 1)];
+            let p = q.centroid() + (q.p[((w * 4.0) as usize).min(3)] - q.centroid()) * (1.2 * w);
+            let state = UavState { p, v: Vec2::new(vx, vy) };
+            let (got, want) = (road_margin(&road, &state, 5.0), road_margin_scan(&road, &state, 5.0));
+            prop_assert_eq!(got.to_bits(), want.to_bits(), "at {:?}: {} vs {}", p, got, want);
+        }
+    }
 }

@@ -1,7 +1,8 @@
 //! Safety metrics of a run, accumulated per tick, and the METRICS.json document.
 
 use crate::fleet::Fleet;
-use crate::margins::{collision_margin, road_margin};
+use crate::histogram::DurationHistogram;
+use crate::margins::{collision_margin, road_margin_at};
 use crate::progress::stall_time_added;
 use serde::Serialize;
 use std::collections::BTreeMap;
@@ -17,9 +18,9 @@ pub struct QpMetrics {
     pub max_slack: f64,
     /// Solves that failed (the UAV braked).
     pub failures: u64,
-    /// Median filter time per solved UAV (µs).
+    /// Median filter time per solved UAV (µs, within 1 %).
     pub p50_us: f64,
-    /// 99th percentile filter time per solved UAV (µs).
+    /// 99th percentile filter time per solved UAV (µs, within 1 %).
     pub p99_us: f64,
 }
 
@@ -41,11 +42,12 @@ pub struct RunMetrics {
     pub stall_s: f64,
     /// The longest single stall (s).
     pub max_stall_s: f64,
-    /// min over time and pairs of S_kd (eq. 2, corrected sign); null with fewer than two UAVs.
+    /// min over time and pairs of S_kd (eq. 2, corrected sign), over the pairs within each tick's
+    /// neighbour radius (every other pair's S_kd is above D_c); null when no two UAVs came that close.
     pub min_collision_margin_m: Option<f64>,
     /// min over time, UAVs and walls of S_kij (eq. 6) to the finite walls.
     pub min_road_margin_m: f64,
-    /// Smallest distance between two UAVs; null with fewer than two UAVs.
+    /// Smallest distance between two UAVs within a tick's neighbour radius; null as above.
     pub min_separation_m: Option<f64>,
     /// Smallest distance of a UAV to a wall (negative when outside).
     pub min_wall_distance_m: f64,
@@ -84,8 +86,9 @@ pub struct MetricsRecorder {
     failures: u64,
     /// Policy outputs replaced by braking (reported in the summary).
     pub policy_fallbacks: u64,
-    solve_us: Vec<f64>,
-    arrival: BTreeMap<String, Option<f64>>,
+    solve_us: DurationHistogram,
+    /// First arrival time by UAV index (a headless run never removes UAVs).
+    arrival: Vec<Option<f64>>,
     stall_s: f64,
     max_stall_s: f64,
     /// Stalls going on, by UAV index (a headless run never removes UAVs), and those that ended.
@@ -108,12 +111,15 @@ impl MetricsRecorder {
         let p = fleet.config.params;
         let road = fleet.road();
         let uavs = fleet.uavs();
+        let lists = fleet.neighbour_lists();
         for (k, u) in uavs.iter().enumerate() {
             let wall = road.boundary_distance(&u.state.p);
             self.min_wall = self.min_wall.min(wall);
             self.outside += u64::from(wall < 0.0);
-            self.min_road = self.min_road.min(road_margin(road, &u.state, p.delta));
-            for d in &uavs[k + 1..] {
+            self.min_road = self.min_road.min(road_margin_at(road, &u.state, p.delta, wall));
+            // The pairs of this tick's neighbour search: any other pair is farther apart than the
+            // activation radius at twice the fleet's top speed, so its S_kd exceeds D_c.
+            for d in lists.get(k).into_iter().flatten().filter(|&&d| d > k).filter_map(|&d| uavs.get(d)) {
                 self.min_collision =
                     min_opt(self.min_collision, collision_margin(&u.state, &d.state, 2.0 * p.delta));
                 self.min_separation = min_opt(self.min_separation, (u.state.p - d.state.p).norm());
@@ -135,15 +141,17 @@ impl MetricsRecorder {
             }
             if last.solved {
                 self.solves += 1;
-                self.solve_us.push(last.solve_us);
+                self.solve_us.record(last.solve_us);
             }
             self.slack_used += u64::from(last.max_slack > 1e-6);
             self.max_slack = self.max_slack.max(last.max_slack);
             self.failures += u64::from(last.failed);
             self.policy_fallbacks += u64::from(last.policy_fallback);
-            let arrival = self.arrival.entry(u.id.clone()).or_insert(None);
-            if u.nav.arrived && arrival.is_none() {
-                *arrival = Some(t);
+            if self.arrival.len() <= k {
+                self.arrival.resize(k + 1, None);
+            }
+            if u.nav.arrived && self.arrival[k].is_none() {
+                self.arrival[k] = Some(t);
             }
         }
     }
@@ -156,19 +164,15 @@ impl MetricsRecorder {
     }
 
     /// The METRICS.json document.
-    pub fn finish(mut self, fleet: &Fleet, scenario: &str) -> RunMetrics {
+    pub fn finish(self, fleet: &Fleet, scenario: &str) -> RunMetrics {
         let p = fleet.config.params;
-        for u in fleet.uavs() {
-            self.arrival.entry(u.id.clone()).or_insert(None);
-        }
-        self.solve_us.sort_by(f64::total_cmp);
-        let pct = |q: f64| {
-            if self.solve_us.is_empty() {
-                0.0
-            } else {
-                self.solve_us[((self.solve_us.len() - 1) as f64 * q).round() as usize]
-            }
-        };
+        let arrival: BTreeMap<String, Option<f64>> = fleet
+            .uavs()
+            .iter()
+            .enumerate()
+            .map(|(k, u)| (u.id.clone(), self.arrival.get(k).copied().flatten()))
+            .collect();
+        let pct = |q: f64| self.solve_us.quantile(q);
         let qp = QpMetrics {
             solves: self.solves,
             slack_used: self.slack_used,
@@ -185,8 +189,8 @@ impl MetricsRecorder {
             scenario: scenario.to_string(),
             ticks: fleet.ticks(),
             sim_time_s: fleet.ticks() as f64 * p.dt,
-            all_arrived: self.arrival.values().all(Option::is_some),
-            arrival_time_s: self.arrival,
+            all_arrived: arrival.values().all(Option::is_some),
+            arrival_time_s: arrival,
             stall_s: self.stall_s,
             max_stall_s: self.max_stall_s,
             min_collision_margin_m: self.min_collision,

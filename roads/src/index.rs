@@ -165,3 +165,71 @@ impl RoadIndex {
         best
     }
 }
+
+/// Walls gathered on the stack by [`RoadIndex::walls_near`]; more candidates than this fall back to
+/// every wall (only roads of tiny segments around a fast UAV get there).
+const NEAR_CAPACITY: usize = 32;
+
+/// Wall indices in ascending order: a superset of the walls within a distance of a point (from the
+/// index), or every wall of the road.
+#[derive(Debug, Clone)]
+pub struct NearWalls {
+    ids: [u32; NEAR_CAPACITY],
+    /// Number of gathered ids, or `None`: every wall up to `count`.
+    len: Option<usize>,
+    count: usize,
+    next: usize,
+}
+
+impl NearWalls {
+    /// Every wall of a road with `count` walls.
+    pub(crate) fn all(count: usize) -> Self {
+        Self { ids: [0; NEAR_CAPACITY], len: None, count, next: 0 }
+    }
+}
+
+impl Iterator for NearWalls {
+    type Item = usize;
+    fn next(&mut self) -> Option<usize> {
+        let k = match self.len {
+            Some(len) => (self.next < len).then(|| self.ids[self.next] as usize),
+            None => (self.next < self.count).then_some(self.next),
+        };
+        self.next += 1;
+        k
+    }
+}
+
+impl RoadIndex {
+    /// The walls within `radius` of `x`, and perhaps a few more (rounding slack), ascending; every
+    /// wall when `x` or `radius` is not finite or too many are near.
+    pub(crate) fn walls_near(&self, wall_count: usize, x: &Vec2, radius: f64) -> NearWalls {
+        if !Self::covers(x) || !radius.is_finite() || radius > FAR_M {
+            return NearWalls::all(wall_count);
+        }
+        let r = radius.max(0.0) + self.slack(x);
+        let mut near = NearWalls { ids: [0; NEAR_CAPACITY], len: Some(0), count: wall_count, next: 0 };
+        let mut len = 0;
+        for line in self.walls.locate_within_distance([x.x, x.y], r * r) {
+            if len == NEAR_CAPACITY {
+                return NearWalls::all(wall_count);
+            }
+            // Wall indices fit in u32: a road has at most 2 · MAX_SEGMENTS + 2 walls.
+            near.ids[len] = line.data as u32;
+            len += 1;
+        }
+        near.ids[..len].sort_unstable();
+        near.len = Some(len);
+        near
+    }
+
+    /// The walls whose boxes touch the box of the segment from `x` to `y` (grown by the rounding
+    /// slack): every wall the segment can cross, in no particular order.
+    pub(crate) fn walls_across(&self, x: &Vec2, y: &Vec2) -> impl Iterator<Item = usize> + '_ {
+        let slack = self.slack(x).max(self.slack(y));
+        let (lo, hi) = (x.inf(y) - Vec2::repeat(slack), x.sup(y) + Vec2::repeat(slack));
+        self.walls
+            .locate_in_envelope_intersecting(&AABB::from_corners([lo.x, lo.y], [hi.x, hi.y]))
+            .map(|l| l.data)
+    }
+}

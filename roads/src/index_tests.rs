@@ -74,6 +74,23 @@ fn same_answers(road: &Road, x: &Vec2) -> Result<(), TestCaseError> {
     let d = road.wall_distance_scan(x);
     let reference = if road.contains_scan(x) { d } else { -d };
     prop_assert_eq!(road.boundary_distance(x).to_bits(), reference.to_bits(), "boundary distance at {:?}", x);
+    // The walls near x hold every wall within the radius, ascending; visibility equals the scan.
+    let walls = road.walls();
+    for radius in [0.0, 0.05, 0.7, 3.0] {
+        let near: Vec<usize> = road.walls_near(x, radius).collect();
+        prop_assert!(near.windows(2).all(|w| w[0] < w[1]), "not ascending: {:?}", near);
+        for (k, w) in walls.iter().enumerate() {
+            if (w.nearest(x).0 - x).norm() <= radius {
+                prop_assert!(near.contains(&k), "wall {} within {} of {:?} missing", k, radius, x);
+            }
+        }
+    }
+    let some = [0, walls.len() / 3, walls.len() / 2, walls.len() - 1];
+    for w in some.iter().map(|&k| &walls[k]) {
+        for y in [w.a, (w.a + w.b) / 2.0, road.quads()[w.segment].centroid()] {
+            prop_assert_eq!(road.visible(x, &y), road.visible_scan(x, &y), "visible {:?} -> {:?}", x, y);
+        }
+    }
     Ok(())
 }
 

@@ -22,6 +22,7 @@ mod validate;
 
 pub use centerline::CenterLine;
 pub use geometry::{Quad, Wall, WallKind, nearest_on_segment, segments_intersect};
+pub use index::NearWalls;
 pub use lanes::{ClearanceProfile, PROFILE_STEP_M, segment_distance};
 pub use layout::RoadLayout;
 pub use nav::{NavMode, NavState, Navigator, Restriction, RoutePosition};

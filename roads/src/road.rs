@@ -2,7 +2,7 @@
 
 use crate::centerline::CenterLine;
 use crate::geometry::{Quad, Wall, WallKind, segments_intersect};
-use crate::index::RoadIndex;
+use crate::index::{NearWalls, RoadIndex};
 use crate::lanes::{ClearanceProfile, path_clear, route_walls};
 use crate::layout::RoadLayout;
 use crate::validate::{RoadError, check_joins, check_overlaps, check_quads};
@@ -175,9 +175,24 @@ impl Road {
         best.0
     }
 
-    /// True when the straight segment from `x` to `y` touches no wall.
+    /// True when the straight segment from `x` to `y` touches no wall (only the walls whose boxes
+    /// touch the segment's are tested).
     pub fn visible(&self, x: &Vec2, y: &Vec2) -> bool {
+        if !RoadIndex::covers(x) || !RoadIndex::covers(y) {
+            return self.visible_scan(x, y);
+        }
+        !self.index.walls_across(x, y).any(|k| segments_intersect(x, y, &self.walls[k].a, &self.walls[k].b))
+    }
+
+    /// [`Road::visible`] by scanning.
+    pub(crate) fn visible_scan(&self, x: &Vec2, y: &Vec2) -> bool {
         !self.walls.iter().any(|w| segments_intersect(x, y, &w.a, &w.b))
+    }
+
+    /// Wall indices, ascending, that include every wall within `radius` of `x` (from the index; all
+    /// walls when `x` is far out or not finite): the per-UAV loops over nearby walls.
+    pub fn walls_near(&self, x: &Vec2, radius: f64) -> NearWalls {
+        self.index.walls_near(self.walls.len(), x, radius)
     }
 }
 

@@ -128,7 +128,10 @@ fn walls_rows(road: &Road, p: Vec2, v: Vec2, radius: f64, params: &Params, out: 
     }
     let mut seen = [Vec2::zeros(); 16];
     let mut n_seen = 0;
-    for (k, w) in walls.iter().enumerate() {
+    // The index gives a superset of the walls within the radius, in index order: the same rows, in
+    // the same order, as a loop over every wall.
+    for k in road.walls_near(&p, radius) {
+        let w = &walls[k];
         let (c, t) = w.nearest(&p);
         if (c - p).norm() > radius {
             continue;

@@ -17,6 +17,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         BenchTarget::Crazyflie => return crate::bench_crazyflie::main(&args),
         BenchTarget::Durability => return crate::bench_durability::main(&args),
         BenchTarget::Fleet => return crate::bench_fleet::main(&args),
+        BenchTarget::Scale => return crate::bench_scale::main(&args),
     }
     ExitCode::SUCCESS
 }

@@ -5,7 +5,7 @@
 
 use crate::cli::BenchArgs;
 use fleet::stress::crowd_scenario;
-use fleet::{Fleet, FleetConfig, StageTimes};
+use fleet::{Fleet, FleetConfig, Scenario, StageTimes};
 use links::SimLink;
 use policies::PolicyRegistry;
 use std::process::ExitCode;
@@ -29,32 +29,14 @@ pub fn main(args: &BenchArgs) -> ExitCode {
         "send",
         "tick"
     );
-    for &n in &args.uavs {
-        let scenario = match crowd_scenario(n.max(2)).validate() {
-            Ok(s) => s,
-            Err(e) => {
-                eprintln!("error: crowd of {n}: {e}");
-                return ExitCode::FAILURE;
+    for &n in &args.uavs_or(&[1000, 10000]) {
+        let mut fleet = match sim_fleet(&crowd_scenario(n.max(2)), &args.policy) {
+            Ok(f) => f,
+            Err((message, code)) => {
+                eprintln!("error: crowd of {n}: {message}");
+                return code;
             }
         };
-        let policies = match PolicyRegistry::standard(scenario.params.delta) {
-            Ok(p) if p.check(&args.policy).is_ok() => p,
-            Ok(_) => {
-                eprintln!("error: --policy {}: unknown (expected pd or rl)", args.policy);
-                return ExitCode::from(2);
-            }
-            Err(e) => {
-                eprintln!("error: {e}");
-                return ExitCode::FAILURE;
-            }
-        };
-        let config = FleetConfig { params: scenario.params, ..FleetConfig::default() };
-        let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
-        for u in &scenario.uavs {
-            let state = UavState::at_rest(u.start);
-            let link = Box::new(SimLink::new(state, scenario.params.dt));
-            fleet.add(u.id.clone(), args.policy.clone(), link, state, Some(u.goal));
-        }
         // Two ticks to warm up (first allocations, the model's first run), then the measured ones.
         fleet.tick();
         fleet.tick();
@@ -67,7 +49,7 @@ pub fn main(args: &BenchArgs) -> ExitCode {
             sum.neighbours_us += s.neighbours_us;
             sum.navigation_us += s.navigation_us;
             sum.policies_us += s.policies_us;
-            sum.filter_us += s.filter_us;
+            sum.filter_us += s.rows_us + s.filter_us;
             sum.send_us += s.send_us;
         }
         let per = |total: f64| {
@@ -92,4 +74,23 @@ pub fn main(args: &BenchArgs) -> ExitCode {
         );
     }
     ExitCode::SUCCESS
+}
+
+/// A fleet flying `scenario` on in-process simulated links with `policy` for every UAV, or the
+/// error message and exit code (2 for an unknown policy).
+pub fn sim_fleet(scenario: &Scenario, policy: &str) -> Result<Fleet, (String, ExitCode)> {
+    let scenario = scenario.validate().map_err(|e| (e.to_string(), ExitCode::FAILURE))?;
+    let policies = match PolicyRegistry::standard(scenario.params.delta) {
+        Ok(p) if p.check(policy).is_ok() => p,
+        Ok(_) => return Err((format!("--policy {policy}: unknown (expected pd or rl)"), ExitCode::from(2))),
+        Err(e) => return Err((e.to_string(), ExitCode::FAILURE)),
+    };
+    let config = FleetConfig { params: scenario.params, ..FleetConfig::default() };
+    let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
+    for u in &scenario.uavs {
+        let state = UavState::at_rest(u.start);
+        let link = Box::new(SimLink::new(state, scenario.params.dt));
+        fleet.add(u.id.clone(), policy.to_string(), link, state, Some(u.goal));
+    }
+    Ok(fleet)
 }

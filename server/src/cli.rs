@@ -231,13 +231,14 @@ pub struct BenchArgs {
     /// Fleet sizes to measure (`crazyflie`), comma-separated.
     #[arg(long, value_delimiter = ',', default_values_t = [1, 10, 25, 50, 100])]
     pub crazyflies: Vec<usize>,
-    /// Fleet sizes to measure (`fleet`), comma-separated.
-    #[arg(long, value_delimiter = ',', default_values_t = [1000, 10000])]
-    pub uavs: Vec<usize>,
-    /// Ticks measured per fleet size (`fleet`).
+    /// Fleet sizes to measure, comma-separated (`fleet`: default 1000,10000; `scale`: default
+    /// 1000,3000,10000).
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u64).range(2..=30_000))]
+    pub uavs: Vec<u64>,
+    /// Ticks measured per fleet size (`fleet`, `scale`).
     #[arg(long, default_value_t = 40)]
     pub ticks: usize,
-    /// Policy flown (`fleet`): `pd` or `rl`.
+    /// Policy flown (`fleet`, `scale`): `pd` or `rl`.
     #[arg(long, default_value = "rl")]
     pub policy: String,
 }
@@ -257,6 +258,16 @@ pub enum BenchTarget {
     /// Per-stage time of one tick (navigation and traffic rules, policies, filter, ...) per UAV, for
     /// dense two-way crowds of each `--uavs` size.
     Fleet,
+    /// Tick p50/p99 and each stage's time for UAVs flying both ways along a long winding trunk road
+    /// (1.2 km per 1,000 UAVs), for each `--uavs` size, and how the per-UAV cost grows.
+    Scale,
+}
+
+impl BenchArgs {
+    /// The `--uavs` sizes, or `default` when none were given.
+    pub fn uavs_or(&self, default: &[usize]) -> Vec<usize> {
+        if self.uavs.is_empty() { default.to_vec() } else { self.uavs.iter().map(|&n| n as usize).collect() }
+    }
 }
 
 impl FlightArgs {

@@ -1,0 +1,101 @@
+//! `airroads bench scale`: the fleet engine at scale (BENCHMARKS.md "Fleet engine at scale"). For
+//! each `--uavs` size, UAVs fly both ways along a long winding trunk road
+//! (`fleet::trunk::trunk_scenario`: 12 m wide, 1.2 km per 1,000 UAVs, goals 60–150 m away) on
+//! in-process simulated links; after two warm-up ticks, `--ticks` ticks are timed, each with the
+//! metrics a headless run records. Prints tick p50/p99 and the mean time of each stage per tick and
+//! per UAV, then how the per-UAV cost of the largest fleet compares with the smallest's.
+
+use crate::bench_fleet::sim_fleet;
+use crate::cli::BenchArgs;
+use fleet::trunk::trunk_scenario;
+use fleet::{MetricsRecorder, StageTimes};
+use std::process::ExitCode;
+use std::time::Instant;
+
+/// The stages, in tick order, as printed.
+const STAGES: [&str; 8] =
+    ["states", "navigation", "neighbours", "policies", "rows", "filter", "send", "metrics"];
+
+/// Sum of each stage's µs over the measured ticks, in [`STAGES`] order.
+fn add(sum: &mut [f64; 8], s: &StageTimes, metrics_us: f64) {
+    let each = [
+        s.read_us,
+        s.navigation_us,
+        s.neighbours_us,
+        s.policies_us,
+        s.rows_us,
+        s.filter_us,
+        s.send_us,
+        metrics_us,
+    ];
+    sum.iter_mut().zip(each).for_each(|(a, b)| *a += b);
+}
+
+/// Nearest-rank quantile of sorted `v`.
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    sorted.get(((sorted.len().max(1) - 1) as f64 * q).round() as usize).copied().unwrap_or(0.0)
+}
+
+/// Runs the subcommand.
+pub fn main(args: &BenchArgs) -> ExitCode {
+    let sizes = args.uavs_or(&[1000, 3000, 10000]);
+    let ticks = args.ticks.max(1);
+    say!(
+        "airroads bench scale: two-way trunk road (1.2 km per 1,000 UAVs), policy {}, {ticks} ticks each, one thread",
+        args.policy
+    );
+    say!("per stage: mean ms per tick (µs per UAV); tick = every stage, metrics included");
+    let mut header = format!("{:>7} {:>9} {:>9}", "uavs", "p50 ms", "p99 ms");
+    for name in STAGES {
+        header.push_str(&format!(" {name:>17}"));
+    }
+    say!("{header}");
+    let mut per_uav = Vec::new();
+    for &n in &sizes {
+        let scenario = match trunk_scenario(n, 1) {
+            Ok(s) => s,
+            Err(e) => {
+                eprintln!("error: trunk road for {n} UAVs: {e}");
+                return ExitCode::FAILURE;
+            }
+        };
+        let mut fleet = match sim_fleet(&scenario, &args.policy) {
+            Ok(f) => f,
+            Err((message, code)) => {
+                eprintln!("error: trunk road of {n} UAVs: {message}");
+                return code;
+            }
+        };
+        let mut recorder = MetricsRecorder::new();
+        let dt = scenario.params.dt;
+        // Two ticks to warm up (first allocations, the model's first run), then the measured ones.
+        for _ in 0..2 {
+            fleet.tick();
+            recorder.record(&fleet, fleet.ticks() as f64 * dt);
+        }
+        let (mut sums, mut tick_ms) = ([0.0; 8], Vec::with_capacity(ticks));
+        for _ in 0..ticks {
+            let started = Instant::now();
+            fleet.tick();
+            let recorded = Instant::now();
+            recorder.record(&fleet, fleet.ticks() as f64 * dt);
+            let metrics_us = recorded.elapsed().as_secs_f64() * 1e6;
+            tick_ms.push(started.elapsed().as_secs_f64() * 1e3);
+            add(&mut sums, &fleet.stage_times(), metrics_us);
+        }
+        tick_ms.sort_by(f64::total_cmp);
+        let mut line = format!("{n:>7} {:>9.1} {:>9.1}", quantile(&tick_ms, 0.5), quantile(&tick_ms, 0.99));
+        for total in sums {
+            let us = total / ticks as f64;
+            line.push_str(&format!(" {:>8.2} ({:>6.2})", us / 1e3, us / n as f64));
+        }
+        say!("{line}");
+        per_uav.push((n, tick_ms.iter().sum::<f64>() / ticks as f64 * 1e3 / n as f64));
+    }
+    if let (Some((small, a)), Some((large, b))) = (per_uav.first(), per_uav.last())
+        && per_uav.len() > 1
+    {
+        say!("per-UAV cost: {a:.2} µs at {small}, {b:.2} µs at {large}: ×{:.2}", b / a);
+    }
+    ExitCode::SUCCESS
+}
