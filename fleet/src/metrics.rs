@@ -113,10 +113,14 @@ impl MetricsRecorder {
         let uavs = fleet.uavs();
         let lists = fleet.neighbour_lists();
         for (k, u) in uavs.iter().enumerate() {
-            let wall = road.boundary_distance(&u.state.p);
+            let hint = u.nav.tracker.current;
+            let wall = match hint {
+                Some(segment) => road.boundary_distance_in(segment, &u.state.p),
+                None => road.boundary_distance(&u.state.p),
+            };
             self.min_wall = self.min_wall.min(wall);
             self.outside += u64::from(wall < 0.0);
-            self.min_road = self.min_road.min(road_margin_at(road, &u.state, p.delta, wall));
+            self.min_road = self.min_road.min(road_margin_at(road, hint, &u.state, p.delta, wall));
             // The pairs of this tick's neighbour search: any other pair is farther apart than the
             // activation radius at twice the fleet's top speed, so its S_kd exceeds D_c.
             for d in lists.get(k).into_iter().flatten().filter(|&&d| d > k).filter_map(|&d| uavs.get(d)) {

@@ -38,6 +38,8 @@ pub(crate) struct RoadIndex {
     quads: RTree<QuadBox>,
     /// Walls as segments (data: wall index).
     walls: RTree<WallLine>,
+    /// Per quad, the walls near it ([`segment_lists`]).
+    pub(crate) near: Vec<Option<Box<[u32]>>>,
     /// Half the smallest sin(θ/2) over all quads' interior angles θ.
     sin_half: f64,
     /// Largest coordinate magnitude of the road (m).
@@ -102,9 +104,11 @@ impl RoadIndex {
             .iter()
             .enumerate()
             .map(|(k, w)| GeomWithData::new(Line::new([w.a.x, w.a.y], [w.b.x, w.b.y]), k));
+        let walls = RTree::bulk_load(lines.collect());
         Self {
             quads: quad_tree(quads, pad),
-            walls: RTree::bulk_load(lines.collect()),
+            near: segment_lists(quads, &walls),
+            walls,
             sin_half: quads.iter().map(sin_half_angle).fold(1.0, f64::min),
             scale: quads.iter().map(scale_of).fold(0.0, f64::max),
         }
@@ -170,57 +174,92 @@ impl RoadIndex {
 /// every wall (only roads of tiny segments around a fast UAV get there).
 const NEAR_CAPACITY: usize = 32;
 
+/// Radius (m) of each segment's list of nearby walls: queries from inside a segment within this
+/// radius read the list instead of the tree.
+pub(crate) const SEGMENT_NEAR_M: f64 = 8.0;
+
+/// Segments with more walls than this within [`SEGMENT_NEAR_M`] keep no list (the tree answers).
+const SEGMENT_NEAR_CAPACITY: usize = 64;
+
 /// Wall indices in ascending order: a superset of the walls within a distance of a point (from the
-/// index), or every wall of the road.
+/// index or a segment's list), or every wall of the road.
 #[derive(Debug, Clone)]
-pub struct NearWalls {
-    ids: [u32; NEAR_CAPACITY],
-    /// Number of gathered ids, or `None`: every wall up to `count`.
-    len: Option<usize>,
-    count: usize,
-    next: usize,
+pub struct NearWalls<'a>(Near<'a>);
+
+#[derive(Debug, Clone)]
+enum Near<'a> {
+    /// Gathered from the tree: ids, count, next position.
+    Few([u32; NEAR_CAPACITY], usize, usize),
+    /// A segment's list.
+    List(std::slice::Iter<'a, u32>),
+    /// Every wall.
+    All(std::ops::Range<usize>),
 }
 
-impl NearWalls {
+impl NearWalls<'_> {
     /// Every wall of a road with `count` walls.
     pub(crate) fn all(count: usize) -> Self {
-        Self { ids: [0; NEAR_CAPACITY], len: None, count, next: 0 }
+        Self(Near::All(0..count))
+    }
+
+    /// The walls of a segment's list.
+    pub(crate) fn list(ids: &[u32]) -> NearWalls<'_> {
+        NearWalls(Near::List(ids.iter()))
     }
 }
 
-impl Iterator for NearWalls {
+impl Iterator for NearWalls<'_> {
     type Item = usize;
     fn next(&mut self) -> Option<usize> {
-        let k = match self.len {
-            Some(len) => (self.next < len).then(|| self.ids[self.next] as usize),
-            None => (self.next < self.count).then_some(self.next),
-        };
-        self.next += 1;
-        k
+        match &mut self.0 {
+            Near::Few(ids, len, next) => {
+                let k = (*next < *len).then(|| ids[*next] as usize);
+                *next += 1;
+                k
+            }
+            Near::List(ids) => ids.next().map(|&k| k as usize),
+            Near::All(range) => range.next(),
+        }
     }
+}
+
+/// For each quad, the walls within [`SEGMENT_NEAR_M`] of it (ascending; a superset: those whose
+/// boxes touch the quad's box grown by that much), or `None` when there are too many.
+pub(crate) fn segment_lists(quads: &[Quad], walls: &RTree<WallLine>) -> Vec<Option<Box<[u32]>>> {
+    quads
+        .iter()
+        .map(|q| {
+            let (lo, hi) = bounds(q);
+            let r = SEGMENT_NEAR_M + ROUNDING * (1.0 + scale_of(q));
+            let grown = AABB::from_corners([lo.x - r, lo.y - r], [hi.x + r, hi.y + r]);
+            // Wall indices fit in u32: a road has at most 2 · MAX_SEGMENTS + 2 walls.
+            let mut ids: Vec<u32> =
+                walls.locate_in_envelope_intersecting(&grown).map(|l| l.data as u32).collect();
+            ids.sort_unstable();
+            (ids.len() <= SEGMENT_NEAR_CAPACITY).then(|| ids.into_boxed_slice())
+        })
+        .collect()
 }
 
 impl RoadIndex {
     /// The walls within `radius` of `x`, and perhaps a few more (rounding slack), ascending; every
     /// wall when `x` or `radius` is not finite or too many are near.
-    pub(crate) fn walls_near(&self, wall_count: usize, x: &Vec2, radius: f64) -> NearWalls {
+    pub(crate) fn walls_near(&self, wall_count: usize, x: &Vec2, radius: f64) -> NearWalls<'static> {
         if !Self::covers(x) || !radius.is_finite() || radius > FAR_M {
             return NearWalls::all(wall_count);
         }
         let r = radius.max(0.0) + self.slack(x);
-        let mut near = NearWalls { ids: [0; NEAR_CAPACITY], len: Some(0), count: wall_count, next: 0 };
-        let mut len = 0;
+        let (mut ids, mut len) = ([0u32; NEAR_CAPACITY], 0);
         for line in self.walls.locate_within_distance([x.x, x.y], r * r) {
             if len == NEAR_CAPACITY {
                 return NearWalls::all(wall_count);
             }
             // Wall indices fit in u32: a road has at most 2 · MAX_SEGMENTS + 2 walls.
-            near.ids[len] = line.data as u32;
+            ids[len] = line.data as u32;
             len += 1;
         }
-        near.ids[..len].sort_unstable();
-        near.len = Some(len);
-        near
+        ids[..len].sort_unstable();
+        NearWalls(Near::Few(ids, len, 0))
     }
 
     /// The walls whose boxes touch the box of the segment from `x` to `y` (grown by the rounding

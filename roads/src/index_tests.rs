@@ -76,14 +76,23 @@ fn same_answers(road: &Road, x: &Vec2) -> Result<(), TestCaseError> {
     prop_assert_eq!(road.boundary_distance(x).to_bits(), reference.to_bits(), "boundary distance at {:?}", x);
     // The walls near x hold every wall within the radius, ascending; visibility equals the scan.
     let walls = road.walls();
-    for radius in [0.0, 0.05, 0.7, 3.0] {
-        let near: Vec<usize> = road.walls_near(x, radius).collect();
-        prop_assert!(near.windows(2).all(|w| w[0] < w[1]), "not ascending: {:?}", near);
-        for (k, w) in walls.iter().enumerate() {
-            if (w.nearest(x).0 - x).norm() <= radius {
-                prop_assert!(near.contains(&k), "wall {} within {} of {:?} missing", k, radius, x);
+    let hints = [0, road.quads().len() / 2, road.locate(x, None)];
+    for radius in [0.0, 0.05, 0.7, 3.0, 7.9] {
+        let lists = std::iter::once(road.walls_near(x, radius))
+            .chain(hints.map(|h| road.walls_near_in(h, x, radius)));
+        for near in lists {
+            let near: Vec<usize> = near.collect();
+            prop_assert!(near.windows(2).all(|w| w[0] < w[1]), "not ascending: {:?}", near);
+            for (k, w) in walls.iter().enumerate() {
+                if (w.nearest(x).0 - x).norm() <= radius {
+                    prop_assert!(near.contains(&k), "wall {} within {} of {:?} missing", k, radius, x);
+                }
             }
         }
+    }
+    for hint in hints {
+        let (got, want) = (road.boundary_distance_in(hint, x), reference);
+        prop_assert_eq!(got.to_bits(), want.to_bits(), "boundary distance with hint {} at {:?}", hint, x);
     }
     let some = [0, walls.len() / 3, walls.len() / 2, walls.len() - 1];
     for w in some.iter().map(|&k| &walls[k]) {

@@ -2,7 +2,7 @@
 
 use crate::centerline::CenterLine;
 use crate::geometry::{Quad, Wall, WallKind, segments_intersect};
-use crate::index::{NearWalls, RoadIndex};
+use crate::index::{NearWalls, RoadIndex, SEGMENT_NEAR_M};
 use crate::lanes::{ClearanceProfile, path_clear, route_walls};
 use crate::layout::RoadLayout;
 use crate::validate::{RoadError, check_joins, check_overlaps, check_quads};
@@ -191,8 +191,39 @@ impl Road {
 
     /// Wall indices, ascending, that include every wall within `radius` of `x` (from the index; all
     /// walls when `x` is far out or not finite): the per-UAV loops over nearby walls.
-    pub fn walls_near(&self, x: &Vec2, radius: f64) -> NearWalls {
+    pub fn walls_near(&self, x: &Vec2, radius: f64) -> NearWalls<'_> {
         self.index.walls_near(self.walls.len(), x, radius)
+    }
+
+    /// [`Road::walls_near`] for a point believed to be in segment `hint` (a UAV's tracked
+    /// segment): that segment's precomputed list when `x` is in it and `radius` is within the
+    /// list's reach, else the tree. The same walls are guaranteed, perhaps with a few more.
+    pub fn walls_near_in(&self, hint: usize, x: &Vec2, radius: f64) -> NearWalls<'_> {
+        match self.segment_list(hint, x) {
+            Some(list) if radius <= SEGMENT_NEAR_M => NearWalls::list(list),
+            _ => self.walls_near(x, radius),
+        }
+    }
+
+    /// [`Road::boundary_distance`] for a point believed to be in segment `hint`: the nearest wall of
+    /// that segment's list when `x` is in it and that wall is within the list's reach (no wall off
+    /// the list can then be nearer), else the tree. The same value either way.
+    pub fn boundary_distance_in(&self, hint: usize, x: &Vec2) -> f64 {
+        if let Some(list) = self.segment_list(hint, x) {
+            let d2 = list.iter().map(|&k| (self.walls[k as usize].nearest(x).0 - x).norm_squared());
+            let d = d2.fold(f64::INFINITY, f64::min).sqrt();
+            if d <= SEGMENT_NEAR_M {
+                // x is in quad `hint` (within the containment tolerance), so inside the road.
+                return d;
+            }
+        }
+        self.boundary_distance(x)
+    }
+
+    /// Segment `hint`'s list of nearby walls if `x` is in that segment and the index covers it.
+    fn segment_list(&self, hint: usize, x: &Vec2) -> Option<&[u32]> {
+        let list = self.index.near.get(hint)?.as_deref()?;
+        (RoadIndex::covers(x) && self.quads[hint].contains(x, CONTAINS_TOL_M)).then_some(list)
     }
 }
 

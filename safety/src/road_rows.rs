@@ -73,7 +73,7 @@ pub fn road_rows(
     let walls = road.walls();
     let line = |k: usize, n: Vec2, s: f64| line_row(s, n.dot(&v), n, delta, d_s, zeta, RowKind::Road(k));
     match rule {
-        RoadRule::Walls => walls_rows(road, p, v, radius, params, out),
+        RoadRule::Walls => walls_rows(road, p, v, segment, radius, params, out),
         RoadRule::Halfplanes => {
             for &k in road.halfplane_walls(segment) {
                 let s = walls[k].signed_distance(&p);
@@ -106,7 +106,15 @@ pub fn road_rows(
 /// barrier only when its foot left the slab, already at b ≈ 0 (stress seed 225, rl: S = 0.088 m < D_s).
 /// The unsigned distance is the true distance to that wall, so it is positive and C¹-continuous with
 /// V's end-point barrier where the foot reaches V.
-fn walls_rows(road: &Road, p: Vec2, v: Vec2, radius: f64, params: &Params, out: &mut Vec<Row>) {
+fn walls_rows(
+    road: &Road,
+    p: Vec2,
+    v: Vec2,
+    segment: usize,
+    radius: f64,
+    params: &Params,
+    out: &mut Vec<Row>,
+) {
     let (delta, d_s, zeta) = (params.delta, params.d_s, params.zeta);
     let walls = road.walls();
     if !road.contains(&p) {
@@ -128,9 +136,9 @@ fn walls_rows(road: &Road, p: Vec2, v: Vec2, radius: f64, params: &Params, out: 
     }
     let mut seen = [Vec2::zeros(); 16];
     let mut n_seen = 0;
-    // The index gives a superset of the walls within the radius, in index order: the same rows, in
-    // the same order, as a loop over every wall.
-    for k in road.walls_near(&p, radius) {
+    // The index (or the tracked segment's list) gives a superset of the walls within the radius, in
+    // index order: the same rows, in the same order, as a loop over every wall.
+    for k in road.walls_near_in(segment, &p, radius) {
         let w = &walls[k];
         let (c, t) = w.nearest(&p);
         if (c - p).norm() > radius {
