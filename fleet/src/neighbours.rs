@@ -1,94 +1,96 @@
-//! Neighbour search: a uniform grid of square cells as wide as the radius, so every pair closer than
-//! the radius lies in the same or in adjacent cells. The UAVs are sorted by cell once per tick and
-//! each occupied cell is compared with itself and four of its eight neighbours (the other four
-//! compare with it): O(N) distance tests for a fleet of bounded density, wherever the road runs
-//! (a sweep along x degenerated on roads running north–south). Buffers are reused every tick.
+//! Neighbour search on a uniform grid of rows: the plane is cut into horizontal bands as tall as
+//! the radius, every UAV is sorted by (band, x, index), and each UAV looks at its own band and the
+//! two beside it within x ± radius, found with pointers that only move forward along each band. Every
+//! pair closer than the radius is in such a window (its y differs by less than one band), the work is
+//! O(N log N) for the sort plus O(N + candidates) at bounded density, whichever way the road runs (a
+//! sweep along x alone degenerated on roads running north–south), and each UAV's list comes out
+//! ordered by x, then index (a merge of three sorted windows), with no sort per list. Buffers are
+//! reused every tick.
 
 use uav::Vec2;
 
-/// Cell coordinates are clamped to ±this, so that a neighbour's coordinate never overflows; points
-/// beyond it (absurdly far out) share the border cells, which costs time, never a pair.
-const MAX_CELL: i64 = (i32::MAX - 2) as i64;
+/// Band numbers are clamped to ±this, so that a neighbour band's number never overflows; points
+/// beyond it (absurdly far out) share the border bands, which costs time, never a pair.
+const MAX_BAND: i64 = 1 << 52;
 
 /// Finds all pairs of points closer than a radius; buffers are kept between calls.
 #[derive(Debug, Default)]
 pub struct NeighbourSearch {
-    /// (cell key, UAV index), sorted.
-    by_cell: Vec<(u64, u32)>,
+    /// (band, x, UAV index) of every finite point, sorted.
+    by_band: Vec<(i64, f64, u32)>,
     /// `lists[k]`: indices of the UAVs within the radius of UAV k, by x, then index.
     pub lists: Vec<Vec<usize>>,
 }
 
-/// The key of cell (x, y): both coordinates offset into u32 and packed, so that sorting by key sorts
-/// by x, then y.
-fn key(x: i64, y: i64) -> u64 {
-    let offset = |c: i64| (c.clamp(-MAX_CELL, MAX_CELL) + i64::from(i32::MAX)) as u64;
-    (offset(x) << 32) | offset(y)
-}
-
-/// The cell coordinates of key `k` (inverse of [`key`]).
-fn coords(k: u64) -> (i64, i64) {
-    ((k >> 32) as i64 - i64::from(i32::MAX), (k & 0xffff_ffff) as i64 - i64::from(i32::MAX))
+/// The order of the sorted entries: band, then x, then index.
+fn order(a: &(i64, f64, u32), b: &(i64, f64, u32)) -> std::cmp::Ordering {
+    a.0.cmp(&b.0).then(a.1.total_cmp(&b.1)).then(a.2.cmp(&b.2))
 }
 
 impl NeighbourSearch {
     /// Recomputes `lists` for `positions` and `radius` (m). Non-finite positions get no neighbours;
-    /// a radius that is not a positive finite number puts every point in one cell.
+    /// a radius that is not a positive finite number puts every point in one band.
     pub fn update(&mut self, positions: &[Vec2], radius: f64) {
         let n = positions.len();
         self.lists.resize_with(n, Vec::new);
         self.lists.truncate(n);
         self.lists.iter_mut().for_each(Vec::clear);
-        let cell = if radius.is_finite() && radius > 0.0 { radius } else { f64::INFINITY };
-        let coordinate = |x: f64| if cell.is_finite() { (x / cell).floor() as i64 } else { 0 };
-        self.by_cell.clear();
-        self.by_cell.extend(
+        let finite_radius = radius.is_finite() && radius > 0.0;
+        let band =
+            |y: f64| if finite_radius { ((y / radius).floor() as i64).clamp(-MAX_BAND, MAX_BAND) } else { 0 };
+        self.by_band.clear();
+        self.by_band.extend(
             (0..n)
                 .filter(|&k| uav::is_finite(&positions[k]))
                 // Fleets are far below 2³² UAVs (the server admits at most a few hundred thousand).
-                .map(|k| (key(coordinate(positions[k].x), coordinate(positions[k].y)), k as u32)),
+                .map(|k| (band(positions[k].y), positions[k].x, k as u32)),
         );
-        self.by_cell.sort_unstable();
+        self.by_band.sort_unstable_by(order);
+        let entries = &self.by_band;
         let r2 = radius * radius;
-        let within = |a: usize, b: usize| (positions[a] - positions[b]).norm_squared() <= r2;
         let mut start = 0;
-        while start < self.by_cell.len() {
-            let here = self.by_cell[start].0;
-            let end = start + self.by_cell[start..].partition_point(|e| e.0 == here);
+        while start < entries.len() {
+            let b = entries[start].0;
+            let end = start + entries[start..].partition_point(|e| e.0 == b);
+            // The runs of bands b − 1, b and b + 1 (empty where no UAV is), with window pointers.
+            let run = |band: i64| {
+                let lo = entries.partition_point(|e| e.0 < band);
+                (lo, lo + entries[lo..].partition_point(|e| e.0 == band))
+            };
+            let runs = [run(b - 1), (start, end), run(b + 1)];
+            let mut from = runs.map(|(lo, _)| lo);
             for i in start..end {
-                let a = self.by_cell[i].1 as usize;
-                for &(_, b) in &self.by_cell[i + 1..end] {
-                    if within(a, b as usize) {
-                        self.lists[a].push(b as usize);
-                        self.lists[b as usize].push(a);
+                let (_, x, a) = entries[i];
+                let (a, p) = (a as usize, positions[a as usize]);
+                // Each window: the entries of a run with x in [x − r, x + r].
+                let mut heads = [0; 3];
+                let mut ends = [0; 3];
+                for w in 0..3 {
+                    while from[w] < runs[w].1 && entries[from[w]].1 < x - radius {
+                        from[w] += 1;
                     }
+                    heads[w] = from[w];
+                    ends[w] = heads[w] + entries[heads[w]..runs[w].1].partition_point(|e| e.1 <= x + radius);
                 }
-            }
-            let (x, y) = coords(here);
-            for (dx, dy) in [(0, 1), (1, -1), (1, 0), (1, 1)] {
-                let other = key(x + dx, y + dy);
-                if other == here {
-                    continue; // clamped at the border: the same cell, already done
-                }
-                let lo = self.by_cell.partition_point(|e| e.0 < other);
-                let hi = lo + self.by_cell[lo..].partition_point(|e| e.0 == other);
-                for i in start..end {
-                    let a = self.by_cell[i].1 as usize;
-                    for &(_, b) in &self.by_cell[lo..hi] {
-                        if within(a, b as usize) {
-                            self.lists[a].push(b as usize);
-                            self.lists[b as usize].push(a);
-                        }
+                // Merge the three windows by (x, index).
+                let list = &mut self.lists[a];
+                loop {
+                    let next = (0..3).filter(|&w| heads[w] < ends[w]).min_by(|&v, &w| {
+                        entries[heads[v]]
+                            .1
+                            .total_cmp(&entries[heads[w]].1)
+                            .then(entries[heads[v]].2.cmp(&entries[heads[w]].2))
+                    });
+                    let Some(w) = next else { break };
+                    let d = entries[heads[w]].2 as usize;
+                    heads[w] += 1;
+                    if d != a && (positions[d] - p).norm_squared() <= r2 {
+                        list.push(d);
                     }
                 }
             }
             start = end;
         }
-        // Each list in the order of x, then index: independent of the grid, and the order in which
-        // the traffic rules and the filter met neighbours when they were measured (a sweep along x),
-        // which matters (distance keeping applies neighbour after neighbour).
-        let by_x = |a: &usize, b: &usize| positions[*a].x.total_cmp(&positions[*b].x).then(a.cmp(b));
-        self.lists.iter_mut().for_each(|l| l.sort_unstable_by(by_x));
     }
 }
 
