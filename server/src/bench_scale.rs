@@ -31,6 +31,15 @@ fn add(sum: &mut [f64; 8], s: &StageTimes, metrics_us: f64) {
     sum.iter_mut().zip(each).for_each(|(a, b)| *a += b);
 }
 
+/// Writes `scenario` as DIR/NAME.json.
+fn write_scenario(dir: &std::path::Path, scenario: &fleet::Scenario) -> anyhow::Result<()> {
+    use anyhow::Context as _;
+    let path = dir.join(format!("{}.json", scenario.name));
+    std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
+    let json = serde_json::to_string(scenario).context("cannot encode the scenario")?;
+    std::fs::write(&path, json).with_context(|| format!("cannot write {}", path.display()))
+}
+
 /// Nearest-rank quantile of sorted `v`.
 fn quantile(sorted: &[f64], q: f64) -> f64 {
     sorted.get(((sorted.len().max(1) - 1) as f64 * q).round() as usize).copied().unwrap_or(0.0)
@@ -59,6 +68,12 @@ pub fn main(args: &BenchArgs) -> ExitCode {
                 return ExitCode::FAILURE;
             }
         };
+        if let Some(dir) = &args.write_scenarios
+            && let Err(e) = write_scenario(dir, &scenario)
+        {
+            eprintln!("error: {e:#}");
+            return ExitCode::FAILURE;
+        }
         let mut fleet = match sim_fleet(&scenario, &args.policy) {
             Ok(f) => f,
             Err((message, code)) => {

@@ -241,6 +241,10 @@ pub struct BenchArgs {
     /// Policy flown (`fleet`, `scale`): `pd` or `rl`.
     #[arg(long, default_value = "rl")]
     pub policy: String,
+    /// Also write each fleet size's scenario as DIR/trunkN.json (`scale`), for `airroads run` and
+    /// for other simulators (scripts/rvo2-bench).
+    #[arg(long, value_name = "DIR")]
+    pub write_scenarios: Option<PathBuf>,
 }
 
 /// Benchmarks.
