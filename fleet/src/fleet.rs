@@ -8,6 +8,7 @@ use crate::traffic::{TrafficRules, UavTraffic};
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::{Link, LinkPhase};
 use policies::{Observation, PolicyRegistry, observation};
+use rayon::prelude::*;
 use roads::{NavMode, NavState, Navigator, Road};
 use safety::barrier::collision_row;
 use safety::{FilterSettings, RoadRule, Row, RowKind, SafetyFilter, activation_radius, road_rows};
@@ -326,21 +327,27 @@ impl Fleet {
         let mut segments = std::mem::take(&mut self.segments);
         segments.clear();
         let hold = self.hold;
-        for uav in &mut self.uavs {
-            segments.push(nav.locate(&mut uav.nav, uav.state.p));
-            let tracked = !hold && uav.flying() && !uav.nav.arrived;
-            uav.traffic.route = uav.nav.position.filter(|_| tracked);
-            uav.traffic.waiting = None;
-            uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
-        }
+        // Per UAV and independent of the others: in parallel, with the same result on any number of
+        // threads (each UAV's computation is the same; only where it runs differs).
+        self.uavs
+            .par_iter_mut()
+            .map(|uav| {
+                let segment = nav.locate(&mut uav.nav, uav.state.p);
+                let tracked = !hold && uav.flying() && !uav.nav.arrived;
+                uav.traffic.route = uav.nav.position.filter(|_| tracked);
+                uav.traffic.waiting = None;
+                uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
+                segment
+            })
+            .collect_into_vec(&mut segments);
         if self.config.nav == NavMode::Traffic {
             self.traffic.plan(&nav, now, &mut self.uavs, &self.neighbours.lists);
         }
-        for (uav, &segment) in self.uavs.iter_mut().zip(&segments) {
+        self.uavs.par_iter_mut().zip(&segments).for_each(|(uav, &segment)| {
             let restriction = uav.traffic.restriction;
             uav.last.target = nav.choose(&mut uav.nav, uav.state.p, uav.state.v, segment, &restriction);
             uav.last.stall_s = uav.traffic.progress.stalled_for(now).unwrap_or(0.0);
-        }
+        });
         self.segments = segments;
     }
 

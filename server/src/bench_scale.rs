@@ -45,12 +45,25 @@ fn quantile(sorted: &[f64], q: f64) -> f64 {
     sorted.get(((sorted.len().max(1) - 1) as f64 * q).round() as usize).copied().unwrap_or(0.0)
 }
 
-/// Runs the subcommand.
+/// Runs the subcommand on `--threads` worker threads (default: all cores).
 pub fn main(args: &BenchArgs) -> ExitCode {
+    let threads = args
+        .threads
+        .map_or_else(|| std::thread::available_parallelism().map_or(1, usize::from), |n| n as usize);
+    match rayon::ThreadPoolBuilder::new().num_threads(threads).build() {
+        Ok(pool) => pool.install(|| measure(args, threads)),
+        Err(e) => {
+            eprintln!("error: cannot start {threads} worker threads: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
     let sizes = args.uavs_or(&[1000, 3000, 10000]);
     let ticks = args.ticks.max(1);
     say!(
-        "airroads bench scale: two-way trunk road (1.2 km per 1,000 UAVs), policy {}, {ticks} ticks each, one thread",
+        "airroads bench scale: two-way trunk road (1.2 km per 1,000 UAVs), policy {}, {ticks} ticks each, {threads} thread(s)",
         args.policy
     );
     say!("per stage: mean ms per tick (µs per UAV); tick = every stage, metrics included");

@@ -241,6 +241,9 @@ pub struct BenchArgs {
     /// Policy flown (`fleet`, `scale`): `pd` or `rl`.
     #[arg(long, default_value = "rl")]
     pub policy: String,
+    /// Worker threads of the tick's parallel stages (`scale`; default: all cores).
+    #[arg(long, value_parser = clap::value_parser!(u64).range(1..=256))]
+    pub threads: Option<u64>,
     /// Also write each fleet size's scenario as DIR/trunkN.json (`scale`), for `airroads run` and
     /// for other simulators (scripts/rvo2-bench).
     #[arg(long, value_name = "DIR")]
