@@ -1,8 +1,8 @@
 //! One tick of the fleet loop (ARCHITECTURE.md, "One tick"): states → targets → neighbours →
 //! policies (batched) → CBF-QP filter → commands.
 
-use crate::lost::obstacle_row;
 use crate::neighbours::NeighbourSearch;
+use crate::rows::RowBuilder;
 use crate::speed::{govern, keep_distance};
 use crate::traffic::{TrafficRules, UavTraffic};
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
@@ -10,11 +10,19 @@ use links::{Link, LinkPhase};
 use policies::{Observation, PolicyRegistry, observation};
 use rayon::prelude::*;
 use roads::{NavMode, NavState, Navigator, Road};
-use safety::barrier::collision_row;
-use safety::{FilterSettings, RoadRule, Row, RowKind, SafetyFilter, activation_radius, road_rows};
+use safety::{FilterSettings, RoadRule, SafetyFilter, activation_radius};
 use std::time::Instant;
 use uav::{Params, UavState, Vec2, braking_input};
 
+/// Fleets at least this large run the per-UAV stages on all worker threads; smaller ones stay on the
+/// calling thread (handing a few UAVs to other threads costs more than it saves, and waking them
+/// on a busy machine can take milliseconds). Either way the results are the same.
+pub const PARALLEL_FROM_UAVS: usize = 256;
+
+/// True when a stage over `n` UAVs runs in parallel ([`PARALLEL_FROM_UAVS`]).
+pub(crate) fn parallel(n: usize) -> bool {
+    n >= PARALLEL_FROM_UAVS
+}
 /// How the collision barrier b_kd of a pair is shared between its two UAVs.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum CollisionShare {
@@ -196,7 +204,7 @@ pub struct Fleet {
     traffic: TrafficRules,
     positions: Vec<Vec2>,
     segments: Vec<usize>,
-    rows: Vec<Row>,
+    row_builder: RowBuilder,
     observations: Vec<Observation>,
     batch: Vec<usize>,
     actions: Vec<Vec2>,
@@ -218,7 +226,7 @@ impl Fleet {
             traffic: TrafficRules::default(),
             positions: Vec::new(),
             segments: Vec::new(),
-            rows: Vec::new(),
+            row_builder: RowBuilder::default(),
             observations: Vec::new(),
             batch: Vec::new(),
             actions: Vec::new(),
@@ -305,11 +313,15 @@ impl Fleet {
         self.stages.navigation_us = lap();
         self.run_policies();
         self.stages.policies_us = lap();
-        self.stages.rows_us = 0.0;
+        let mut builder = std::mem::take(&mut self.row_builder);
+        let (rule, lists) = (self.config.road_rule, &self.neighbours.lists);
+        builder.build(&self.road, rule, &params, &self.uavs, lists, |d| self.disk_of(d));
+        self.row_builder = builder;
+        self.stages.rows_us = lap();
         for k in 0..self.uavs.len() {
             self.filter_one(k);
         }
-        self.stages.filter_us = lap() - self.stages.rows_us;
+        self.stages.filter_us = lap();
         for uav in &mut self.uavs {
             uav.link.send(uav.last.u);
         }
@@ -329,25 +341,32 @@ impl Fleet {
         let hold = self.hold;
         // Per UAV and independent of the others: in parallel, with the same result on any number of
         // threads (each UAV's computation is the same; only where it runs differs).
-        self.uavs
-            .par_iter_mut()
-            .map(|uav| {
-                let segment = nav.locate(&mut uav.nav, uav.state.p);
-                let tracked = !hold && uav.flying() && !uav.nav.arrived;
-                uav.traffic.route = uav.nav.position.filter(|_| tracked);
-                uav.traffic.waiting = None;
-                uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
-                segment
-            })
-            .collect_into_vec(&mut segments);
+        let locate = |uav: &mut Uav| {
+            let segment = nav.locate(&mut uav.nav, uav.state.p);
+            let tracked = !hold && uav.flying() && !uav.nav.arrived;
+            uav.traffic.route = uav.nav.position.filter(|_| tracked);
+            uav.traffic.waiting = None;
+            uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
+            segment
+        };
+        if parallel(self.uavs.len()) {
+            self.uavs.par_iter_mut().map(locate).collect_into_vec(&mut segments);
+        } else {
+            segments.extend(self.uavs.iter_mut().map(locate));
+        }
         if self.config.nav == NavMode::Traffic {
             self.traffic.plan(&nav, now, &mut self.uavs, &self.neighbours.lists);
         }
-        self.uavs.par_iter_mut().zip(&segments).for_each(|(uav, &segment)| {
+        let choose = |(uav, &segment): (&mut Uav, &usize)| {
             let restriction = uav.traffic.restriction;
             uav.last.target = nav.choose(&mut uav.nav, uav.state.p, uav.state.v, segment, &restriction);
             uav.last.stall_s = uav.traffic.progress.stalled_for(now).unwrap_or(0.0);
-        });
+        };
+        if parallel(self.uavs.len()) {
+            self.uavs.par_iter_mut().zip(&segments).for_each(choose);
+        } else {
+            self.uavs.iter_mut().zip(&segments).for_each(choose);
+        }
         self.segments = segments;
     }
 
@@ -433,12 +452,9 @@ impl Fleet {
         }
     }
 
-    /// Builds the rows of UAV k and filters its nominal input.
+    /// Filters UAV k's nominal input against its rows (built for the tick by [`RowBuilder`]).
     fn filter_one(&mut self, k: usize) {
         let p = &self.config.params;
-        let me = self.uavs[k].state;
-        let rows_started = Instant::now();
-        self.rows.clear();
         if !self.uavs[k].flying() {
             // Not following commands (taking off, landing, lost): brake, which is also what its
             // link holds it to; its neighbours treat it as an obstacle.
@@ -447,45 +463,18 @@ impl Fleet {
             (last.solved, last.failed, last.solve_us, last.min_barrier) = (false, false, 0.0, f64::INFINITY);
             return;
         }
-        let segment = self.uavs[k].nav.tracker.current.unwrap_or(0);
-        road_rows(&self.road, self.config.road_rule, me.p, me.v, segment, p, &mut self.rows);
-        let delta_sum = 2.0 * p.delta;
-        // Sampled-data margin (docs/safety.md §4.4, §8 d): with inputs held for dt, the curvature of
-        // b_kd lets a pair drift below the continuous-time boundary by up to ½·δΣ·dt² per step, and in
-        // dense jams the filtered inputs alternate from tick to tick; the filter keeps twice that,
-        // δΣ·dt², beyond D_c.
-        let d_c = p.d_c + delta_sum * p.dt * p.dt;
-        for &d in &self.neighbours.lists[k] {
-            let other = self.uavs[d].state;
-            if !self.uavs[d].cooperates() {
-                if self.uavs[d].in_the_air() {
-                    let disk = self.disk_of(d);
-                    self.rows.push(obstacle_row(me, &disk, d_c, p, RowKind::Collision(d)));
-                }
-                continue;
-            }
-            let (p_kd, v_kd) = (me.p - other.p, me.v - other.v);
-            if p_kd.norm() > activation_radius(p.d_c, v_kd.norm(), delta_sum) {
-                continue;
-            }
-            let mut row = collision_row(p_kd, v_kd, p.delta, p.delta, d_c, p.zeta, RowKind::Collision(d));
-            if self.config.share == CollisionShare::Sequential && d < k {
-                // d was filtered earlier this tick: enforce the whole relative row given its u_d.
-                row.c = row.c * delta_sum / p.delta + row.a.dot(&self.uavs[d].last.u);
-            }
-            self.rows.push(row);
-        }
+        let uavs = &self.uavs;
+        let rows = self.row_builder.rows_of(k, self.config.share, p.delta, |d| uavs[d].last.u);
         let started = Instant::now();
-        self.stages.rows_us += started.duration_since(rows_started).as_secs_f64() * 1e6;
-        let out = self.filter.filter(self.uavs[k].last.u_ref, me.v, &self.rows, p.delta, p.dt);
+        let out = self.filter.filter(self.uavs[k].last.u_ref, self.uavs[k].state.v, rows, p.delta, p.dt);
         let last = &mut self.uavs[k].last;
         last.solve_us = if out.solved { started.elapsed().as_secs_f64() * 1e6 } else { 0.0 };
         last.u = out.u;
-        last.rows = self.rows.len();
+        last.rows = rows.len();
         last.active_rows = out.active_rows;
         last.max_slack = out.max_slack;
         last.solved = out.solved;
         last.failed = out.failed;
-        last.min_barrier = self.rows.iter().map(|r| r.b).fold(f64::INFINITY, f64::min);
+        last.min_barrier = rows.iter().map(|r| r.b).fold(f64::INFINITY, f64::min);
     }
 }

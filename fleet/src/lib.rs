@@ -15,6 +15,7 @@ mod metrics;
 mod neighbours;
 pub mod paths;
 pub mod progress;
+mod rows;
 mod run;
 mod scenario;
 pub mod sections;
@@ -27,7 +28,7 @@ mod yielding;
 pub mod zones;
 
 pub use edit::EditError;
-pub use fleet::{CollisionShare, Fleet, FleetConfig, StageTimes, Uav, UavTick};
+pub use fleet::{CollisionShare, Fleet, FleetConfig, PARALLEL_FROM_UAVS, StageTimes, Uav, UavTick};
 pub use histogram::DurationHistogram;
 pub use lost::{ReachDisk, WATCHDOG_HOLD_S, obstacle_row, point_disk, reach_disk};
 pub use margins::{collision_margin, road_margin};

@@ -1,11 +1,13 @@
 //! Safety metrics of a run, accumulated per tick, and the METRICS.json document.
 
-use crate::fleet::Fleet;
+use crate::fleet::{Fleet, parallel};
 use crate::histogram::DurationHistogram;
 use crate::margins::{collision_margin, road_margin_at};
 use crate::progress::stall_time_added;
+use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;
+use uav::UavState;
 
 /// Solver statistics of a run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -94,6 +96,20 @@ pub struct MetricsRecorder {
     /// Stalls going on, by UAV index (a headless run never removes UAVs), and those that ended.
     ongoing: Vec<Option<Stall>>,
     stalls: Vec<Stall>,
+    /// Scratch: each UAV's state and tracked segment, and its margins, this tick.
+    states: Vec<(UavState, Option<usize>)>,
+    margins: Vec<UavMargins>,
+}
+
+/// One UAV's margins in one tick.
+#[derive(Debug, Clone, Copy, Default)]
+struct UavMargins {
+    /// Distance to the nearest wall (negative outside).
+    wall: f64,
+    /// Its road margin S_kij.
+    road_margin: f64,
+    /// The smallest S_kd and distance to a later neighbour, if it has one.
+    closest: Option<(f64, f64)>,
 }
 
 fn min_opt(a: Option<f64>, b: f64) -> Option<f64> {
@@ -112,21 +128,40 @@ impl MetricsRecorder {
         let road = fleet.road();
         let uavs = fleet.uavs();
         let lists = fleet.neighbour_lists();
-        for (k, u) in uavs.iter().enumerate() {
-            let hint = u.nav.tracker.current;
+        self.states.clear();
+        self.states.extend(uavs.iter().map(|u| (u.state, u.nav.tracker.current)));
+        let states = &self.states;
+        // Each UAV's margins on its own (in parallel for large fleets; a minimum does not depend on
+        // the order).
+        let margins_of = |(k, &(state, hint)): (usize, &(UavState, Option<usize>))| {
             let wall = match hint {
-                Some(segment) => road.boundary_distance_in(segment, &u.state.p),
-                None => road.boundary_distance(&u.state.p),
+                Some(segment) => road.boundary_distance_in(segment, &state.p),
+                None => road.boundary_distance(&state.p),
             };
-            self.min_wall = self.min_wall.min(wall);
-            self.outside += u64::from(wall < 0.0);
-            self.min_road = self.min_road.min(road_margin_at(road, hint, &u.state, p.delta, wall));
+            let road_margin = road_margin_at(road, hint, &state, p.delta, wall);
             // The pairs of this tick's neighbour search: any other pair is farther apart than the
             // activation radius at twice the fleet's top speed, so its S_kd exceeds D_c.
-            for d in lists.get(k).into_iter().flatten().filter(|&&d| d > k).filter_map(|&d| uavs.get(d)) {
-                self.min_collision =
-                    min_opt(self.min_collision, collision_margin(&u.state, &d.state, 2.0 * p.delta));
-                self.min_separation = min_opt(self.min_separation, (u.state.p - d.state.p).norm());
+            let pairs = lists.get(k).into_iter().flatten().filter(|&&d| d > k).filter_map(|&d| states.get(d));
+            let closest = pairs.fold(None, |closest: Option<(f64, f64)>, (other, _)| {
+                let (m, sep) = (collision_margin(&state, other, 2.0 * p.delta), (state.p - other.p).norm());
+                Some(closest.map_or((m, sep), |(a, b)| (a.min(m), b.min(sep))))
+            });
+            UavMargins { wall, road_margin, closest }
+        };
+        if parallel(states.len()) {
+            states.par_iter().enumerate().map(margins_of).collect_into_vec(&mut self.margins);
+        } else {
+            self.margins.clear();
+            self.margins.extend(states.iter().enumerate().map(margins_of));
+        }
+        for (k, u) in uavs.iter().enumerate() {
+            let m = self.margins[k];
+            self.min_wall = self.min_wall.min(m.wall);
+            self.outside += u64::from(m.wall < 0.0);
+            self.min_road = self.min_road.min(m.road_margin);
+            if let Some((collision, separation)) = m.closest {
+                self.min_collision = min_opt(self.min_collision, collision);
+                self.min_separation = min_opt(self.min_separation, separation);
             }
             let last = &u.last;
             self.stall_s += stall_time_added(last.stall_s, p.dt);

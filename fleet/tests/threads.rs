@@ -1,12 +1,13 @@
 //! The tick's parallel stages give bit-identical runs on any number of threads: the same paths,
-//! arrivals, margins and stalls with 1, 2 and 4 worker threads.
+//! arrivals, margins and stalls with 1, 2 and 4 worker threads, for a fleet large enough that the
+//! stages do run in parallel (`fleet::PARALLEL_FROM_UAVS`).
 
-use fleet::families::Family;
-use fleet::{FleetConfig, RunOptions, RunOutcome, run_scenario};
+use fleet::trunk::trunk_scenario;
+use fleet::{FleetConfig, PARALLEL_FROM_UAVS, RunOptions, RunOutcome, Scenario, run_scenario};
 use policies::PolicyRegistry;
 
-fn run_on(threads: usize, family: Family, seed: u64) -> RunOutcome {
-    let scenario = family.scenario(seed).validate().expect("generated scenarios are valid");
+fn run_on(threads: usize, scenario: &Scenario) -> RunOutcome {
+    let scenario = scenario.validate().expect("generated scenarios are valid");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
     let policies = PolicyRegistry::standard(scenario.params.delta).expect("the shipped models load");
     let mut outcome = pool
@@ -27,12 +28,13 @@ fn run_on(threads: usize, family: Family, seed: u64) -> RunOutcome {
 
 #[test]
 fn runs_are_identical_on_one_two_and_four_threads() {
-    for (family, seed) in [(Family::Crowd, 3), (Family::HeadOn, 11), (Family::Mixed, 17)] {
-        let one = run_on(1, family, seed);
-        assert!(!one.paths.is_empty());
-        for threads in [2, 4] {
-            let many = run_on(threads, family, seed);
-            assert!(many == one, "{} seed {seed}: {threads} threads differ from one", family.name());
-        }
+    let mut scenario = trunk_scenario(PARALLEL_FROM_UAVS + 144, 5).expect("a trunk road");
+    scenario.params.t_max = 8.0;
+    let one = run_on(1, &scenario);
+    assert_eq!(one.paths.len(), PARALLEL_FROM_UAVS + 144);
+    assert!(one.metrics.min_collision_margin_m.is_some(), "UAVs met: neighbour rows were built");
+    for threads in [2, 4] {
+        let many = run_on(threads, &scenario);
+        assert!(many == one, "{threads} threads differ from one");
     }
 }
