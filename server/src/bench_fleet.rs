@@ -48,7 +48,8 @@ pub fn main(args: &BenchArgs) -> ExitCode {
                 return ExitCode::FAILURE;
             }
         };
-        let config = FleetConfig { params: scenario.params, ..FleetConfig::default() };
+        let mut config = FleetConfig { params: scenario.params, ..FleetConfig::default() };
+        config.filter.solver = args.solver.parse().unwrap_or_default();
         let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
         for u in &scenario.uavs {
             let state = UavState::at_rest(u.start);

@@ -15,6 +15,7 @@ mod bench_crazyflie;
 mod bench_durability;
 mod bench_fleet;
 mod bench_server;
+mod bench_solver;
 mod cli;
 mod plot;
 mod run_cmd;
