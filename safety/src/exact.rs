@@ -26,7 +26,7 @@ use uav::Vec2;
 pub const CERTIFY_TOL: f64 = 1e-9;
 /// Rows with ‖a‖ at most this are constant rows: they cost φ_c(−c_c) whatever u is.
 const A_MIN: f64 = 1e-150;
-/// A row passes through the iterate when |a_cᵀu − c_c| ≤ this × (|c_c| + ‖a_c‖‖u‖).
+/// A row passes through the iterate when |a_cᵀu − c_c| ≤ this × (|c_c| + ‖a_c‖(‖u‖ + δ + ‖u_r‖)).
 const TAU_REL: f64 = 1e-13;
 /// The ball is active when |‖u‖ − δ| ≤ this × δ.
 const BALL_TOL: f64 = 1e-13;
@@ -110,6 +110,8 @@ pub struct ExactSolver {
     mu: f64,
     /// Active-set iterations of the last solve.
     iterations: usize,
+    /// δ + ‖u_r‖: the size of the inputs, the floor of the scale of t_c's round-off.
+    size: f64,
     kkt: KktResidual,
 }
 
@@ -160,7 +162,8 @@ impl ExactSolver {
         self.gid.clear();
         self.gid.resize(m, 0);
         self.iterations = 0;
-        let (mut u, mut w) = (u_r, Working::default());
+        self.size = delta + u_r.norm();
+        let (mut u, mut w) = self.start(rows, u_r, 4.0 * (delta + u_r.norm()));
         let mut mu = 0.0;
         let mut done = self.inner(rows, u_r, 1.0, &mut u, &mut w);
         if done && u.norm() > delta * (1.0 + BALL_TOL) {

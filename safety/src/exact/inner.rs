@@ -35,11 +35,50 @@ impl ExactSolver {
         false
     }
 
+    /// A starting point for μ = 0, in the manner of a dual method: u_r projected on the most violated
+    /// row, then the vertex with the row most violated there (if not parallel). Any start is correct
+    /// (the problem is unconstrained in u); this one usually leaves only the certificate to do.
+    /// Rows whose line lies farther than `reach` from the origin (tiny ‖a_c‖) are not used.
+    pub(super) fn start(&self, rows: &[ConstraintRow], u_r: Vec2, reach: f64) -> (Vec2, Working) {
+        let (mut u, mut w) = (u_r, Working::default());
+        for _ in 0..2 {
+            let mut most: Option<(usize, f64)> = None;
+            for (c, r) in rows.iter().enumerate() {
+                let n = self.norm[c];
+                if n > A_MIN && !w.contains(c) && r.c.abs() <= reach * n {
+                    let dist = (r.a.dot(&u) - r.c) / n;
+                    if dist > most.map_or(0.0, |m| m.1) {
+                        most = Some((c, dist));
+                    }
+                }
+            }
+            let Some((c, _)) = most else { break };
+            let r = &rows[c];
+            if w.len == 0 {
+                u -= r.a * ((r.a.dot(&u) - r.c) / (self.norm[c] * self.norm[c]));
+            } else {
+                let k = &rows[w.rows[0]];
+                let det = uav::cross(&k.a, &r.a);
+                if det.abs() <= PAR_TOL * self.norm[c] * self.norm[w.rows[0]] {
+                    break;
+                }
+                let vertex = Vec2::new(k.c * r.a.y - r.c * k.a.y, k.a.x * r.c - r.a.x * k.c) / det;
+                if vertex.norm().partial_cmp(&reach) != Some(std::cmp::Ordering::Less) {
+                    break;
+                }
+                u = vertex;
+            }
+            w.push(c);
+        }
+        (u, w)
+    }
+
     /// Computes t_c at `u` and marks the rows through `u` (|t_c| ≤ τ_c, geometric rows only) and the
     /// working set; true when every marked row lies on the line of a working row (no degeneracy
     /// beyond the working set).
     fn classify(&mut self, rows: &[ConstraintRow], u: Vec2, w: &Working) -> bool {
-        let norm_u = u.norm();
+        // The floor δ + ‖u_r‖ keeps rows through a point near the origin from looking apart.
+        let norm_u = u.norm() + self.size;
         let mut simple = true;
         for (c, r) in rows.iter().enumerate() {
             let t = r.a.dot(&u) - r.c;

@@ -49,6 +49,7 @@ impl ExactSolver {
         let certified = self.lp(g0, scale);
         self.distribute(rows);
         if certified {
+            self.polish(rows, u);
             return Local::Optimal;
         }
         let (d, ray, value) = self.best_candidate(rows, g0, h0);
@@ -56,6 +57,7 @@ impl ExactSolver {
             || d.norm() <= 16.0 * f64::EPSILON * (1.0 + norm_u + scale / kappa)
         {
             // No numerically measurable descent: the certificate in `finish` judges this point.
+            self.polish(rows, u);
             return Local::Optimal;
         }
         let (alpha, block) = self.ratio_test(rows, d);
@@ -68,6 +70,30 @@ impl ExactSolver {
             w.push(c);
         }
         Local::Moved
+    }
+
+    /// Puts u exactly on the lines whose summed multiplier is strictly inside its range (the lines u
+    /// must lie on), removing the drift of |t_c| ≤ τ_c that a multiplier of 10⁶ would turn into an
+    /// objective error: onto the one such line, or onto the vertex of the first two.
+    fn polish(&self, rows: &[ConstraintRow], u: &mut Vec2) {
+        let mut interior = self.groups.iter().filter(|g| {
+            let tol = 1e-9 * (g.hi - g.lo);
+            g.value > g.lo + tol && g.value < g.hi - tol
+        });
+        let (Some(first), second) = (interior.next(), interior.next()) else { return };
+        let a = &rows[first.rep];
+        match second {
+            None => *u -= a.a * ((a.a.dot(u) - a.c) / a.a.norm_squared()),
+            Some(g) => {
+                let b = &rows[g.rep];
+                let det = uav::cross(&a.a, &b.a);
+                let vertex = Vec2::new(a.c * b.a.y - b.c * a.a.y, a.a.x * b.c - b.a.x * a.c) / det;
+                // Only a small correction: a far vertex means the lines are nearly parallel.
+                if (vertex - *u).norm() <= 1e-9 * (1.0 + u.norm()) {
+                    *u = vertex;
+                }
+            }
+        }
     }
 
     /// Groups the marked rows into distinct lines through u.
@@ -117,12 +143,42 @@ impl ExactSolver {
                 self.groups[1].value = v2;
                 within(&self.groups[0], v1) && within(&self.groups[1], v2)
             }
-            _ => super::zonotope::decompose(&mut self.groups, &mut self.order, y, tol),
+            // Most often two lines carry y and the others have Λ = 0 (which every range holds):
+            // exact, and without the zonotope's cancellation of large bounds.
+            _ => {
+                self.lp_pairs(y, tol) || super::zonotope::decompose(&mut self.groups, &mut self.order, y, tol)
+            }
         };
         for g in &mut self.groups {
             g.value = if g.value.is_finite() { g.value.clamp(g.lo, g.hi) } else { 0.0 };
         }
         ok
+    }
+
+    /// Σ Λ_g n_g = y with at most two lines nonzero; true (values set) if some pair fits its ranges.
+    fn lp_pairs(&mut self, y: Vec2, tol: f64) -> bool {
+        let k = self.groups.len();
+        let within = |g: &Group, v: f64| v >= g.lo - tol && v <= g.hi + tol;
+        for i in 0..k {
+            for j in i + 1..k {
+                let (gi, gj) = (&self.groups[i], &self.groups[j]);
+                let det = uav::cross(&gi.n, &gj.n);
+                let (vi, vj) = (uav::cross(&y, &gj.n) / det, uav::cross(&gi.n, &y) / det);
+                if within(gi, vi) && within(gj, vj) {
+                    for (l, g) in self.groups.iter_mut().enumerate() {
+                        g.value = if l == i {
+                            vi
+                        } else if l == j {
+                            vj
+                        } else {
+                            0.0
+                        };
+                    }
+                    return true;
+                }
+            }
+        }
+        false
     }
 
     /// Splits each line's Λ among its rows: rows whose normal points along Λ's sign take up to ρ_c
