@@ -8,7 +8,7 @@ use super::Group;
 use uav::Vec2;
 
 /// Sets the groups' `value` to a solution and returns true if y is in the zonotope (barycentric
-/// coordinates down to −`tol`, then clamped); otherwise returns false and leaves each value at lo.
+/// within `tol` in Σ Λ_g n_g, then clamped); otherwise returns false and leaves each value at lo.
 pub(super) fn decompose(
     groups: &mut [Group],
     order: &mut Vec<(f64, usize, bool)>,
@@ -40,15 +40,15 @@ pub(super) fn decompose(
         if flip { -v } else { v }
     };
     let k = order.len();
-    let scale = 1.0 + y.norm() + (0..k).map(|j| generator(j).norm()).sum::<f64>();
     let p = y - base;
     // (i, j, s, t): y = base + Σ_{i<l<j} g_l + s g_i + t g_j.
     let found = match k {
-        0 => (p.norm() <= tol * scale).then_some((0, 0, 0.0, 0.0)),
+        0 => (p.norm() <= tol).then_some((0, 0, 0.0, 0.0)),
         1 => {
             let v = generator(0);
             let s = p.dot(&v) / v.norm_squared();
-            (uav::cross(&v, &p).abs() / v.norm() <= tol * scale && s >= -tol && s <= 1.0 + tol)
+            let slack = tol / v.norm();
+            (uav::cross(&v, &p).abs() / v.norm() <= tol && s >= -slack && s <= 1.0 + slack)
                 .then_some((0, 0, s, 0.0))
         }
         _ => tile(k, &generator, p, tol),
@@ -84,8 +84,9 @@ fn tile(k: usize, generator: &dyn Fn(usize) -> Vec2, p: Vec2, tol: f64) -> Optio
             if det != 0.0 {
                 let q = p - offset;
                 let (s, t) = (uav::cross(&q, &gj) / det, uav::cross(&gi, &q) / det);
-                let inside = |x: f64| x >= -tol && x <= 1.0 + tol;
-                if inside(s) && inside(t) {
+                // A coefficient off [0, 1] by x moves the point by x‖g‖: allow `tol` of that.
+                let inside = |x: f64, g: Vec2| x >= -tol / g.norm() && x <= 1.0 + tol / g.norm();
+                if inside(s, gi) && inside(t, gj) {
                     return Some((i, j, s.clamp(0.0, 1.0), t.clamp(0.0, 1.0)));
                 }
             }
@@ -149,7 +150,7 @@ mod thin {
             .collect();
         let y = Vec2::new(-3.9154459497312457, -0.6259763138890642);
         let mut order = Vec::new();
-        let ok = decompose(&mut groups, &mut order, y, 1e-12);
+        let ok = decompose(&mut groups, &mut order, y, 1e-8);
         let back = groups.iter().fold(Vec2::zeros(), |acc, g| acc + g.n * g.value);
         assert!(ok && (back - y).norm() <= 1e-9, "{back:?} vs {y:?}");
     }
