@@ -82,17 +82,23 @@ impl ExactSolver {
         });
         let (Some(first), second) = (interior.next(), interior.next()) else { return };
         let a = &rows[first.rep];
-        match second {
-            None => *u -= a.a * ((a.a.dot(u) - a.c) / a.a.norm_squared()),
+        let target = match second {
+            None => *u - a.a * ((a.a.dot(u) - a.c) / a.a.norm_squared()),
             Some(g) => {
                 let b = &rows[g.rep];
                 let det = uav::cross(&a.a, &b.a);
-                let vertex = Vec2::new(a.c * b.a.y - b.c * a.a.y, a.a.x * b.c - b.a.x * a.c) / det;
-                // Only a small correction: a far vertex means the lines are nearly parallel.
-                if (vertex - *u).norm() <= 1e-9 * (1.0 + u.norm()) {
-                    *u = vertex;
-                }
+                Vec2::new(a.c * b.a.y - b.c * a.a.y, a.a.x * b.c - b.a.x * a.c) / det
             }
+        };
+        // Only a small correction (a far vertex means nearly parallel lines), and none that moves a
+        // row not through u across its kink (its multiplier, ρ_c + P_c t_c or 0, would change).
+        let small = (target - *u).norm() <= 1e-9 * (1.0 + u.norm());
+        let keeps_sides = rows
+            .iter()
+            .enumerate()
+            .all(|(c, r)| self.zmark[c] || ((r.a.dot(&target) - r.c > 0.0) == (self.t[c] > 0.0)));
+        if small && keeps_sides {
+            *u = target;
         }
     }
 

@@ -73,8 +73,11 @@ pub(super) fn decompose(
 
 /// The tile of the zonotope Σ_l [0, 1] g_l (generators in angular order in [0, π)) that holds p: the
 /// zonotope is tiled by the parallelograms Σ_{i<l<j} g_l + [0, 1]g_i + [0, 1]g_j, i < j, each
-/// well conditioned unless g_i and g_j are nearly parallel. Returns (i, j, s, t) with s, t clamped.
+/// well conditioned unless g_i and g_j are nearly parallel. Returns (i, j, s, t) with s, t clamped,
+/// from the tile that p is least outside of (by how far clamping moves the point), if that is at most
+/// `tol`: a point on the boundary of a thin tile can fall just outside every tile in round-off.
 fn tile(k: usize, generator: &dyn Fn(usize) -> Vec2, p: Vec2, tol: f64) -> Option<(usize, usize, f64, f64)> {
+    let mut best: Option<(usize, usize, f64, f64, f64)> = None;
     for i in 0..k {
         let gi = generator(i);
         let mut offset = Vec2::zeros();
@@ -84,16 +87,20 @@ fn tile(k: usize, generator: &dyn Fn(usize) -> Vec2, p: Vec2, tol: f64) -> Optio
             if det != 0.0 {
                 let q = p - offset;
                 let (s, t) = (uav::cross(&q, &gj) / det, uav::cross(&gi, &q) / det);
-                // A coefficient off [0, 1] by x moves the point by x‖g‖: allow `tol` of that.
-                let inside = |x: f64, g: Vec2| x >= -tol / g.norm() && x <= 1.0 + tol / g.norm();
-                if inside(s, gi) && inside(t, gj) {
-                    return Some((i, j, s.clamp(0.0, 1.0), t.clamp(0.0, 1.0)));
+                // A coefficient off [0, 1] by x moves the point by x‖g‖.
+                let off = |x: f64, g: Vec2| (x - x.clamp(0.0, 1.0)).abs() * g.norm();
+                let outside = off(s, gi) + off(t, gj);
+                if outside == 0.0 {
+                    return Some((i, j, s, t));
+                }
+                if best.is_none_or(|b| outside < b.4) {
+                    best = Some((i, j, s.clamp(0.0, 1.0), t.clamp(0.0, 1.0), outside));
                 }
             }
             offset += gj;
         }
     }
-    None
+    best.filter(|b| b.4 <= tol).map(|(i, j, s, t, _)| (i, j, s, t))
 }
 
 #[cfg(test)]
