@@ -214,7 +214,7 @@ impl SafetyFilter {
                     };
                 }
                 Err(ExactError::NonFinite | ExactError::Invalid(_)) => return self.brake(v, delta, dt),
-                // Not certified (3 in 10⁶ instances of `airroads bench solver`): Clarabel decides.
+                // Not certified (2 in 10⁶ instances of `airroads bench solver`): Clarabel decides.
                 Err(ExactError::NotCertified { .. }) => {}
             }
         }
