@@ -2,17 +2,19 @@
 //! road walls (b_kij, signed, finite walls with end-point barriers) and neighbours (b_kd, decentralised
 //! share δ_k/(δ_k+δ_d)), turned into affine rows `aᵀu ≤ c`, and the per-UAV QP
 //! `min ½‖u_q‖² + Σ(ρ r + ½P r²)` with one slack per row and ‖u‖ ≤ δ as a second-order cone, solved
-//! with Clarabel.
+//! exactly by an active-set method in R² with a KKT certificate (`exact`) or with Clarabel (`qp`).
 //!
 //! Synchronous and allocation-free in steady state; knows nothing of fleets, policies or I/O.
 
 pub mod barrier;
+pub mod exact;
 mod filter;
 pub mod paper;
 mod qp;
 mod road_rows;
 
 pub use barrier::{Row, RowKind};
-pub use filter::{FilterOutcome, FilterSettings, Objective, SafetyFilter};
-pub use qp::{ConstraintRow, QpSolution, QpSolver};
+pub use exact::{ExactError, ExactSolver, KktResidual, kkt_residual};
+pub use filter::{FilterOutcome, FilterSettings, Objective, SafetyFilter, Solver};
+pub use qp::{CLARABEL_TOL, ConstraintRow, QpSolution, QpSolver};
 pub use road_rows::{ACTIVATION_BARRIER, RoadRule, activation_radius, road_rows};

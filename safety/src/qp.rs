@@ -52,7 +52,12 @@ pub struct QpSolver {
     b: Vec<f64>,
     slacks: Vec<f64>,
     x_u: Vec2,
+    /// Clarabel's gap and feasibility tolerances.
+    tol: f64,
 }
+
+/// The filter's Clarabel tolerances (gap, absolute and relative, and feasibility).
+pub const CLARABEL_TOL: f64 = 1e-9;
 
 impl Default for QpSolver {
     fn default() -> Self {
@@ -72,14 +77,14 @@ enum Attempt {
     Robust,
 }
 
-fn settings(attempt: Attempt) -> DefaultSettings<f64> {
+fn settings(attempt: Attempt, tol: f64) -> DefaultSettings<f64> {
     DefaultSettings {
         verbose: false,
         presolve_enable: false,
         input_sparse_dropzeros: false,
-        tol_gap_abs: 1e-9,
-        tol_gap_rel: 1e-9,
-        tol_feas: 1e-9,
+        tol_gap_abs: tol,
+        tol_gap_rel: tol,
+        tol_feas: tol,
         // The slack penalties (ρ from 10³ to 10⁵ next to unit weights) make the data badly scaled:
         // equilibration halves the iterations, and iterative refinement costs a third of the time
         // without changing the result at these tolerances (`airroads bench filter`).
@@ -107,6 +112,12 @@ fn pattern(m: usize, p_vals: &[f64], a_vals: &[f64]) -> (CscMatrix<f64>, CscMatr
 impl QpSolver {
     /// An empty solver; structures are built on first use for each row count.
     pub fn new() -> Self {
+        Self::with_tolerance(CLARABEL_TOL)
+    }
+
+    /// An empty solver with Clarabel's gap and feasibility tolerances set to `tol` instead of
+    /// [`CLARABEL_TOL`] (a tighter reference for checking the exact solver, `airroads bench solver`).
+    pub fn with_tolerance(tol: f64) -> Self {
         Self {
             cache: Vec::new(),
             p_vals: Vec::new(),
@@ -115,6 +126,7 @@ impl QpSolver {
             b: Vec::new(),
             slacks: Vec::new(),
             x_u: Vec2::zeros(),
+            tol,
         }
     }
 
@@ -147,7 +159,7 @@ impl QpSolver {
     fn build(&self, m: usize, attempt: Attempt) -> Option<DefaultSolver<f64>> {
         let (p, a) = pattern(m, &self.p_vals, &self.a_vals);
         let cones = [NonnegativeConeT(2 * m), SecondOrderConeT(3)];
-        DefaultSolver::new(&p, &self.q, &a, &self.b, &cones, settings(attempt)).ok()
+        DefaultSolver::new(&p, &self.q, &a, &self.b, &cones, settings(attempt, self.tol)).ok()
     }
 
     /// Builds a fresh solver for the filled data, solves and reads the result.

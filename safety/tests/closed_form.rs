@@ -1,7 +1,8 @@
-//! The filter's closed-form shortcut (one binding constraint) returns the same input as Clarabel.
+//! The closed-form shortcut of the Clarabel path (one binding constraint) returns the same input as
+//! Clarabel. (The exact solver is checked against Clarabel in `exact_solver.rs`.)
 
 use proptest::prelude::*;
-use safety::{ConstraintRow, FilterSettings, QpSolver, Row, RowKind, SafetyFilter};
+use safety::{ConstraintRow, FilterSettings, QpSolver, Row, RowKind, SafetyFilter, Solver};
 use uav::Vec2;
 
 fn unit(angle: f64) -> Vec2 {
@@ -22,7 +23,7 @@ proptest! {
             .into_iter()
             .map(|(t, c, b, road)| Row { a: unit(t), c, b, kind: if road { RowKind::Road(0) } else { RowKind::Collision(0) } })
             .collect();
-        let settings = FilterSettings::default();
+        let settings = FilterSettings { solver: Solver::Clarabel, ..FilterSettings::default() };
         let out = SafetyFilter::new(settings).filter(u_ref, Vec2::zeros(), &rows, delta, 0.05);
         let constraints: Vec<ConstraintRow> = settings.constraint_rows(&rows, delta).collect();
         let reference = QpSolver::new().solve(u_ref, &constraints, delta);

@@ -1,10 +1,10 @@
 //! `airroads bench filter`: µs per filtered UAV for 2, 6 and 12 rows, through the whole filter (as
-//! flown: the closed form when one constraint binds) and through Clarabel alone.
+//! flown with `--solver`), and per QP through the exact solver and through Clarabel alone.
 
 use crate::cli::{BenchArgs, BenchTarget};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-use safety::{FilterSettings, QpSolver, Row, RowKind, SafetyFilter};
+use safety::{ExactSolver, FilterSettings, QpSolver, Row, RowKind, SafetyFilter, Solver};
 use std::process::ExitCode;
 use std::time::Instant;
 use uav::Vec2;
@@ -12,12 +12,13 @@ use uav::Vec2;
 /// Runs the subcommand.
 pub fn main(args: BenchArgs) -> ExitCode {
     match args.target {
-        BenchTarget::Filter => bench_filter(args.iterations),
+        BenchTarget::Filter => bench_filter(args.iterations, args.solver.parse().unwrap_or_default()),
         BenchTarget::Server => return crate::bench_server::main(&args),
         BenchTarget::Crazyflie => return crate::bench_crazyflie::main(&args),
         BenchTarget::Durability => return crate::bench_durability::main(&args),
         BenchTarget::Fleet => return crate::bench_fleet::main(&args),
         BenchTarget::Scale => return crate::bench_scale::main(&args),
+        BenchTarget::Solver => return crate::bench_solver::main(args.instances, args.seed),
     }
     ExitCode::SUCCESS
 }
@@ -68,30 +69,34 @@ fn stats(times: &mut [f64]) -> (f64, f64, f64) {
     (pct(0.5), pct(0.99), times.iter().sum::<f64>() / times.len() as f64)
 }
 
-fn bench_filter(iterations: usize) {
+fn bench_filter(iterations: usize, solver: Solver) {
     let iterations = iterations.max(1);
     say!(
         "airroads bench filter: {iterations} random instances per row count, nominal input violating every row"
     );
-    say!("  filter   = SafetyFilter::filter as flown (closed form when one constraint binds, else Clarabel)");
+    say!("  filter   = SafetyFilter::filter as flown with --solver {}", solver.name());
+    say!("  exact    = ExactSolver::solve on the same rows (active set in R², KKT-certified)");
     say!("  clarabel = QpSolver::solve on the same rows (cached solver, data updated in place)");
     say!(
-        "{:>6} {:>12} {:>12} {:>14} {:>14} {:>12} {:>7}",
+        "{:>6} {:>11} {:>11} {:>10} {:>10} {:>13} {:>13} {:>12} {:>7}",
         "rows",
         "filter_p50",
         "filter_p99",
+        "exact_p50",
+        "exact_p99",
         "clarabel_p50",
         "clarabel_p99",
         "closed_form",
         "failed"
     );
-    let settings = FilterSettings::default();
+    let settings = FilterSettings { solver, ..FilterSettings::default() };
     let mut filter = SafetyFilter::new(settings);
-    let mut solver = QpSolver::new();
+    let (mut clarabel, mut exact) = (QpSolver::new(), ExactSolver::new());
     let mut rng = StdRng::seed_from_u64(7);
     let (mut rows, mut constraints) = (Vec::new(), Vec::new());
     for count in [2, 6, 12] {
-        let (mut filtered, mut direct) = (Vec::with_capacity(iterations), Vec::with_capacity(iterations));
+        let mut times =
+            [Vec::with_capacity(iterations), Vec::with_capacity(iterations), Vec::with_capacity(iterations)];
         let (mut closed, mut failed) = (0, 0);
         let warmup = iterations / 10;
         for i in 0..iterations + warmup {
@@ -102,18 +107,25 @@ fn bench_filter(iterations: usize) {
             let out = filter.filter(u_ref, Vec2::zeros(), &rows, 5.0, 0.05);
             let filter_us = start.elapsed().as_secs_f64() * 1e6;
             let start = Instant::now();
-            let sol = solver.solve(u_ref, &constraints, 5.0);
+            let ours = exact.solve(u_ref, &constraints, 5.0);
+            let exact_us = start.elapsed().as_secs_f64() * 1e6;
+            let start = Instant::now();
+            let sol = clarabel.solve(u_ref, &constraints, 5.0);
             let clarabel_us = start.elapsed().as_secs_f64() * 1e6;
             if i >= warmup {
-                filtered.push(filter_us);
-                direct.push(clarabel_us);
-                failed += usize::from(out.failed || sol.status != clarabel::solver::SolverStatus::Solved);
+                for (sample, t) in times.iter_mut().zip([filter_us, exact_us, clarabel_us]) {
+                    sample.push(t);
+                }
+                failed += usize::from(
+                    out.failed || ours.is_err() || sol.status != clarabel::solver::SolverStatus::Solved,
+                );
                 closed += usize::from(out.closed_form);
             }
         }
-        let (f50, f99, _) = stats(&mut filtered);
-        let (c50, c99, _) = stats(&mut direct);
+        let [(f50, f99, _), (e50, e99, _), (c50, c99, _)] = times.map(|mut t| stats(&mut t));
         let share = format!("{:.0}%", 100.0 * closed as f64 / iterations as f64);
-        say!("{count:>6} {f50:>12.1} {f99:>12.1} {c50:>14.1} {c99:>14.1} {share:>12} {failed:>7}");
+        say!(
+            "{count:>6} {f50:>11.2} {f99:>11.2} {e50:>10.2} {e99:>10.2} {c50:>13.1} {c99:>13.1} {share:>12} {failed:>7}"
+        );
     }
 }

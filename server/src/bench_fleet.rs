@@ -30,7 +30,7 @@ pub fn main(args: &BenchArgs) -> ExitCode {
         "tick"
     );
     for &n in &args.uavs_or(&[1000, 10000]) {
-        let mut fleet = match sim_fleet(&crowd_scenario(n.max(2)), &args.policy) {
+        let mut fleet = match sim_fleet(&crowd_scenario(n.max(2)), &args.policy, &args.solver) {
             Ok(f) => f,
             Err((message, code)) => {
                 eprintln!("error: crowd of {n}: {message}");
@@ -76,16 +76,18 @@ pub fn main(args: &BenchArgs) -> ExitCode {
     ExitCode::SUCCESS
 }
 
-/// A fleet flying `scenario` on in-process simulated links with `policy` for every UAV, or the
-/// error message and exit code (2 for an unknown policy).
-pub fn sim_fleet(scenario: &Scenario, policy: &str) -> Result<Fleet, (String, ExitCode)> {
+/// A fleet flying `scenario` on in-process simulated links with `policy` for every UAV and QP
+/// `solver` (`exact` or `clarabel`), or the error message and exit code (2 for an unknown policy).
+pub fn sim_fleet(scenario: &Scenario, policy: &str, solver: &str) -> Result<Fleet, (String, ExitCode)> {
     let scenario = scenario.validate().map_err(|e| (e.to_string(), ExitCode::FAILURE))?;
     let policies = match PolicyRegistry::standard(scenario.params.delta) {
         Ok(p) if p.check(policy).is_ok() => p,
         Ok(_) => return Err((format!("--policy {policy}: unknown (expected pd or rl)"), ExitCode::from(2))),
         Err(e) => return Err((e.to_string(), ExitCode::FAILURE)),
     };
-    let config = FleetConfig { params: scenario.params, ..FleetConfig::default() };
+    let mut config = FleetConfig { params: scenario.params, ..FleetConfig::default() };
+    // The value parser of `--solver` only admits valid names.
+    config.filter.solver = solver.parse().unwrap_or_default();
     let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
     for u in &scenario.uavs {
         let state = UavState::at_rest(u.start);

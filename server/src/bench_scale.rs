@@ -63,8 +63,9 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
     let sizes = args.uavs_or(&[1000, 3000, 10000]);
     let ticks = args.ticks.max(1);
     say!(
-        "airroads bench scale: two-way trunk road (1.2 km per 1,000 UAVs), policy {}, {ticks} ticks each, {threads} thread(s)",
-        args.policy
+        "airroads bench scale: two-way trunk road (1.2 km per 1,000 UAVs), policy {}, solver {}, {ticks} ticks each, {threads} thread(s)",
+        args.policy,
+        args.solver
     );
     say!("per stage: mean ms per tick (µs per UAV); tick = every stage, metrics included");
     let mut header = format!("{:>7} {:>9} {:>9}", "uavs", "p50 ms", "p99 ms");
@@ -87,7 +88,7 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
             eprintln!("error: {e:#}");
             return ExitCode::FAILURE;
         }
-        let mut fleet = match sim_fleet(&scenario, &args.policy) {
+        let mut fleet = match sim_fleet(&scenario, &args.policy, &args.solver) {
             Ok(f) => f,
             Err((message, code)) => {
                 eprintln!("error: trunk road of {n} UAVs: {message}");

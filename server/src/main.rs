@@ -16,6 +16,7 @@ mod bench_durability;
 mod bench_fleet;
 mod bench_scale;
 mod bench_server;
+mod bench_solver;
 mod cli;
 mod plot;
 mod run_cmd;
