@@ -1,6 +1,6 @@
 //! The safety margins a run reports: eq. (2) and eq. (6) left sides with the corrected sign (E1).
 
-use roads::Road;
+use roads::{Road, Wall};
 use safety::barrier::braking_margin;
 use uav::{UavState, Vec2};
 
@@ -30,27 +30,31 @@ pub fn road_margin_at(road: &Road, hint: Option<usize>, s: &UavState, delta: f64
     // A wall at distance d has a margin of at least d − v²/(2δ), and the nearest wall's is at most
     // its distance: walls farther than that distance plus v²/(2δ) cannot hold the minimum.
     let walls = road.walls();
-    let nearest = boundary;
-    let radius = nearest + s.v.norm_squared() / (2.0 * delta) + 1e-9 * (1.0 + nearest);
+    let radius = boundary + s.v.norm_squared() / (2.0 * delta) + 1e-9 * (1.0 + boundary);
     let mut best = f64::INFINITY;
     let near = match hint {
         Some(segment) => road.walls_near_in(segment, &s.p, radius),
         None => road.walls_near(&s.p, radius),
     };
     for k in near {
-        let w = &walls[k];
-        let (c, t) = w.nearest(&s.p);
-        let (dist, rate) = if t > 0.0 && t < 1.0 {
-            let d = w.signed_distance(&s.p);
-            (d.abs(), d.signum() * w.n_in.dot(&s.v))
-        } else {
-            let e: Vec2 = s.p - c;
-            let n = e.norm();
-            (n, if n > 0.0 { e.dot(&s.v) / n } else { 0.0 })
-        };
-        best = best.min(braking_margin(dist, rate, delta));
+        best = best.min(wall_margin(&walls[k], s, delta));
     }
     best
+}
+
+/// The braking margin of one finite wall as rule R2 enforces it: its line distance in its slab (from
+/// either side), its end points as points.
+fn wall_margin(w: &Wall, s: &UavState, delta: f64) -> f64 {
+    let (c, t) = w.nearest(&s.p);
+    let (dist, rate) = if t > 0.0 && t < 1.0 {
+        let d = w.signed_distance(&s.p);
+        (d.abs(), d.signum() * w.n_in.dot(&s.v))
+    } else {
+        let e: Vec2 = s.p - c;
+        let n = e.norm();
+        (n, if n > 0.0 { e.dot(&s.v) / n } else { 0.0 })
+    };
+    braking_margin(dist, rate, delta)
 }
 
 #[cfg(test)]
@@ -63,21 +67,7 @@ mod tests {
         if !road.contains(&s.p) {
             return road.boundary_distance(&s.p);
         }
-        road.walls()
-            .iter()
-            .map(|w| {
-                let (c, t) = w.nearest(&s.p);
-                let (dist, rate) = if t > 0.0 && t < 1.0 {
-                    let d = w.signed_distance(&s.p);
-                    (d.abs(), d.signum() * w.n_in.dot(&s.v))
-                } else {
-                    let e: Vec2 = s.p - c;
-                    let n = e.norm();
-                    (n, if n > 0.0 { e.dot(&s.v) / n } else { 0.0 })
-                };
-                braking_margin(dist, rate, delta)
-            })
-            .fold(f64::INFINITY, f64::min)
+        road.walls().iter().map(|w| wall_margin(w, s, delta)).fold(f64::INFINITY, f64::min)
     }
 
     proptest! {

@@ -7,6 +7,7 @@
 
 use crate::bench_fleet::sim_fleet;
 use crate::cli::BenchArgs;
+use airroads::serve::stats::percentiles;
 use fleet::trunk::trunk_scenario;
 use fleet::{MetricsRecorder, StageTimes};
 use std::process::ExitCode;
@@ -38,11 +39,6 @@ fn write_scenario(dir: &std::path::Path, scenario: &fleet::Scenario) -> anyhow::
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))?;
     let json = serde_json::to_string(scenario).context("cannot encode the scenario")?;
     std::fs::write(&path, json).with_context(|| format!("cannot write {}", path.display()))
-}
-
-/// Nearest-rank quantile of sorted `v`.
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    sorted.get(((sorted.len().max(1) - 1) as f64 * q).round() as usize).copied().unwrap_or(0.0)
 }
 
 /// Runs the subcommand on `--threads` worker threads (default: all cores).
@@ -102,24 +98,25 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
             fleet.tick();
             recorder.record(&fleet, fleet.ticks() as f64 * dt);
         }
-        let (mut sums, mut tick_ms) = ([0.0; 8], Vec::with_capacity(ticks));
+        let (mut sums, mut tick_us) = ([0.0; 8], Vec::with_capacity(ticks));
         for _ in 0..ticks {
             let started = Instant::now();
             fleet.tick();
             let recorded = Instant::now();
             recorder.record(&fleet, fleet.ticks() as f64 * dt);
             let metrics_us = recorded.elapsed().as_secs_f64() * 1e6;
-            tick_ms.push(started.elapsed().as_secs_f64() * 1e3);
+            tick_us.push(started.elapsed().as_secs_f64() * 1e6);
             add(&mut sums, &fleet.stage_times(), metrics_us);
         }
-        tick_ms.sort_by(f64::total_cmp);
-        let mut line = format!("{n:>7} {:>9.1} {:>9.1}", quantile(&tick_ms, 0.5), quantile(&tick_ms, 0.99));
+        let mean_us = tick_us.iter().sum::<f64>() / ticks as f64;
+        let tick = percentiles(&mut tick_us);
+        let mut line = format!("{n:>7} {:>9.1} {:>9.1}", tick.p50_us / 1e3, tick.p99_us / 1e3);
         for total in sums {
             let us = total / ticks as f64;
             line.push_str(&format!(" {:>8.2} ({:>6.2})", us / 1e3, us / n as f64));
         }
         say!("{line}");
-        per_uav.push((n, tick_ms.iter().sum::<f64>() / ticks as f64 * 1e3 / n as f64));
+        per_uav.push((n, mean_us / n as f64));
     }
     if let (Some((small, a)), Some((large, b))) = (per_uav.first(), per_uav.last())
         && per_uav.len() > 1
