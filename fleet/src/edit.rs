@@ -56,7 +56,7 @@ impl Fleet {
     }
 
     /// The neighbour lists of the last tick (`[k]`: indices of UAVs near UAV k).
-    pub fn neighbour_lists(&self) -> &[Vec<usize>] {
+    pub fn neighbour_lists(&self) -> &crate::Ragged<usize> {
         &self.neighbours.lists
     }
 

@@ -203,6 +203,7 @@ pub struct Fleet {
     pub(crate) neighbours: NeighbourSearch,
     traffic: TrafficRules,
     positions: Vec<Vec2>,
+    velocities: Vec<Vec2>,
     segments: Vec<usize>,
     row_builder: RowBuilder,
     observations: Vec<Observation>,
@@ -225,6 +226,7 @@ impl Fleet {
             neighbours: NeighbourSearch::default(),
             traffic: TrafficRules::default(),
             positions: Vec::new(),
+            velocities: Vec::new(),
             segments: Vec::new(),
             row_builder: RowBuilder::default(),
             observations: Vec::new(),
@@ -434,21 +436,34 @@ impl Fleet {
             }
         }
         if self.config.nav == NavMode::Traffic {
-            // The traffic rules' speed limit (narrower road, slower flight) and the distance kept to
-            // every neighbour (`fleet::speed`).
-            let d_c = self.config.params.d_c;
-            for k in 0..self.uavs.len() {
-                let me = &self.uavs[k];
-                let Some(pos) = me.nav.position.filter(|_| !me.nav.arrived && me.flying()) else { continue };
-                let (p, v) = (me.state.p, me.state.v);
-                let limit = self.traffic.speed_limit(pos.s, pos.direction());
-                let mut u = govern(v, me.last.u_ref, limit, delta, dt);
-                for &d in &self.neighbours.lists[k] {
-                    let other = &self.uavs[d].state;
-                    u = keep_distance(v, u, other.p - p, other.v, d_c, delta, dt);
-                }
-                self.uavs[k].last.u_ref = u;
+            self.limit_speeds();
+        }
+    }
+
+    /// The traffic rules' speed limit (narrower road, slower flight) and the distance kept to every
+    /// neighbour (`fleet::speed`), applied to each flying UAV's nominal input. Per UAV, reading its
+    /// neighbours' states from plain copies (a link is not shared across threads): in parallel for
+    /// large fleets, with the same result on any number of threads.
+    fn limit_speeds(&mut self) {
+        let (d_c, delta, dt) = (self.config.params.d_c, self.config.params.delta, self.config.params.dt);
+        self.velocities.clear();
+        self.velocities.extend(self.uavs.iter().map(|u| u.state.v));
+        let (positions, velocities) = (&self.positions, &self.velocities);
+        let (traffic, lists) = (&self.traffic, &self.neighbours.lists);
+        let limit = |(k, me): (usize, &mut Uav)| {
+            let Some(pos) = me.nav.position.filter(|_| !me.nav.arrived && me.flying()) else { return };
+            let (p, v) = (me.state.p, me.state.v);
+            let limit = traffic.speed_limit(pos.s, pos.direction());
+            let mut u = govern(v, me.last.u_ref, limit, delta, dt);
+            for &d in &lists[k] {
+                u = keep_distance(v, u, positions[d] - p, velocities[d], d_c, delta, dt);
             }
+            me.last.u_ref = u;
+        };
+        if parallel(self.uavs.len()) {
+            self.uavs.par_iter_mut().enumerate().for_each(limit);
+        } else {
+            self.uavs.iter_mut().enumerate().for_each(limit);
         }
     }
 

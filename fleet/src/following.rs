@@ -10,6 +10,7 @@
 //! every column follows nobody, and following alone cannot deadlock.
 
 use crate::fleet::Uav;
+use crate::ragged::Ragged;
 use crate::speed::KEEP_MARGIN_M;
 use crate::traffic::FOLLOW_GAP_IN_DC;
 use roads::{Navigator, RoutePosition};
@@ -37,7 +38,7 @@ pub const NARROWING: f64 = 0.8;
 /// lane (among `neighbours[k]`), when the rule applies to it: a follow gap of
 /// [`FOLLOW_GAP_IN_DC`]·D_c behind the nearest one, moved on by [`LEAD_TIME_S`] of the leader's
 /// speed, but never closer to the leader than D_c plus the margin the UAVs keep.
-pub fn follow(nav: &Navigator, uavs: &mut [Uav], neighbours: &[Vec<usize>], traffic: &mut TrafficAlong) {
+pub fn follow(nav: &Navigator, uavs: &mut [Uav], neighbours: &Ragged<usize>, traffic: &mut TrafficAlong) {
     let gap = FOLLOW_GAP_IN_DC * nav.d_c;
     let keep = nav.d_c + KEEP_MARGIN_M;
     traffic.update(uavs);
@@ -165,7 +166,7 @@ mod tests {
             u.traffic.route = u.nav.position;
         }
         let n = uavs.len();
-        let neighbours: Vec<Vec<usize>> = (0..n).map(|k| (0..n).filter(|&d| d != k).collect()).collect();
+        let neighbours: Ragged<usize> = (0..n).map(|k| (0..n).filter(|&d| d != k).collect()).collect();
         follow(&nav, &mut fleet.uavs, &neighbours, &mut TrafficAlong::default());
         fleet.uavs.iter().map(|u| u.traffic.restriction.follow_at).collect()
     }

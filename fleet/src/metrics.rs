@@ -74,6 +74,15 @@ pub struct Stall {
     pub at: [f64; 2],
 }
 
+/// A [`Stall`] as recorded, its UAV by index.
+#[derive(Debug, Clone, Copy)]
+struct StallRecord {
+    uav: usize,
+    start_s: f64,
+    duration_s: f64,
+    at: [f64; 2],
+}
+
 /// Accumulates metrics tick by tick.
 #[derive(Debug, Default)]
 pub struct MetricsRecorder {
@@ -93,9 +102,10 @@ pub struct MetricsRecorder {
     arrival: Vec<Option<f64>>,
     stall_s: f64,
     max_stall_s: f64,
-    /// Stalls going on, by UAV index (a headless run never removes UAVs), and those that ended.
-    ongoing: Vec<Option<Stall>>,
-    stalls: Vec<Stall>,
+    /// Stalls going on, by UAV index (a headless run never removes UAVs), and those that ended, each
+    /// with its UAV's index (the id is looked up when they are read: no string copied per stall).
+    ongoing: Vec<Option<StallRecord>>,
+    stalls: Vec<StallRecord>,
     /// Scratch: each UAV's state and tracked segment, and its margins, this tick.
     states: Vec<(UavState, Option<usize>)>,
     margins: Vec<UavMargins>,
@@ -172,8 +182,9 @@ impl MetricsRecorder {
             match (&mut self.ongoing[k], last.stall_s > 0.0) {
                 (Some(stall), true) => stall.duration_s = last.stall_s,
                 (slot @ None, true) => {
-                    let (id, at) = (u.id.clone(), [u.state.p.x, u.state.p.y]);
-                    *slot = Some(Stall { id, start_s: t - last.stall_s, duration_s: last.stall_s, at });
+                    let at = [u.state.p.x, u.state.p.y];
+                    *slot =
+                        Some(StallRecord { uav: k, start_s: t - last.stall_s, duration_s: last.stall_s, at });
                 }
                 (slot @ Some(_), false) => self.stalls.extend(slot.take()),
                 (None, false) => {}
@@ -195,9 +206,13 @@ impl MetricsRecorder {
         }
     }
 
-    /// Every stall so far (those going on included), longest first.
-    pub fn stalls(&self) -> Vec<Stall> {
-        let mut all: Vec<Stall> = self.stalls.iter().chain(self.ongoing.iter().flatten()).cloned().collect();
+    /// Every stall so far (those going on included) of the UAVs of `fleet`, longest first.
+    pub fn stalls(&self, fleet: &Fleet) -> Vec<Stall> {
+        let id = |k: usize| fleet.uavs().get(k).map(|u| u.id.clone()).unwrap_or_default();
+        let recorded = self.stalls.iter().chain(self.ongoing.iter().flatten());
+        let mut all: Vec<Stall> = recorded
+            .map(|r| Stall { id: id(r.uav), start_s: r.start_s, duration_s: r.duration_s, at: r.at })
+            .collect();
         all.sort_by(|a, b| b.duration_s.total_cmp(&a.duration_s));
         all
     }

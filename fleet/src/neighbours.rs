@@ -4,9 +4,10 @@
 //! pair closer than the radius is in such a window (its y differs by less than one band), the work is
 //! O(N log N) for the sort plus O(N + candidates) at bounded density, whichever way the road runs (a
 //! sweep along x alone degenerated on roads running north–south), and each UAV's list comes out
-//! ordered by x, then index (a merge of three sorted windows), with no sort per list. Buffers are
-//! reused every tick.
+//! ordered by x, then index (a merge of three sorted windows), with no sort per list. The lists share
+//! one buffer ([`Ragged`]) reused every tick.
 
+use crate::ragged::Ragged;
 use uav::Vec2;
 
 /// Band numbers are clamped to ±this, so that a neighbour band's number never overflows; points
@@ -19,7 +20,7 @@ pub struct NeighbourSearch {
     /// (band, x, UAV index) of every finite point, sorted.
     by_band: Vec<(i64, f64, u32)>,
     /// `lists[k]`: indices of the UAVs within the radius of UAV k, by x, then index.
-    pub lists: Vec<Vec<usize>>,
+    pub lists: Ragged<usize>,
 }
 
 /// The order of the sorted entries: band, then x, then index.
@@ -32,9 +33,7 @@ impl NeighbourSearch {
     /// a radius that is not a positive finite number puts every point in one band.
     pub fn update(&mut self, positions: &[Vec2], radius: f64) {
         let n = positions.len();
-        self.lists.resize_with(n, Vec::new);
-        self.lists.truncate(n);
-        self.lists.iter_mut().for_each(Vec::clear);
+        self.lists.reset(n);
         let finite_radius = radius.is_finite() && radius > 0.0;
         let band =
             |y: f64| if finite_radius { ((y / radius).floor() as i64).clamp(-MAX_BAND, MAX_BAND) } else { 0 };
@@ -73,21 +72,22 @@ impl NeighbourSearch {
                     ends[w] = heads[w] + entries[heads[w]..runs[w].1].partition_point(|e| e.1 <= x + radius);
                 }
                 // Merge the three windows by (x, index).
-                let list = &mut self.lists[a];
-                loop {
-                    let next = (0..3).filter(|&w| heads[w] < ends[w]).min_by(|&v, &w| {
-                        entries[heads[v]]
-                            .1
-                            .total_cmp(&entries[heads[w]].1)
-                            .then(entries[heads[v]].2.cmp(&entries[heads[w]].2))
-                    });
-                    let Some(w) = next else { break };
-                    let d = entries[heads[w]].2 as usize;
-                    heads[w] += 1;
-                    if d != a && (positions[d] - p).norm_squared() <= r2 {
-                        list.push(d);
+                self.lists.fill(a, |list| {
+                    loop {
+                        let next = (0..3).filter(|&w| heads[w] < ends[w]).min_by(|&v, &w| {
+                            entries[heads[v]]
+                                .1
+                                .total_cmp(&entries[heads[w]].1)
+                                .then(entries[heads[v]].2.cmp(&entries[heads[w]].2))
+                        });
+                        let Some(w) = next else { break };
+                        let d = entries[heads[w]].2 as usize;
+                        heads[w] += 1;
+                        if d != a && (positions[d] - p).norm_squared() <= r2 {
+                            list.push(d);
+                        }
                     }
-                }
+                });
             }
             start = end;
         }
@@ -118,13 +118,18 @@ mod tests {
             .collect()
     }
 
+    /// The lists of a search, one vector each.
+    fn lists(s: &NeighbourSearch) -> Vec<Vec<usize>> {
+        (0..s.lists.len()).map(|k| s.lists[k].to_vec()).collect()
+    }
+
     #[test]
     fn grid_finds_exactly_the_pairs_within_the_radius() {
         let pts: Vec<Vec2> =
             (0..60).map(|i| Vec2::new(((i * 37) % 23) as f64 * 0.7, ((i * 11) % 13) as f64 * 0.9)).collect();
         let mut s = NeighbourSearch::default();
         s.update(&pts, 2.0);
-        assert_eq!(s.lists, brute(&pts, 2.0));
+        assert_eq!(lists(&s), brute(&pts, 2.0));
     }
 
     proptest! {
@@ -149,11 +154,11 @@ mod tests {
                 .collect();
             let mut s = NeighbourSearch::default();
             s.update(&pts, radius);
-            prop_assert_eq!(&s.lists, &brute(&pts, radius));
+            prop_assert_eq!(lists(&s), brute(&pts, radius));
             // Reused buffers: a second, smaller update gives the same as a fresh search.
             let fewer = &pts[..pts.len() / 2];
             s.update(fewer, radius);
-            prop_assert_eq!(&s.lists, &brute(fewer, radius));
+            prop_assert_eq!(lists(&s), brute(fewer, radius));
         }
     }
 
@@ -162,6 +167,6 @@ mod tests {
         let pts = [Vec2::new(0.0, 0.0), Vec2::new(1e9, -1e9), Vec2::new(f64::NAN, 0.0)];
         let mut s = NeighbourSearch::default();
         s.update(&pts, f64::INFINITY);
-        assert_eq!(s.lists, vec![vec![1], vec![0], vec![]]);
+        assert_eq!(lists(&s), vec![vec![1], vec![0], vec![]]);
     }
 }

@@ -4,9 +4,14 @@
 //! Each UAV's rows depend only on the states read this tick, so any number of threads gives the same
 //! rows. What depends on the order of filtering (the whole pair row against a neighbour filtered
 //! earlier in the tick, given its u_d) is applied afterwards, UAV by UAV ([`RowBuilder::rows_of`]).
+//!
+//! The rows of each block of [`UAVS_PER_BLOCK`] consecutive UAVs share one buffer ([`Ragged`]), one
+//! block per parallel task: a block's total varies far less from tick to tick than one UAV's row
+//! count, so the buffers stop growing after the first ticks (no allocation in steady state).
 
 use crate::fleet::{CollisionShare, Uav, parallel};
 use crate::lost::{ReachDisk, obstacle_row};
+use crate::ragged::Ragged;
 use rayon::prelude::*;
 use roads::Road;
 use safety::barrier::collision_row;
@@ -28,11 +33,15 @@ pub(crate) struct RowView {
     pub segment: usize,
 }
 
-/// Per-UAV row buffers, reused from tick to tick.
+/// UAVs whose rows share one buffer and one parallel task.
+const UAVS_PER_BLOCK: usize = 64;
+
+/// Row buffers, reused from tick to tick.
 #[derive(Debug, Default)]
 pub(crate) struct RowBuilder {
     views: Vec<RowView>,
-    rows: Vec<Vec<Row>>,
+    /// `blocks[b][i]`: the rows of UAV `b·UAVS_PER_BLOCK + i`.
+    blocks: Vec<Ragged<Row>>,
 }
 
 impl RowBuilder {
@@ -44,7 +53,7 @@ impl RowBuilder {
         rule: RoadRule,
         params: &Params,
         uavs: &[Uav],
-        lists: &[Vec<usize>],
+        lists: &Ragged<usize>,
         disk_of: impl Fn(usize) -> ReachDisk,
     ) {
         self.views.clear();
@@ -55,20 +64,25 @@ impl RowBuilder {
             obstacle: (!u.cooperates() && u.in_the_air()).then(|| disk_of(d)),
             segment: u.nav.tracker.current.unwrap_or(0),
         }));
-        self.rows.resize_with(uavs.len(), Vec::new);
-        self.rows.truncate(uavs.len());
+        let n = uavs.len();
+        self.blocks.resize_with(n.div_ceil(UAVS_PER_BLOCK), Ragged::default);
+        self.blocks.truncate(n.div_ceil(UAVS_PER_BLOCK));
         let views = &self.views;
-        let build = |(k, rows): (usize, &mut Vec<Row>)| {
-            rows.clear();
-            let me = views[k];
-            if me.flying {
-                rows_of_one(road, rule, params, me, lists.get(k).map_or(&[][..], Vec::as_slice), views, rows);
+        let build = |(b, block): (usize, &mut Ragged<Row>)| {
+            let first = b * UAVS_PER_BLOCK;
+            let uavs = first..(first + UAVS_PER_BLOCK).min(n);
+            block.reset(uavs.len());
+            for (i, k) in uavs.enumerate() {
+                let me = views[k];
+                if me.flying {
+                    block.fill(i, |rows| rows_of_one(road, rule, params, me, &lists[k], views, rows));
+                }
             }
         };
-        if parallel(self.rows.len()) {
-            self.rows.par_iter_mut().enumerate().for_each(build);
+        if parallel(n) {
+            self.blocks.par_iter_mut().enumerate().for_each(build);
         } else {
-            self.rows.iter_mut().enumerate().for_each(build);
+            self.blocks.iter_mut().enumerate().for_each(build);
         }
     }
 
@@ -81,7 +95,10 @@ impl RowBuilder {
         delta: f64,
         u_of: impl Fn(usize) -> Vec2,
     ) -> &[Row] {
-        let rows = &mut self.rows[k];
+        let rows = match self.blocks.get_mut(k / UAVS_PER_BLOCK) {
+            Some(block) => block.get_mut(k % UAVS_PER_BLOCK),
+            None => &mut [],
+        };
         let delta_sum = 2.0 * delta;
         if share == CollisionShare::Sequential {
             for row in rows.iter_mut() {

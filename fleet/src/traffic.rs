@@ -9,6 +9,7 @@
 
 use crate::fleet::Uav;
 use crate::progress::Progress;
+use crate::ragged::Ragged;
 use crate::sections::{HOLD_M, Section, next_section, sections};
 use crate::speed::SpeedProfile;
 use crate::yielding::{Flying, make_way};
@@ -134,7 +135,7 @@ impl TrafficRules {
 
     /// Applies the rules at time `now` and sets each UAV's `traffic.restriction`, from its
     /// `traffic.route` and progress (updated by the fleet). `neighbours[k]` lists the UAVs near UAV k.
-    pub fn plan(&mut self, nav: &Navigator, now: f64, uavs: &mut [Uav], neighbours: &[Vec<usize>]) {
+    pub fn plan(&mut self, nav: &Navigator, now: f64, uavs: &mut [Uav], neighbours: &Ragged<usize>) {
         if self.road_id != nav.road.id() {
             self.road_id = nav.road.id();
             self.sections = sections(nav.road, nav);
@@ -251,7 +252,7 @@ impl TrafficRules {
         }
     }
 
-    fn resolve_deadlocks(&self, nav: &Navigator, now: f64, uavs: &mut [Uav], neighbours: &[Vec<usize>]) {
+    fn resolve_deadlocks(&self, nav: &Navigator, now: f64, uavs: &mut [Uav], neighbours: &Ragged<usize>) {
         let blocking = BLOCKING_IN_DC * nav.d_c;
         for k in 0..uavs.len() {
             if let Some((target, until)) = uavs[k].traffic.back_off {
@@ -350,7 +351,7 @@ mod tests {
         }
         let nav = Navigator::new(&fleet.road, NavMode::Traffic, &params);
         let mut rules = TrafficRules::default();
-        let neighbours: Vec<Vec<usize>> =
+        let neighbours: Ragged<usize> =
             (0..uavs.len()).map(|k| (0..uavs.len()).filter(|&d| d != k).collect()).collect();
         let mut t = 0.0;
         while t <= seconds {

@@ -6,7 +6,7 @@ use fleet::trunk::trunk_scenario;
 use fleet::{FleetConfig, PARALLEL_FROM_UAVS, RunOptions, RunOutcome, Scenario, run_scenario};
 use policies::PolicyRegistry;
 
-fn run_on(threads: usize, scenario: &Scenario) -> RunOutcome {
+fn run_on(threads: usize, scenario: &Scenario, policy: &str) -> RunOutcome {
     let scenario = scenario.validate().expect("generated scenarios are valid");
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
     let policies = PolicyRegistry::standard(scenario.params.delta).expect("the shipped models load");
@@ -14,7 +14,7 @@ fn run_on(threads: usize, scenario: &Scenario) -> RunOutcome {
         .install(|| {
             let options = RunOptions {
                 config: FleetConfig::default(),
-                policy: "pd".into(),
+                policy: policy.into(),
                 trajectory: None,
                 paths: true,
             };
@@ -30,11 +30,13 @@ fn run_on(threads: usize, scenario: &Scenario) -> RunOutcome {
 fn runs_are_identical_on_one_two_and_four_threads() {
     let mut scenario = trunk_scenario(PARALLEL_FROM_UAVS + 144, 5).expect("a trunk road");
     scenario.params.t_max = 8.0;
-    let one = run_on(1, &scenario);
-    assert_eq!(one.paths.len(), PARALLEL_FROM_UAVS + 144);
-    assert!(one.metrics.min_collision_margin_m.is_some(), "UAVs met: neighbour rows were built");
-    for threads in [2, 4] {
-        let many = run_on(threads, &scenario);
-        assert!(many == one, "{threads} threads differ from one");
+    for policy in ["pd", "rl"] {
+        let one = run_on(1, &scenario, policy);
+        assert_eq!(one.paths.len(), PARALLEL_FROM_UAVS + 144);
+        assert!(one.metrics.min_collision_margin_m.is_some(), "UAVs met: neighbour rows were built");
+        for threads in [2, 4] {
+            let many = run_on(threads, &scenario, policy);
+            assert!(many == one, "{policy}: {threads} threads differ from one");
+        }
     }
 }

@@ -4,6 +4,7 @@
 use crate::{Observation, Policy, PolicyError};
 use std::path::Path;
 use std::sync::Arc;
+use tract_linalg::multithread::{Executor, multithread_tract_scope};
 use tract_onnx::prelude::*;
 use tract_onnx::tract_hir::infer::Factoid;
 use uav::Vec2;
@@ -36,6 +37,10 @@ pub enum LoadError {
         reason: String,
     },
 }
+
+/// Batches at least this large run their matrix products on all of the caller's worker threads
+/// (smaller ones cost less on one thread than the hand-over).
+pub const PARALLEL_BATCH: usize = 256;
 
 /// A tracking policy from an ONNX file, evaluated by tract on whole batches.
 pub struct OnnxPolicy {
@@ -100,11 +105,21 @@ impl OnnxPolicy {
     }
 
     /// Runs the network on a batch and hands its `2 × batch` outputs to `read` (no copy).
+    ///
+    /// Batches of [`PARALLEL_BATCH`] observations or more split their matrix products over the
+    /// caller's rayon pool (tract's `RayonGlobal` executor: the pool a `ThreadPool::install` set up,
+    /// or the global one). tract splits only between output panels, each computed by the same
+    /// kernel, so the outputs are the same bits on any number of threads.
     fn run(&mut self, observations: &[Observation], read: impl FnOnce(&[f32])) -> TractResult<()> {
         self.input.clear();
         self.input.extend(observations.iter().flat_map(|o| o.iter().map(|&x| x as f32)));
         let input = Tensor::from_shape(&[observations.len(), 6], &self.input)?;
-        let outputs = self.state.run(tvec![input.into()])?;
+        let state = &mut self.state;
+        let outputs = if observations.len() >= PARALLEL_BATCH {
+            multithread_tract_scope(Executor::RayonGlobal, || state.run(tvec![input.into()]))?
+        } else {
+            state.run(tvec![input.into()])?
+        };
         read(outputs[0].try_as_plain_ram()?.as_slice::<f32>()?);
         Ok(())
     }
@@ -116,10 +131,10 @@ impl Policy for OnnxPolicy {
         if observations.is_empty() {
             return Ok(());
         }
-        let raw = self
-            .infer(observations)
-            .map_err(|e| PolicyError { policy: self.name.clone(), reason: format!("{e:#}") })?;
-        actions.extend(raw.chunks_exact(2).map(|u| Vec2::new(f64::from(u[0]), f64::from(u[1]))));
-        Ok(())
+        let to_actions = |raw: &[f32]| {
+            actions.extend(raw.chunks_exact(2).map(|u| Vec2::new(f64::from(u[0]), f64::from(u[1]))));
+        };
+        self.run(observations, to_actions)
+            .map_err(|e| PolicyError { policy: self.name.clone(), reason: format!("{e:#}") })
     }
 }

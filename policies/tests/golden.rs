@@ -53,3 +53,27 @@ fn shipped_models_reproduce_their_golden_pairs() {
     assert!(checked >= 1, "no model with golden pairs in policies/models");
     assert_eq!(SHIPPED_MODEL_ONNX, std::fs::read(models_dir().join("tracker.onnx")).unwrap().as_slice());
 }
+
+/// A batch large enough for tract to split its matrix products over the worker threads gives the
+/// same bits on one, two and four threads, and the same as each observation evaluated alone.
+#[test]
+fn large_batches_are_identical_on_any_number_of_threads() {
+    let mut policy = OnnxPolicy::load("tracker", &models_dir().join("tracker.onnx")).unwrap();
+    // Deterministic spread of observations: offsets up to ±6 m, velocities up to ±2 m/s.
+    let obs: Vec<[f64; 6]> = (0..4096)
+        .map(|k| std::array::from_fn(|i| ((k * 7 + i * 13) % 97) as f64 / 97.0 * 4.0 - 2.0))
+        .collect();
+    let on = |threads: usize, policy: &mut OnnxPolicy| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| policy.infer(&obs).unwrap())
+    };
+    let one = on(1, &mut policy);
+    assert_eq!(one.len(), 2 * obs.len());
+    for threads in [2, 4] {
+        assert!(on(threads, &mut policy) == one, "{threads} threads give other outputs than one");
+    }
+    for k in [0, 1, 2047, 4095] {
+        let single = policy.infer(&obs[k..=k]).unwrap();
+        assert_eq!(single[..], one[2 * k..2 * k + 2], "observation {k} alone differs from its batch");
+    }
+}
