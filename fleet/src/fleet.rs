@@ -1,6 +1,7 @@
 //! One tick of the fleet loop (ARCHITECTURE.md, "One tick"): states → targets → neighbours →
 //! policies (batched) → CBF-QP filter → commands.
 
+use crate::filtering::FilterStage;
 use crate::neighbours::NeighbourSearch;
 use crate::rows::RowBuilder;
 use crate::speed::{govern, keep_distance};
@@ -10,7 +11,7 @@ use links::{Link, LinkPhase};
 use policies::{Observation, PolicyRegistry, observation};
 use rayon::prelude::*;
 use roads::{NavMode, NavState, Navigator, Road};
-use safety::{FilterSettings, RoadRule, SafetyFilter, activation_radius};
+use safety::{FilterSettings, RoadRule, activation_radius};
 use std::time::Instant;
 use uav::{Params, UavState, Vec2, braking_input};
 
@@ -199,13 +200,13 @@ pub struct Fleet {
     pub(crate) policies: PolicyRegistry,
     /// Hold: every UAV brakes to a hover instead of flying its policy (the filter still runs).
     pub(crate) hold: bool,
-    filter: SafetyFilter,
+    filter_stage: FilterStage,
     pub(crate) neighbours: NeighbourSearch,
     traffic: TrafficRules,
     positions: Vec<Vec2>,
     velocities: Vec<Vec2>,
     segments: Vec<usize>,
-    row_builder: RowBuilder,
+    pub(crate) row_builder: RowBuilder,
     observations: Vec<Observation>,
     batch: Vec<usize>,
     actions: Vec<Vec2>,
@@ -217,7 +218,7 @@ impl Fleet {
     /// An empty fleet on `road`.
     pub fn new(config: FleetConfig, road: Road, policies: PolicyRegistry) -> Self {
         Self {
-            filter: SafetyFilter::new(config.filter),
+            filter_stage: FilterStage::default(),
             config,
             road,
             uavs: Vec::new(),
@@ -320,9 +321,9 @@ impl Fleet {
         builder.build(&self.road, rule, &params, &self.uavs, lists, |d| self.disk_of(d));
         self.row_builder = builder;
         self.stages.rows_us = lap();
-        for k in 0..self.uavs.len() {
-            self.filter_one(k);
-        }
+        let mut stage = std::mem::take(&mut self.filter_stage);
+        stage.run(self, self.config.filter);
+        self.filter_stage = stage;
         self.stages.filter_us = lap();
         for uav in &mut self.uavs {
             uav.link.send(uav.last.u);
@@ -465,31 +466,5 @@ impl Fleet {
         } else {
             self.uavs.iter_mut().enumerate().for_each(limit);
         }
-    }
-
-    /// Filters UAV k's nominal input against its rows (built for the tick by [`RowBuilder`]).
-    fn filter_one(&mut self, k: usize) {
-        let p = &self.config.params;
-        if !self.uavs[k].flying() {
-            // Not following commands (taking off, landing, lost): brake, which is also what its
-            // link holds it to; its neighbours treat it as an obstacle.
-            let last = &mut self.uavs[k].last;
-            (last.u, last.rows, last.active_rows, last.max_slack) = (last.u_ref, 0, 0, 0.0);
-            (last.solved, last.failed, last.solve_us, last.min_barrier) = (false, false, 0.0, f64::INFINITY);
-            return;
-        }
-        let uavs = &self.uavs;
-        let rows = self.row_builder.rows_of(k, self.config.share, p.delta, |d| uavs[d].last.u);
-        let started = Instant::now();
-        let out = self.filter.filter(self.uavs[k].last.u_ref, self.uavs[k].state.v, rows, p.delta, p.dt);
-        let last = &mut self.uavs[k].last;
-        last.solve_us = if out.solved { started.elapsed().as_secs_f64() * 1e6 } else { 0.0 };
-        last.u = out.u;
-        last.rows = rows.len();
-        last.active_rows = out.active_rows;
-        last.max_slack = out.max_slack;
-        last.solved = out.solved;
-        last.failed = out.failed;
-        last.min_barrier = rows.iter().map(|r| r.b).fold(f64::INFINITY, f64::min);
     }
 }

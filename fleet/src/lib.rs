@@ -6,6 +6,7 @@
 
 mod edit;
 pub mod families;
+mod filtering;
 mod fleet;
 pub mod following;
 mod histogram;

@@ -48,14 +48,6 @@ impl<T> Ragged<T> {
     pub fn get(&self, k: usize) -> Option<&[T]> {
         self.spans.get(k).and_then(|&(start, end)| self.items.get(start..end))
     }
-
-    /// List `k`, mutable (empty when there is no list `k`).
-    pub(crate) fn get_mut(&mut self, k: usize) -> &mut [T] {
-        match self.spans.get(k) {
-            Some(&(start, end)) => self.items.get_mut(start..end).unwrap_or_default(),
-            None => &mut [],
-        }
-    }
 }
 
 impl<T> Index<usize> for Ragged<T> {

@@ -3,13 +3,14 @@
 //! per neighbour that does not cooperate but may be in the air (its reach disk, [`crate::lost`]).
 //! Each UAV's rows depend only on the states read this tick, so any number of threads gives the same
 //! rows. What depends on the order of filtering (the whole pair row against a neighbour filtered
-//! earlier in the tick, given its u_d) is applied afterwards, UAV by UAV ([`RowBuilder::rows_of`]).
+//! earlier in the tick, given its u_d) is applied to a copy just before each UAV's QP
+//! ([`RowBuilder::rows_of`], in the order of [`crate::filtering`]).
 //!
 //! The rows of each block of [`UAVS_PER_BLOCK`] consecutive UAVs share one buffer ([`Ragged`]), one
 //! block per parallel task: a block's total varies far less from tick to tick than one UAV's row
 //! count, so the buffers stop growing after the first ticks (no allocation in steady state).
 
-use crate::fleet::{CollisionShare, Uav, parallel};
+use crate::fleet::{Uav, parallel};
 use crate::lost::{ReachDisk, obstacle_row};
 use crate::ragged::Ragged;
 use rayon::prelude::*;
@@ -86,32 +87,38 @@ impl RowBuilder {
         }
     }
 
-    /// UAV k's rows, with the whole pair row against each cooperating neighbour d < k already
-    /// filtered this tick (its input `u_of(d)`) when the share is sequential.
+    /// What the rows of other UAVs know of UAV k this tick.
+    pub fn view(&self, k: usize) -> RowView {
+        self.views[k]
+    }
+
+    /// UAV k's rows as built, each pair row with its share only (empty when it does not fly).
+    pub fn built(&self, k: usize) -> &[Row] {
+        self.blocks.get(k / UAVS_PER_BLOCK).map_or(&[], |block| &block[k % UAVS_PER_BLOCK])
+    }
+
+    /// UAV k's rows into `out`, with the whole pair row against each cooperating neighbour d filtered
+    /// before it this tick (`before(d)`, its input `u_of(d)`).
     pub fn rows_of(
-        &mut self,
+        &self,
         k: usize,
-        share: CollisionShare,
         delta: f64,
+        before: impl Fn(usize) -> bool,
         u_of: impl Fn(usize) -> Vec2,
-    ) -> &[Row] {
-        let rows = match self.blocks.get_mut(k / UAVS_PER_BLOCK) {
-            Some(block) => block.get_mut(k % UAVS_PER_BLOCK),
-            None => &mut [],
-        };
+        out: &mut Vec<Row>,
+    ) {
+        out.clear();
+        out.extend_from_slice(self.built(k));
         let delta_sum = 2.0 * delta;
-        if share == CollisionShare::Sequential {
-            for row in rows.iter_mut() {
-                if let RowKind::Collision(d) = row.kind
-                    && d < k
-                    && self.views[d].cooperates
-                {
-                    // d was filtered earlier this tick: enforce the whole relative row given its u_d.
-                    row.c = row.c * delta_sum / delta + row.a.dot(&u_of(d));
-                }
+        for row in out.iter_mut() {
+            if let RowKind::Collision(d) = row.kind
+                && self.views[d].cooperates
+                && before(d)
+            {
+                // d was filtered earlier this tick: enforce the whole relative row given its u_d.
+                row.c = row.c * delta_sum / delta + row.a.dot(&u_of(d));
             }
         }
-        rows
     }
 }
 
