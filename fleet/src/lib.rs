@@ -32,10 +32,11 @@ pub mod zones;
 pub use edit::EditError;
 pub use fleet::{CollisionShare, Fleet, FleetConfig, PARALLEL_FROM_UAVS, StageTimes, Uav, UavTick};
 pub use histogram::DurationHistogram;
-pub use lost::{ReachDisk, WATCHDOG_HOLD_S, obstacle_row, point_disk, reach_disk};
 pub use margins::{collision_margin, road_margin};
 pub use metrics::{MetricsRecorder, QpMetrics, RunMetrics, Stall};
 pub use ragged::Ragged;
 pub use run::{RunOptions, RunOutcome, TAKEOFF_TIMEOUT_S, TRAJECTORY_HEADER, run_scenario, run_scenario_on};
+/// The reach disk of a neighbour that does not run the filter (moved to `safety`; kept here for users of `fleet`).
+pub use safety::{ReachDisk, WATCHDOG_HOLD_S, obstacle_row, point_disk, reach_disk};
 pub use scenario::{Scenario, ScenarioError, ScenarioUav, UavSpec, ValidScenario};
 pub use undo::Undo;

@@ -1,72 +1,8 @@
-//! Neighbours that do not fly the filter: UAVs taking off or landing, and UAVs whose link is stale
-//! or lost.
-//!
-//! A UAV d taking off or landing holds its place: a static obstacle, the collision barrier with
-//! δ_d = 0 (docs/safety.md §5 R2 with D_s → D_c), which its neighbour k enforces alone.
-//!
-//! A UAV whose link gave no state for t seconds may have moved. The Crazyflie holds its last
-//! setpoint until its watchdog levels it out after T_hold = 0.5 s and cuts the motors after 2 s; any
-//! command it still received was bounded by δ. So it is inside the disk centred on its dead-reckoned
-//! position c(t) = p + v·t with radius ρ(t) = ½δτ² + δτ(t − τ), τ = min(t, T_hold): acceleration up
-//! to δ for at most T_hold, then coasting. Its neighbour k keeps D_c from that disk with the barrier
-//! b = √(2δ(‖p_k − c‖ − D_c − ρ)) + (ṅ − ρ̇), whose row `−p̂ᵀu_k ≤ δ(ṅ − ρ̇)/h + ‖v_⊥‖²/n + ζb³ − ρ̈`
-//! also pays for the disk's growth ρ̇ = δτ and ρ̈ = δ while t < T_hold. After the horizon the disk
-//! freezes (the motors are off). The lost UAV itself brakes and no longer runs the filter.
+//! Neighbours that do not fly the filter (taking off, landing, stale or lost links): where the fleet
+//! thinks each may be (`safety::ReachDisk`, docs/safety.md §5 and `safety/src/neighbour_rows.rs`).
 
 use crate::fleet::Fleet;
-use safety::barrier::collision_row;
-use safety::{Row, RowKind};
-use uav::{Params, UavState, Vec2};
-
-/// How long a Crazyflie keeps its last setpoint before its watchdog levels it out (s).
-pub const WATCHDOG_HOLD_S: f64 = 0.5;
-
-/// Where a UAV can be t seconds after its last state.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ReachDisk {
-    /// Dead-reckoned centre c(t).
-    pub centre: Vec2,
-    /// Velocity of the centre (the last velocity; zero once frozen).
-    pub velocity: Vec2,
-    /// Radius ρ(t) (m).
-    pub radius: f64,
-    /// ρ̇ (m/s).
-    pub growth: f64,
-    /// ρ̈ (m/s²).
-    pub growth_rate: f64,
-}
-
-/// The disk that contains a UAV `t` seconds after its `last` state, frozen after `horizon`.
-pub fn reach_disk(last: UavState, t: f64, delta: f64, horizon: f64) -> ReachDisk {
-    let frozen = t >= horizon;
-    let t = t.clamp(0.0, horizon.max(0.0));
-    let tau = t.min(WATCHDOG_HOLD_S);
-    let radius = 0.5 * delta * tau * tau + delta * tau * (t - tau);
-    let (velocity, growth, growth_rate) = if frozen {
-        (Vec2::zeros(), 0.0, 0.0)
-    } else {
-        (last.v, delta * tau, if t < WATCHDOG_HOLD_S { delta } else { 0.0 })
-    };
-    ReachDisk { centre: last.p + last.v * t, velocity, radius, growth, growth_rate }
-}
-
-/// The row of UAV k (state `me`) keeping `clearance` from the disk (a point when its radius is 0):
-/// the whole pair row, k alone.
-pub fn obstacle_row(me: UavState, disk: &ReachDisk, clearance: f64, params: &Params, kind: RowKind) -> Row {
-    let p_kd = me.p - disk.centre;
-    let n = p_kd.norm();
-    let p_hat = if n > 0.0 { p_kd / n } else { Vec2::new(1.0, 0.0) };
-    // The boundary approaches k at ρ̇: as if the centre moved towards k at that speed.
-    let v_kd = me.v - disk.velocity - p_hat * disk.growth;
-    let mut row = collision_row(p_kd, v_kd, params.delta, 0.0, clearance + disk.radius, params.zeta, kind);
-    row.c -= disk.growth_rate;
-    row
-}
-
-/// A static obstacle (ρ = 0) at `at`.
-pub fn point_disk(at: Vec2) -> ReachDisk {
-    ReachDisk { centre: at, velocity: Vec2::zeros(), radius: 0.0, growth: 0.0, growth_rate: 0.0 }
-}
+use safety::{ReachDisk, point_disk, reach_disk};
 
 impl Fleet {
     /// Where UAV d can be now: its reach disk while its link is stale, else its last state.
@@ -89,37 +25,5 @@ impl Fleet {
                 (disk.centre - self.uavs[d].state.p).norm() + disk.radius
             })
             .fold(0.0, f64::max)
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn the_disk_grows_while_held_then_linearly_and_freezes_at_the_horizon() {
-        let last = UavState { p: Vec2::new(1.0, 0.0), v: Vec2::new(2.0, 0.0) };
-        let d = reach_disk(last, 0.2, 5.0, 2.0);
-        assert!((d.radius - 0.1).abs() < 1e-12 && (d.growth - 1.0).abs() < 1e-12 && d.growth_rate == 5.0);
-        assert!((d.centre - Vec2::new(1.4, 0.0)).norm() < 1e-12);
-        let d = reach_disk(last, 1.0, 5.0, 2.0);
-        assert!((d.radius - (0.625 + 1.25)).abs() < 1e-12 && (d.growth - 2.5).abs() < 1e-12);
-        assert_eq!(d.growth_rate, 0.0);
-        let frozen = reach_disk(last, 3.0, 5.0, 2.0);
-        assert_eq!(
-            frozen,
-            ReachDisk { velocity: Vec2::zeros(), growth: 0.0, ..reach_disk(last, 2.0, 5.0, 2.0) }
-        );
-    }
-
-    #[test]
-    fn the_row_against_a_growing_disk_is_tighter_than_against_a_point() {
-        let params = Params::default();
-        let me = UavState { p: Vec2::new(3.0, 0.0), v: Vec2::zeros() };
-        let point = obstacle_row(me, &point_disk(Vec2::zeros()), params.d_c, &params, RowKind::Collision(0));
-        let disk = reach_disk(UavState::at_rest(Vec2::zeros()), 0.2, params.delta, 2.0);
-        let grown = obstacle_row(me, &disk, params.d_c, &params, RowKind::Collision(0));
-        assert!((point.a - Vec2::new(-1.0, 0.0)).norm() < 1e-12);
-        assert!(grown.b < point.b && grown.c < point.c);
     }
 }

@@ -1,6 +1,7 @@
 //! The rows of every UAV's QP for one tick, built in parallel: its road rows (`safety::road_rows`),
 //! a collision row b_kd per cooperating neighbour within the activation radius, and an obstacle row
-//! per neighbour that does not cooperate but may be in the air (its reach disk, [`crate::lost`]).
+//! per neighbour that does not cooperate but may be in the air (its reach disk; both
+//! `safety::neighbour_rows`).
 //! Each UAV's rows depend only on the states read this tick, so any number of threads gives the same
 //! rows. What depends on the order of filtering (the whole pair row against a neighbour filtered
 //! earlier in the tick, given its u_d) is applied to a copy just before each UAV's QP
@@ -11,12 +12,10 @@
 //! count, so the buffers stop growing after the first ticks (no allocation in steady state).
 
 use crate::fleet::{Uav, parallel};
-use crate::lost::{ReachDisk, obstacle_row};
 use crate::ragged::Ragged;
 use rayon::prelude::*;
 use roads::Road;
-use safety::barrier::collision_row;
-use safety::{RoadRule, Row, RowKind, activation_radius, road_rows};
+use safety::{Neighbour, ReachDisk, RoadRule, Row, RowKind, neighbour_rows, road_rows};
 use uav::{Params, UavState, Vec2};
 
 /// What the rows of other UAVs need to know about one UAV this tick (plain data, shared by threads).
@@ -134,24 +133,14 @@ fn rows_of_one(
 ) {
     let state = me.state;
     road_rows(road, rule, state.p, state.v, me.segment, p, out);
-    let delta_sum = 2.0 * p.delta;
-    // Sampled-data margin (docs/safety.md §4.4, §8 d): with inputs held for dt, the curvature of
-    // b_kd lets a pair drift below the continuous-time boundary by up to ½·δΣ·dt² per step, and in
-    // dense jams the filtered inputs alternate from tick to tick; the filter keeps twice that,
-    // δΣ·dt², beyond D_c.
-    let d_c = p.d_c + delta_sum * p.dt * p.dt;
-    for &d in neighbours {
+    let what = |d: usize| {
         let other = views[d];
-        if !other.cooperates {
-            if let Some(disk) = other.obstacle {
-                out.push(obstacle_row(state, &disk, d_c, p, RowKind::Collision(d)));
-            }
-            continue;
-        }
-        let (p_kd, v_kd) = (state.p - other.state.p, state.v - other.state.v);
-        if p_kd.norm() > activation_radius(p.d_c, v_kd.norm(), delta_sum) {
-            continue;
-        }
-        out.push(collision_row(p_kd, v_kd, p.delta, p.delta, d_c, p.zeta, RowKind::Collision(d)));
-    }
+        let seen = match (other.cooperates, other.obstacle) {
+            (true, _) => Neighbour::Cooperating(other.state),
+            (false, Some(disk)) => Neighbour::Obstacle(disk),
+            (false, None) => Neighbour::Absent,
+        };
+        (d, seen)
+    };
+    neighbour_rows(state, neighbours.iter().map(|&d| what(d)), p, out);
 }
