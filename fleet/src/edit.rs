@@ -203,7 +203,7 @@ impl Fleet {
     pub fn replace_road(&mut self, road: Road) -> Result<Vec<String>, EditError> {
         let p = self.config.params;
         // UAVs on the ground (landed, stopped, not yet taken off) are not in the road's airspace.
-        for uav in self.uavs.iter().filter(|u| u.in_the_air()) {
+        for uav in self.uavs.iter().filter(|u| u.condition.in_the_air()) {
             let margin = road_margin(&road, &uav.state, p.delta);
             if below(margin, p.d_s) {
                 let reason = format!(

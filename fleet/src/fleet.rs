@@ -1,6 +1,7 @@
 //! One tick of the fleet loop (ARCHITECTURE.md, "One tick"): states → targets → neighbours →
 //! policies (batched) → CBF-QP filter → commands.
 
+use crate::condition::Condition;
 use crate::filtering::FilterStage;
 use crate::neighbours::NeighbourSearch;
 use crate::rows::RowBuilder;
@@ -118,11 +119,6 @@ pub struct UavTick {
     pub failed: bool,
     /// The policy produced no finite action and the UAV braked instead.
     pub policy_fallback: bool,
-    /// The link had no state this tick; the last known one was used.
-    pub stale: bool,
-    /// No fresh state for `stale_after` or the link is reconnecting while the UAV may be airborne:
-    /// its neighbours treat its reach since the last state as an obstacle.
-    pub lost: bool,
     /// Wall time of the filter for this UAV (µs), when a QP was solved.
     pub solve_us: f64,
     /// Length (s) of the stall it is in (no progress towards its goal for a while), 0 when none.
@@ -167,28 +163,13 @@ pub struct Uav {
     pub phase: LinkPhase,
     /// Consecutive ticks without a fresh state from the link.
     pub stale_ticks: u32,
+    /// What it is this tick (from `phase`, `stale_ticks` and whether it was airborne when last
+    /// heard from), for every stage of the tick.
+    pub condition: Condition,
     /// Its progress and standing with the traffic rules.
     pub traffic: UavTraffic,
     /// It was airborne when last heard from, so while lost it may still be in the air.
-    pub(crate) airborne: bool,
-}
-
-impl Uav {
-    /// It flies its policy through the filter this tick (airborne, following commands, not lost).
-    pub fn flying(&self) -> bool {
-        self.phase == LinkPhase::Flying && !self.last.lost
-    }
-
-    /// In the air, or possibly so while lost: its neighbours must keep D_c from it.
-    pub fn in_the_air(&self) -> bool {
-        self.phase.airborne() || self.last.lost
-    }
-
-    /// It shares pair rows with its neighbours this tick: flying the filter on a fresh state.
-    /// Otherwise a neighbour in the air is avoided alone, as its reach disk ([`crate::lost`]).
-    pub fn cooperates(&self) -> bool {
-        self.flying() && self.stale_ticks == 0
-    }
+    was_airborne: bool,
 }
 
 /// The fleet: road, UAVs, policies and the reusable filter and scratch buffers.
@@ -287,7 +268,8 @@ impl Fleet {
             phase,
             stale_ticks: 0,
             traffic: UavTraffic::default(),
-            airborne: phase.airborne(),
+            condition: Condition::of(phase, phase.airborne(), 0, false),
+            was_airborne: phase.airborne(),
         });
     }
 
@@ -346,7 +328,7 @@ impl Fleet {
         // threads (each UAV's computation is the same; only where it runs differs).
         let locate = |uav: &mut Uav| {
             let segment = nav.locate(&mut uav.nav, uav.state.p);
-            let tracked = !hold && uav.flying() && !uav.nav.arrived;
+            let tracked = !hold && uav.condition.flying() && !uav.nav.arrived;
             uav.traffic.route = uav.nav.position.filter(|_| tracked);
             uav.traffic.waiting = None;
             uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
@@ -398,13 +380,12 @@ impl Fleet {
                 }
                 _ => uav.stale_ticks = uav.stale_ticks.saturating_add(1),
             }
-            uav.last.stale = uav.stale_ticks > 0;
             let silent = f64::from(uav.stale_ticks) * dt >= stale_after;
-            uav.last.lost = uav.airborne && (silent || uav.phase == LinkPhase::Connecting);
+            uav.condition = Condition::of(uav.phase, uav.was_airborne, uav.stale_ticks, silent);
             if uav.phase.airborne() && !silent {
-                uav.airborne = true;
+                uav.was_airborne = true;
             } else if matches!(uav.phase, LinkPhase::Landed | LinkPhase::Stopped) {
-                uav.airborne = false;
+                uav.was_airborne = false;
             }
         }
     }
@@ -422,7 +403,9 @@ impl Fleet {
         for (name, policy) in self.policies.iter_mut() {
             self.batch.clear();
             self.observations.clear();
-            for (k, uav) in self.uavs.iter().enumerate().filter(|(_, u)| u.policy == name && u.flying()) {
+            for (k, uav) in
+                self.uavs.iter().enumerate().filter(|(_, u)| u.policy == name && u.condition.flying())
+            {
                 self.batch.push(k);
                 self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
             }
@@ -452,7 +435,9 @@ impl Fleet {
         let (positions, velocities) = (&self.positions, &self.velocities);
         let (traffic, lists) = (&self.traffic, &self.neighbours.lists);
         let limit = |(k, me): (usize, &mut Uav)| {
-            let Some(pos) = me.nav.position.filter(|_| !me.nav.arrived && me.flying()) else { return };
+            let Some(pos) = me.nav.position.filter(|_| !me.nav.arrived && me.condition.flying()) else {
+                return;
+            };
             let (p, v) = (me.state.p, me.state.v);
             let limit = traffic.speed_limit(pos.s, pos.direction());
             let mut u = govern(v, me.last.u_ref, limit, delta, dt);

@@ -4,6 +4,7 @@
 //!
 //! No async, no I/O beyond what a [`links::Link`] does: the server wraps this in its 20 Hz task.
 
+mod condition;
 mod edit;
 pub mod families;
 mod filtering;
@@ -29,6 +30,7 @@ mod undo;
 mod yielding;
 pub mod zones;
 
+pub use condition::Condition;
 pub use edit::EditError;
 pub use fleet::{CollisionShare, Fleet, FleetConfig, PARALLEL_FROM_UAVS, StageTimes, Uav, UavTick};
 pub use histogram::DurationHistogram;

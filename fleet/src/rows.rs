@@ -25,9 +25,9 @@ pub(crate) struct RowView {
     pub state: UavState,
     /// It follows commands and gets rows of its own.
     pub flying: bool,
-    /// It shares pair rows with its neighbours ([`Uav::cooperates`]).
+    /// It shares pair rows with its neighbours ([`crate::Condition::cooperates`]).
     pub cooperates: bool,
-    /// Its reach disk when it does not cooperate but may be in the air ([`Uav::in_the_air`]).
+    /// Its reach disk when it does not cooperate but may be in the air ([`crate::Condition::in_the_air`]).
     pub obstacle: Option<ReachDisk>,
     /// Its tracked segment (a hint for the road's queries).
     pub segment: usize,
@@ -59,9 +59,9 @@ impl RowBuilder {
         self.views.clear();
         self.views.extend(uavs.iter().enumerate().map(|(d, u)| RowView {
             state: u.state,
-            flying: u.flying(),
-            cooperates: u.cooperates(),
-            obstacle: (!u.cooperates() && u.in_the_air()).then(|| disk_of(d)),
+            flying: u.condition.flying(),
+            cooperates: u.condition.cooperates(),
+            obstacle: (!u.condition.cooperates() && u.condition.in_the_air()).then(|| disk_of(d)),
             segment: u.nav.tracker.current.unwrap_or(0),
         }));
         let n = uavs.len();

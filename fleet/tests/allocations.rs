@@ -44,7 +44,10 @@ fn allocations_per_tick(uavs: usize, policy: &str, threads: usize) -> Vec<(usize
             let change = region.change();
             counts.push((change.allocations, change.reallocations));
         }
-        assert!(fleet.uavs().iter().all(|u| u.flying()), "every UAV flies its policy during the count");
+        assert!(
+            fleet.uavs().iter().all(|u| u.condition.flying()),
+            "every UAV flies its policy during the count"
+        );
         counts.split_off(WARM_UP_TICKS)
     })
 }

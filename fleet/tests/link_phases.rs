@@ -52,9 +52,9 @@ fn a_stopping_or_landing_uav_is_an_obstacle_that_does_not_fly_the_filter() {
     for phase in [LinkPhase::Stopping, LinkPhase::Landing, LinkPhase::TakingOff] {
         let (fleet, min_distance) = fly_past(phase, 400);
         let b = &fleet.uavs()[1];
-        assert!(b.in_the_air(), "{phase:?} must count as in the air");
-        assert!(!b.flying() && !b.cooperates(), "{phase:?} must not fly the filter");
-        assert!(!b.last.lost, "{phase:?} with fresh states is not lost");
+        assert!(b.condition.in_the_air(), "{phase:?} must count as in the air");
+        assert!(!b.condition.flying() && !b.condition.cooperates(), "{phase:?} must not fly the filter");
+        assert!(b.condition != fleet::Condition::Lost, "{phase:?} with fresh states is not lost");
         assert_eq!(b.last.u, fleet.uavs()[1].last.u_ref, "{phase:?} brakes");
         assert!(min_distance >= d_c, "{phase:?}: a came {min_distance} m close, less than D_c {d_c}");
     }
@@ -65,6 +65,6 @@ fn a_uav_confirmed_down_is_out_of_the_airspace() {
     for phase in [LinkPhase::Stopped, LinkPhase::Landed] {
         let (fleet, _) = fly_past(phase, 1);
         let b = &fleet.uavs()[1];
-        assert!(!b.in_the_air() && !b.flying(), "{phase:?} is on the ground");
+        assert!(!b.condition.in_the_air() && !b.condition.flying(), "{phase:?} is on the ground");
     }
 }

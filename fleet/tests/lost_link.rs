@@ -70,7 +70,7 @@ fn head_on_with_silence(offset: f64, from: u32, ticks: u32, speed: f64) -> (f64,
             a.lock().unwrap().silent_for = None;
         }
         fleet.tick();
-        was_lost |= fleet.uavs()[0].last.lost;
+        was_lost |= fleet.uavs()[0].condition == fleet::Condition::Lost;
         let (pa, pb) = (a.lock().unwrap().state.p, b.lock().unwrap().state.p);
         min_distance = min_distance.min((pa - pb).norm());
     }

@@ -1,6 +1,6 @@
 //! The immutable snapshot the fleet loop publishes after every tick (`GET /api/state`, `/ws`, Rerun).
 
-use fleet::{Fleet, Uav, collision_margin, road_margin};
+use fleet::{Condition, Fleet, Uav, collision_margin, road_margin};
 use links::LinkPhase;
 use serde::Serialize;
 use uav::Vec2;
@@ -143,8 +143,10 @@ fn xy(v: &Vec2) -> [f64; 2] {
 
 fn status(u: &Uav, holding: bool) -> UavStatus {
     let l = &u.last;
-    if l.lost {
-        return UavStatus::Lost;
+    match u.condition {
+        Condition::Lost => return UavStatus::Lost,
+        Condition::Stale => return UavStatus::Stale,
+        Condition::Cooperating | Condition::Transit | Condition::Grounded => {}
     }
     match u.phase {
         LinkPhase::Connecting => return UavStatus::Connecting,
@@ -155,9 +157,7 @@ fn status(u: &Uav, holding: bool) -> UavStatus {
         LinkPhase::Stopping => return UavStatus::Stopping,
         LinkPhase::Flying => {}
     }
-    if l.stale {
-        UavStatus::Stale
-    } else if l.failed {
+    if l.failed {
         UavStatus::Failed
     } else if u.nav.arrived {
         UavStatus::Arrived
@@ -185,10 +185,10 @@ impl Snapshot {
             .map(|(k, u)| {
                 let l = &u.last;
                 // UAVs on the ground (landed, stopped, not yet up) are not in each other's airspace.
-                let collision = lists.get(k).filter(|_| u.in_the_air()).and_then(|list| {
+                let collision = lists.get(k).filter(|_| u.condition.in_the_air()).and_then(|list| {
                     list.iter()
                         .filter_map(|&d| all.get(d))
-                        .filter(|d| d.in_the_air())
+                        .filter(|d| d.condition.in_the_air())
                         .map(|d| collision_margin(&u.state, &d.state, 2.0 * p.delta))
                         .min_by(f64::total_cmp)
                 });
@@ -205,7 +205,7 @@ impl Snapshot {
                     status: status(u, fleet.holding()),
                     link: u.link.describe().to_string(),
                     phase: u.phase.name(),
-                    lost: l.lost,
+                    lost: u.condition == Condition::Lost,
                     wait_reason: u.traffic.waiting.map(|w| w.name()),
                     active_rows: l.active_rows,
                     slack: l.max_slack,

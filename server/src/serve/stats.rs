@@ -137,7 +137,7 @@ impl TickStats {
             m.qp.max_slack = m.qp.max_slack.max(l.max_slack);
             m.qp.failures += u64::from(l.failed);
             m.policy_fallbacks += u64::from(l.policy_fallback);
-            m.stale_states += u64::from(l.stale);
+            m.stale_states += u64::from(u.stale_ticks > 0);
         }
         m.min_collision_margin_m = min_opt(m.min_collision_margin_m, snapshot.min_collision_margin_m);
         m.min_road_margin_m = min_opt(m.min_road_margin_m, snapshot.min_road_margin_m);
