@@ -57,7 +57,7 @@ impl Fleet {
 
     /// The neighbour lists of the last tick (`[k]`: indices of UAVs near UAV k).
     pub fn neighbour_lists(&self) -> &crate::Ragged<usize> {
-        &self.neighbours.lists
+        &self.pipeline.neighbours.lists
     }
 
     /// Hold (every UAV brakes to a hover; the filter still runs) or fly the policies again.

@@ -16,7 +16,7 @@
 use crate::fleet::{Fleet, parallel};
 use crate::rows::RowBuilder;
 use rayon::prelude::*;
-use safety::{FilterSettings, Row, RowKind, SafetyFilter};
+use safety::{Row, RowKind, SafetyFilter};
 use std::time::Instant;
 use uav::{Params, Vec2};
 
@@ -171,11 +171,11 @@ fn filter_one(
 impl FilterStage {
     /// Filters every UAV's nominal input (`u_ref` of its last tick) against its rows and writes the
     /// results to the UAVs.
-    pub(crate) fn run(&mut self, fleet: &mut Fleet, settings: FilterSettings) {
+    pub(crate) fn run(&mut self, fleet: &mut Fleet, rows: &RowBuilder) {
+        let settings = fleet.config.filter;
         let n = fleet.uavs.len();
         let p = fleet.config.params;
         let sequential = fleet.config.share == crate::CollisionShare::Sequential;
-        let rows = &fleet.row_builder;
         self.order.plan(rows, n);
         self.inputs.clear();
         self.inputs.extend(fleet.uavs.iter().map(|u| u.last.u_ref));

@@ -1,20 +1,15 @@
-//! One tick of the fleet loop (ARCHITECTURE.md, "One tick"): states → targets → neighbours →
-//! policies (batched) → CBF-QP filter → commands.
+//! The fleet's state (road, UAVs, policies, traffic reservations, hold) and its configuration; one
+//! [`Fleet::tick`] runs the stages of [`crate::pipeline`] (ARCHITECTURE.md, "One tick"): states →
+//! neighbours → targets → policies (batched) → rows → CBF-QP filter → commands.
 
 use crate::condition::Condition;
-use crate::filtering::FilterStage;
-use crate::neighbours::NeighbourSearch;
-use crate::rows::RowBuilder;
-use crate::speed::{govern, keep_distance};
+use crate::pipeline::TickPipeline;
 use crate::traffic::{TrafficRules, UavTraffic};
-use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::{Link, LinkPhase};
-use policies::{Observation, PolicyRegistry, observation};
-use rayon::prelude::*;
-use roads::{NavMode, NavState, Navigator, Road};
-use safety::{FilterSettings, RoadRule, activation_radius};
-use std::time::Instant;
-use uav::{Params, UavState, Vec2, braking_input};
+use policies::PolicyRegistry;
+use roads::{NavMode, NavState, Road};
+use safety::{FilterSettings, RoadRule};
+use uav::{Params, UavState, Vec2};
 
 /// Fleets at least this large run the per-UAV stages on all worker threads; smaller ones stay on the
 /// calling thread (handing a few UAVs to other threads costs more than it saves, and waking them
@@ -169,7 +164,7 @@ pub struct Uav {
     /// Its progress and standing with the traffic rules.
     pub traffic: UavTraffic,
     /// It was airborne when last heard from, so while lost it may still be in the air.
-    was_airborne: bool,
+    pub(crate) was_airborne: bool,
 }
 
 /// The fleet: road, UAVs, policies and the reusable filter and scratch buffers.
@@ -181,41 +176,25 @@ pub struct Fleet {
     pub(crate) policies: PolicyRegistry,
     /// Hold: every UAV brakes to a hover instead of flying its policy (the filter still runs).
     pub(crate) hold: bool,
-    filter_stage: FilterStage,
-    pub(crate) neighbours: NeighbourSearch,
-    traffic: TrafficRules,
-    positions: Vec<Vec2>,
-    velocities: Vec<Vec2>,
-    segments: Vec<usize>,
-    pub(crate) row_builder: RowBuilder,
-    observations: Vec<Observation>,
-    batch: Vec<usize>,
-    actions: Vec<Vec2>,
-    tick: u64,
-    stages: StageTimes,
+    /// The traffic rules' sections, reservations and speed limits.
+    pub(crate) traffic: TrafficRules,
+    pub(crate) tick: u64,
+    /// The per-tick machinery (its neighbour lists are those of the last tick).
+    pub(crate) pipeline: TickPipeline,
 }
 
 impl Fleet {
     /// An empty fleet on `road`.
     pub fn new(config: FleetConfig, road: Road, policies: PolicyRegistry) -> Self {
         Self {
-            filter_stage: FilterStage::default(),
             config,
             road,
             uavs: Vec::new(),
             policies,
             hold: false,
-            neighbours: NeighbourSearch::default(),
             traffic: TrafficRules::default(),
-            positions: Vec::new(),
-            velocities: Vec::new(),
-            segments: Vec::new(),
-            row_builder: RowBuilder::default(),
-            observations: Vec::new(),
-            batch: Vec::new(),
-            actions: Vec::new(),
             tick: 0,
-            stages: StageTimes::default(),
+            pipeline: TickPipeline::default(),
         }
     }
 
@@ -243,7 +222,7 @@ impl Fleet {
 
     /// How long each stage of the last tick took.
     pub fn stage_times(&self) -> StageTimes {
-        self.stages
+        self.pipeline.stages
     }
 
     /// Adds a UAV at `state` flying policy `policy` towards `goal` (None: hover where it is).
@@ -273,183 +252,12 @@ impl Fleet {
         });
     }
 
-    /// Runs one tick and returns the number of UAVs that have arrived.
+    /// Runs one tick ([`TickPipeline`]) and returns the number of UAVs that have arrived.
     pub fn tick(&mut self) -> usize {
-        let params = self.config.params;
-        let mut clock = Instant::now();
-        let mut lap = || {
-            let now = Instant::now();
-            let us = now.duration_since(clock).as_secs_f64() * 1e6;
-            clock = now;
-            us
-        };
-        self.read_states();
-        self.stages.read_us = lap();
-        self.positions.clear();
-        self.positions.extend(self.uavs.iter().map(|u| u.state.p));
-        let v_max = self.uavs.iter().map(|u| u.state.v.norm()).fold(0.0, f64::max);
-        let reach = activation_radius(params.d_c, 2.0 * v_max, 2.0 * params.delta)
-            .max(YIELD_RADIUS_IN_DC * params.d_c)
-            + self.max_stale_reach();
-        self.neighbours.update(&self.positions, reach);
-        self.stages.neighbours_us = lap();
-        self.plan_targets();
-        self.make_way();
-        self.stages.navigation_us = lap();
-        self.run_policies();
-        self.stages.policies_us = lap();
-        let mut builder = std::mem::take(&mut self.row_builder);
-        let (rule, lists) = (self.config.road_rule, &self.neighbours.lists);
-        builder.build(&self.road, rule, &params, &self.uavs, lists, |d| self.disk_of(d));
-        self.row_builder = builder;
-        self.stages.rows_us = lap();
-        let mut stage = std::mem::take(&mut self.filter_stage);
-        stage.run(self, self.config.filter);
-        self.filter_stage = stage;
-        self.stages.filter_us = lap();
-        for uav in &mut self.uavs {
-            uav.link.send(uav.last.u);
-        }
-        self.stages.send_us = lap();
+        let mut pipeline = std::mem::take(&mut self.pipeline);
+        pipeline.run(self);
+        self.pipeline = pipeline;
         self.tick += 1;
         self.uavs.iter().filter(|u| u.nav.arrived).count()
-    }
-
-    /// Locates every UAV on its route, tracks its progress, applies the traffic rules (`traffic`
-    /// navigation) and chooses its temporary target.
-    fn plan_targets(&mut self) {
-        let params = self.config.params;
-        let now = self.tick as f64 * params.dt;
-        let nav = Navigator::new(&self.road, self.config.nav, &params);
-        let mut segments = std::mem::take(&mut self.segments);
-        segments.clear();
-        let hold = self.hold;
-        // Per UAV and independent of the others: in parallel, with the same result on any number of
-        // threads (each UAV's computation is the same; only where it runs differs).
-        let locate = |uav: &mut Uav| {
-            let segment = nav.locate(&mut uav.nav, uav.state.p);
-            let tracked = !hold && uav.condition.flying() && !uav.nav.arrived;
-            uav.traffic.route = uav.nav.position.filter(|_| tracked);
-            uav.traffic.waiting = None;
-            uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
-            segment
-        };
-        if parallel(self.uavs.len()) {
-            self.uavs.par_iter_mut().map(locate).collect_into_vec(&mut segments);
-        } else {
-            segments.extend(self.uavs.iter_mut().map(locate));
-        }
-        if self.config.nav == NavMode::Traffic {
-            self.traffic.plan(&nav, now, &mut self.uavs, &self.neighbours.lists);
-        }
-        let choose = |(uav, &segment): (&mut Uav, &usize)| {
-            let restriction = uav.traffic.restriction;
-            uav.last.target = nav.choose(&mut uav.nav, uav.state.p, uav.state.v, segment, &restriction);
-            uav.last.stall_s = uav.traffic.progress.stalled_for(now).unwrap_or(0.0);
-        };
-        if parallel(self.uavs.len()) {
-            self.uavs.par_iter_mut().zip(&segments).for_each(choose);
-        } else {
-            self.uavs.iter_mut().zip(&segments).for_each(choose);
-        }
-        self.segments = segments;
-    }
-
-    /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::yielding`]).
-    fn make_way(&mut self) {
-        let d_c = self.config.params.d_c;
-        for k in 0..self.uavs.len() {
-            let me = &self.uavs[k];
-            let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { continue };
-            let flying = self.neighbours.lists[k].iter().map(|&d| &self.uavs[d]).filter_map(|u| {
-                let goal = u.nav.goal().filter(|_| !u.nav.arrived)?;
-                Some(Flying { p: u.state.p, goal })
-            });
-            self.uavs[k].last.target = make_way(me.state.p, goal, flying, d_c);
-        }
-    }
-
-    fn read_states(&mut self) {
-        let (dt, stale_after) = (self.config.params.dt, self.config.stale_after);
-        for uav in &mut self.uavs {
-            uav.phase = uav.link.phase();
-            match uav.link.state() {
-                Some(s) if s.is_finite() => {
-                    uav.state = s;
-                    uav.stale_ticks = 0;
-                }
-                _ => uav.stale_ticks = uav.stale_ticks.saturating_add(1),
-            }
-            let silent = f64::from(uav.stale_ticks) * dt >= stale_after;
-            uav.condition = Condition::of(uav.phase, uav.was_airborne, uav.stale_ticks, silent);
-            if uav.phase.airborne() && !silent {
-                uav.was_airborne = true;
-            } else if matches!(uav.phase, LinkPhase::Landed | LinkPhase::Stopped) {
-                uav.was_airborne = false;
-            }
-        }
-    }
-
-    /// Evaluates each policy once on the batch of UAVs that use it.
-    fn run_policies(&mut self) {
-        let (delta, dt) = (self.config.params.delta, self.config.params.dt);
-        for uav in &mut self.uavs {
-            uav.last.u_ref = braking_input(uav.state.v, delta, dt);
-            uav.last.policy_fallback = !self.hold;
-        }
-        if self.hold {
-            return;
-        }
-        for (name, policy) in self.policies.iter_mut() {
-            self.batch.clear();
-            self.observations.clear();
-            for (k, uav) in
-                self.uavs.iter().enumerate().filter(|(_, u)| u.policy == name && u.condition.flying())
-            {
-                self.batch.push(k);
-                self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
-            }
-            if self.batch.is_empty() || policy.act(&self.observations, &mut self.actions).is_err() {
-                continue;
-            }
-            for (&k, u) in self.batch.iter().zip(&self.actions) {
-                if uav::is_finite(u) {
-                    self.uavs[k].last.u_ref = uav::saturate(*u, delta);
-                    self.uavs[k].last.policy_fallback = false;
-                }
-            }
-        }
-        if self.config.nav == NavMode::Traffic {
-            self.limit_speeds();
-        }
-    }
-
-    /// The traffic rules' speed limit (narrower road, slower flight) and the distance kept to every
-    /// neighbour (`fleet::speed`), applied to each flying UAV's nominal input. Per UAV, reading its
-    /// neighbours' states from plain copies (a link is not shared across threads): in parallel for
-    /// large fleets, with the same result on any number of threads.
-    fn limit_speeds(&mut self) {
-        let (d_c, delta, dt) = (self.config.params.d_c, self.config.params.delta, self.config.params.dt);
-        self.velocities.clear();
-        self.velocities.extend(self.uavs.iter().map(|u| u.state.v));
-        let (positions, velocities) = (&self.positions, &self.velocities);
-        let (traffic, lists) = (&self.traffic, &self.neighbours.lists);
-        let limit = |(k, me): (usize, &mut Uav)| {
-            let Some(pos) = me.nav.position.filter(|_| !me.nav.arrived && me.condition.flying()) else {
-                return;
-            };
-            let (p, v) = (me.state.p, me.state.v);
-            let limit = traffic.speed_limit(pos.s, pos.direction());
-            let mut u = govern(v, me.last.u_ref, limit, delta, dt);
-            for &d in &lists[k] {
-                u = keep_distance(v, u, positions[d] - p, velocities[d], d_c, delta, dt);
-            }
-            me.last.u_ref = u;
-        };
-        if parallel(self.uavs.len()) {
-            self.uavs.par_iter_mut().enumerate().for_each(limit);
-        } else {
-            self.uavs.iter_mut().enumerate().for_each(limit);
-        }
     }
 }

@@ -16,6 +16,7 @@ mod margins;
 mod metrics;
 mod neighbours;
 pub mod paths;
+mod pipeline;
 pub mod progress;
 mod ragged;
 mod rows;

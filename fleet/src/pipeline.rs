@@ -1,0 +1,226 @@
+//! The per-tick machinery of the fleet, apart from its state (the way rapier keeps its sets apart
+//! from `PhysicsPipeline`): the [`Fleet`] holds the road, the UAVs, the policies, the traffic rules'
+//! reservations and the hold; the [`TickPipeline`] holds what one tick computes and reuses from tick
+//! to tick (positions, the neighbour grid, the rows, the filter's order and solvers, the policy
+//! batches) and runs the tick as one method per stage (ARCHITECTURE.md, "One tick"):
+//! read → neighbours → navigation → policies → rows → filter → send.
+
+use crate::condition::Condition;
+use crate::filtering::FilterStage;
+use crate::fleet::{Fleet, StageTimes, Uav, parallel};
+use crate::neighbours::NeighbourSearch;
+use crate::rows::RowBuilder;
+use crate::speed::{govern, keep_distance};
+use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
+use links::LinkPhase;
+use policies::{Observation, observation};
+use rayon::prelude::*;
+use roads::{NavMode, Navigator};
+use safety::activation_radius;
+use std::time::Instant;
+use uav::{Vec2, braking_input};
+
+/// What a tick computes and keeps for the next one; every buffer is reused.
+#[derive(Debug, Default)]
+pub(crate) struct TickPipeline {
+    /// Each UAV's position and velocity as read this tick (plain copies shared by threads).
+    positions: Vec<Vec2>,
+    velocities: Vec<Vec2>,
+    /// The neighbour grid and each UAV's neighbour list of the last tick.
+    pub neighbours: NeighbourSearch,
+    /// Each UAV's tracked segment this tick.
+    segments: Vec<usize>,
+    /// Every UAV's rows this tick.
+    rows: RowBuilder,
+    /// The filter's order, workers and solvers.
+    filter: FilterStage,
+    /// One policy's batch: observations, UAV indices, actions.
+    observations: Vec<Observation>,
+    batch: Vec<usize>,
+    actions: Vec<Vec2>,
+    /// How long each stage of the last tick took.
+    pub stages: StageTimes,
+}
+
+impl TickPipeline {
+    /// Runs one tick of `fleet`, stage after stage.
+    pub fn run(&mut self, fleet: &mut Fleet) {
+        let mut clock = Instant::now();
+        let mut lap = || {
+            let now = Instant::now();
+            let us = now.duration_since(clock).as_secs_f64() * 1e6;
+            clock = now;
+            us
+        };
+        self.read_states(fleet);
+        self.stages.read_us = lap();
+        self.find_neighbours(fleet);
+        self.stages.neighbours_us = lap();
+        self.plan_targets(fleet);
+        self.make_way(fleet);
+        self.stages.navigation_us = lap();
+        self.run_policies(fleet);
+        self.stages.policies_us = lap();
+        let (params, rule) = (fleet.config.params, fleet.config.road_rule);
+        self.rows
+            .build(&fleet.road, rule, &params, &fleet.uavs, &self.neighbours.lists, |d| fleet.disk_of(d));
+        self.stages.rows_us = lap();
+        self.filter.run(fleet, &self.rows);
+        self.stages.filter_us = lap();
+        for uav in &mut fleet.uavs {
+            uav.link.send(uav.last.u);
+        }
+        self.stages.send_us = lap();
+    }
+
+    /// Finds every UAV's neighbours within the activation radius at twice the fleet's top speed (and
+    /// at least the yielding radius), widened by the farthest reach of a stale UAV.
+    fn find_neighbours(&mut self, fleet: &Fleet) {
+        let params = fleet.config.params;
+        self.positions.clear();
+        self.positions.extend(fleet.uavs.iter().map(|u| u.state.p));
+        self.velocities.clear();
+        self.velocities.extend(fleet.uavs.iter().map(|u| u.state.v));
+        let v_max = self.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
+        let reach = activation_radius(params.d_c, 2.0 * v_max, 2.0 * params.delta)
+            .max(YIELD_RADIUS_IN_DC * params.d_c)
+            + fleet.max_stale_reach();
+        self.neighbours.update(&self.positions, reach);
+    }
+
+    /// Locates every UAV on its route, tracks its progress, applies the traffic rules (`traffic`
+    /// navigation) and chooses its temporary target.
+    fn plan_targets(&mut self, fleet: &mut Fleet) {
+        let params = fleet.config.params;
+        let now = fleet.tick as f64 * params.dt;
+        let nav = Navigator::new(&fleet.road, fleet.config.nav, &params);
+        let mut segments = std::mem::take(&mut self.segments);
+        segments.clear();
+        let hold = fleet.hold;
+        // Per UAV and independent of the others: in parallel, with the same result on any number of
+        // threads (each UAV's computation is the same; only where it runs differs).
+        let locate = |uav: &mut Uav| {
+            let segment = nav.locate(&mut uav.nav, uav.state.p);
+            let tracked = !hold && uav.condition.flying() && !uav.nav.arrived;
+            uav.traffic.route = uav.nav.position.filter(|_| tracked);
+            uav.traffic.waiting = None;
+            uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
+            segment
+        };
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter_mut().map(locate).collect_into_vec(&mut segments);
+        } else {
+            segments.extend(fleet.uavs.iter_mut().map(locate));
+        }
+        if fleet.config.nav == NavMode::Traffic {
+            fleet.traffic.plan(&nav, now, &mut fleet.uavs, &self.neighbours.lists);
+        }
+        let choose = |(uav, &segment): (&mut Uav, &usize)| {
+            let restriction = uav.traffic.restriction;
+            uav.last.target = nav.choose(&mut uav.nav, uav.state.p, uav.state.v, segment, &restriction);
+            uav.last.stall_s = uav.traffic.progress.stalled_for(now).unwrap_or(0.0);
+        };
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter_mut().zip(&segments).for_each(choose);
+        } else {
+            fleet.uavs.iter_mut().zip(&segments).for_each(choose);
+        }
+        self.segments = segments;
+    }
+
+    /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::yielding`]).
+    fn make_way(&mut self, fleet: &mut Fleet) {
+        let d_c = fleet.config.params.d_c;
+        for k in 0..fleet.uavs.len() {
+            let me = &fleet.uavs[k];
+            let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { continue };
+            let flying = self.neighbours.lists[k].iter().map(|&d| &fleet.uavs[d]).filter_map(|u| {
+                let goal = u.nav.goal().filter(|_| !u.nav.arrived)?;
+                Some(Flying { p: u.state.p, goal })
+            });
+            fleet.uavs[k].last.target = make_way(me.state.p, goal, flying, d_c);
+        }
+    }
+
+    fn read_states(&mut self, fleet: &mut Fleet) {
+        let (dt, stale_after) = (fleet.config.params.dt, fleet.config.stale_after);
+        for uav in &mut fleet.uavs {
+            uav.phase = uav.link.phase();
+            match uav.link.state() {
+                Some(s) if s.is_finite() => {
+                    uav.state = s;
+                    uav.stale_ticks = 0;
+                }
+                _ => uav.stale_ticks = uav.stale_ticks.saturating_add(1),
+            }
+            let silent = f64::from(uav.stale_ticks) * dt >= stale_after;
+            uav.condition = Condition::of(uav.phase, uav.was_airborne, uav.stale_ticks, silent);
+            if uav.phase.airborne() && !silent {
+                uav.was_airborne = true;
+            } else if matches!(uav.phase, LinkPhase::Landed | LinkPhase::Stopped) {
+                uav.was_airborne = false;
+            }
+        }
+    }
+
+    /// Evaluates each policy once on the batch of UAVs that use it.
+    fn run_policies(&mut self, fleet: &mut Fleet) {
+        let (delta, dt) = (fleet.config.params.delta, fleet.config.params.dt);
+        for uav in &mut fleet.uavs {
+            uav.last.u_ref = braking_input(uav.state.v, delta, dt);
+            uav.last.policy_fallback = !fleet.hold;
+        }
+        if fleet.hold {
+            return;
+        }
+        for (name, policy) in fleet.policies.iter_mut() {
+            self.batch.clear();
+            self.observations.clear();
+            for (k, uav) in
+                fleet.uavs.iter().enumerate().filter(|(_, u)| u.policy == name && u.condition.flying())
+            {
+                self.batch.push(k);
+                self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
+            }
+            if self.batch.is_empty() || policy.act(&self.observations, &mut self.actions).is_err() {
+                continue;
+            }
+            for (&k, u) in self.batch.iter().zip(&self.actions) {
+                if uav::is_finite(u) {
+                    fleet.uavs[k].last.u_ref = uav::saturate(*u, delta);
+                    fleet.uavs[k].last.policy_fallback = false;
+                }
+            }
+        }
+        if fleet.config.nav == NavMode::Traffic {
+            self.limit_speeds(fleet);
+        }
+    }
+
+    /// The traffic rules' speed limit (narrower road, slower flight) and the distance kept to every
+    /// neighbour (`fleet::speed`), applied to each flying UAV's nominal input. Per UAV, reading its
+    /// neighbours' states from plain copies (a link is not shared across threads): in parallel for
+    /// large fleets, with the same result on any number of threads.
+    fn limit_speeds(&mut self, fleet: &mut Fleet) {
+        let (d_c, delta, dt) = (fleet.config.params.d_c, fleet.config.params.delta, fleet.config.params.dt);
+        let (positions, velocities) = (&self.positions, &self.velocities);
+        let (traffic, lists) = (&fleet.traffic, &self.neighbours.lists);
+        let limit = |(k, me): (usize, &mut Uav)| {
+            let Some(pos) = me.nav.position.filter(|_| !me.nav.arrived && me.condition.flying()) else {
+                return;
+            };
+            let (p, v) = (me.state.p, me.state.v);
+            let limit = traffic.speed_limit(pos.s, pos.direction());
+            let mut u = govern(v, me.last.u_ref, limit, delta, dt);
+            for &d in &lists[k] {
+                u = keep_distance(v, u, positions[d] - p, velocities[d], d_c, delta, dt);
+            }
+            me.last.u_ref = u;
+        };
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter_mut().enumerate().for_each(limit);
+        } else {
+            fleet.uavs.iter_mut().enumerate().for_each(limit);
+        }
+    }
+}
