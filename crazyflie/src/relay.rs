@@ -132,16 +132,6 @@ pub struct Shared {
     unconfirmed: AtomicU64,
 }
 
-const PHASES: [LinkPhase; 7] = [
-    LinkPhase::Connecting,
-    LinkPhase::TakingOff,
-    LinkPhase::Flying,
-    LinkPhase::Landing,
-    LinkPhase::Landed,
-    LinkPhase::Stopped,
-    LinkPhase::Stopping,
-];
-
 impl Shared {
     /// The newest sample.
     pub fn sample(&self) -> Option<Sample> {
@@ -157,13 +147,13 @@ impl Shared {
 
     /// The session's phase.
     pub fn phase(&self) -> LinkPhase {
-        PHASES[usize::from(self.phase.load(Ordering::Acquire)).min(PHASES.len() - 1)]
+        LinkPhase::ALL[usize::from(self.phase.load(Ordering::Acquire)).min(LinkPhase::ALL.len() - 1)]
     }
 
     /// Sets the session's phase.
     pub fn set_phase(&self, phase: LinkPhase) {
-        let index = PHASES.iter().position(|p| *p == phase).unwrap_or(0);
-        // PHASES has 7 entries: the index fits in a u8.
+        let index = LinkPhase::ALL.iter().position(|p| *p == phase).unwrap_or(0);
+        // LinkPhase::ALL has 7 entries: the index fits in a u8.
         self.phase.store(index as u8, Ordering::Release);
     }
 

@@ -61,22 +61,12 @@ impl Condition {
 mod tests {
     use super::*;
 
-    const PHASES: [LinkPhase; 7] = [
-        LinkPhase::Connecting,
-        LinkPhase::TakingOff,
-        LinkPhase::Flying,
-        LinkPhase::Landing,
-        LinkPhase::Landed,
-        LinkPhase::Stopped,
-        LinkPhase::Stopping,
-    ];
-
     /// Every combination: lost exactly when it was airborne and is silent or reconnecting; flying
     /// exactly when its link flies and it is not lost; in the air when its phase is airborne or it is
     /// lost; cooperating exactly when flying on a fresh state.
     #[test]
     fn conditions_follow_phase_memory_and_silence() {
-        for phase in PHASES {
+        for phase in LinkPhase::ALL {
             for was_airborne in [false, true] {
                 for (stale_ticks, silent) in [(0, false), (2, false), (9, true)] {
                     let c = Condition::of(phase, was_airborne, stale_ticks, silent);

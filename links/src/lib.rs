@@ -47,6 +47,17 @@ pub enum LinkPhase {
 }
 
 impl LinkPhase {
+    /// Every phase, in declaration order.
+    pub const ALL: [LinkPhase; 7] = [
+        LinkPhase::Connecting,
+        LinkPhase::TakingOff,
+        LinkPhase::Flying,
+        LinkPhase::Landing,
+        LinkPhase::Landed,
+        LinkPhase::Stopped,
+        LinkPhase::Stopping,
+    ];
+
     /// The JSON/CLI name.
     pub fn name(&self) -> &'static str {
         match self {
