@@ -9,9 +9,9 @@
 //! the indices) joins the tail, which filters after every level, one UAV at a time in index order.
 //! So every pair is enforced exactly as in index order (the same inputs bit for bit), and the
 //! levels depend on the rows only: runs are the same on any number of threads. (A greedy colouring
-//! gives fewer levels, but a UAV of the first colour enforces only shares, like `split`; it
-//! measured worse in the stress suites: a violation in `headon`, 267 instead of 273 arrivals in
-//! `mixed`.)
+//! gives fewer levels, but a UAV of the first colour enforces only shares, like `split`; tried once
+//! while this was written, not kept, it failed `fleet/tests/stress.rs`: a violation in `headon`, 267
+//! instead of at least 271 arrivals in `mixed`.)
 
 use crate::fleet::{Fleet, parallel};
 use crate::rows::RowBuilder;
@@ -133,19 +133,17 @@ impl std::fmt::Debug for FilterStage {
     }
 }
 
-/// Filters UAV k (its nominal input `u_ref`) against its rows, the pair rows against UAVs with a
-/// smaller index made whole with their inputs (`inputs`, already filtered).
-#[allow(clippy::too_many_arguments)] // the per-UAV inputs of one filter call, all read-only
+/// Filters UAV k's nominal input (`inputs[k]`, not filtered yet) against its rows, the pair rows
+/// against UAVs with a smaller index made whole with their inputs (`inputs[d]`, already filtered).
 fn filter_one(
     k: usize,
-    u_ref: Vec2,
     rows: &RowBuilder,
     inputs: &[Vec2],
     share_sequential: bool,
     p: &Params,
     worker: &mut Worker,
 ) -> Filtered {
-    let me = rows.view(k);
+    let (me, u_ref) = (rows.view(k), inputs[k]);
     if !me.flying {
         // Not following commands (taking off, landing, lost): brake, which is also what its link
         // holds it to; its neighbours treat it as an obstacle.
@@ -199,7 +197,7 @@ impl FilterStage {
                     .zip(self.workers.par_iter_mut())
                     .for_each(|((out, ks), worker)| {
                         for (o, &k) in out.iter_mut().zip(ks) {
-                            *o = filter_one(k, inputs[k], rows, inputs, sequential, &p, worker);
+                            *o = filter_one(k, rows, inputs, sequential, &p, worker);
                         }
                     });
                 for (o, &k) in self.results[start..end].iter().zip(&order.order[start..end]) {
@@ -211,7 +209,7 @@ impl FilterStage {
                 for pos in start..end {
                     let k = self.order.order[pos];
                     let worker = &mut self.workers[0];
-                    let o = filter_one(k, self.inputs[k], rows, &self.inputs, sequential, &p, worker);
+                    let o = filter_one(k, rows, &self.inputs, sequential, &p, worker);
                     self.results[pos] = o;
                     self.inputs[k] = o.u;
                 }
