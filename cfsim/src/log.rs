@@ -282,8 +282,13 @@ impl Log {
             if due > now_ms {
                 continue;
             }
+            // The firmware's timer fires on its own grid (start + n·period): a simulation step that
+            // runs late samples at the last grid point it passed and skips the periods it missed
+            // whole, so the timestamps stay on the grid however the host schedules this loop.
+            let missed = if period == 0 { 0.0 } else { ((now_ms - due) / f64::from(period)).floor() };
+            let fired = due + missed * f64::from(period);
             // Timestamp: milliseconds since boot, 24 bits.
-            let ts = (now_ms.max(0.0) as u64 & 0x00ff_ffff) as u32;
+            let ts = (fired.max(0.0) as u64 & 0x00ff_ffff) as u32;
             let mut data = vec![block.id];
             data.extend_from_slice(&ts.to_le_bytes()[..3]);
             for op in &block.ops {
@@ -295,10 +300,8 @@ impl Log {
             block.running = if period == 0 {
                 None
             } else {
-                let period = f64::from(period);
-                // Skip missed periods instead of bursting after a stall.
-                let next = if due + period <= now_ms { now_ms + period } else { due + period };
-                Some((period as u32, next))
+                // The next grid point after this sample: missed periods are skipped, not burst.
+                Some((period, fired + f64::from(period)))
             };
         }
         out
@@ -377,6 +380,23 @@ mod tests {
         assert!(log.due(100.0, |_| 0.0).is_empty());
         assert_eq!(control(&mut log, &[2, 3]), vec![2, 3, 0]);
         assert_eq!(control(&mut log, &[2, 3]), vec![2, 3, ENOENT]);
+    }
+
+    #[test]
+    fn late_steps_keep_the_timestamps_on_the_grid() {
+        let mut log = Log::new();
+        control(&mut log, &[6, 3, 7, 0, 0]);
+        control(&mut log, &[3, 3, 1]); // 10 ms, started at 0: due at 10, 20, 30, …
+        let stamp = |pk: &[Packet]| u32::from_le_bytes([pk[0].data[1], pk[0].data[2], pk[0].data[3], 0]);
+        // Two ms late: sampled for 10, the next one still due at 20 (no 12, 8 pair).
+        assert_eq!(stamp(&log.due(12.0, |_| 0.0)), 10);
+        assert!(log.due(19.5, |_| 0.0).is_empty());
+        assert_eq!(stamp(&log.due(20.0, |_| 0.0)), 20);
+        // A stall past 30 and 40: one sample for 40, then 50 (missed periods skipped, not burst).
+        let pk = log.due(47.0, |_| 0.0);
+        assert_eq!((pk.len(), stamp(&pk)), (1, 40));
+        assert!(log.due(49.0, |_| 0.0).is_empty());
+        assert_eq!(stamp(&log.due(50.5, |_| 0.0)), 50);
     }
 
     #[test]
