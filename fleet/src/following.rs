@@ -44,10 +44,12 @@ pub fn follow(nav: &Navigator, uavs: &mut [Uav], neighbours: &Ragged<usize>, tra
     traffic.update(uavs);
     for k in 0..uavs.len() {
         uavs[k].traffic.restriction.follow_at = None;
+        uavs[k].traffic.restriction.keep_lane = false;
         let Some(me) = uavs[k].traffic.route else { continue };
-        if !applies(nav, uavs, k, &me, &neighbours[k], traffic) {
+        let Some(oncoming) = applies(nav, uavs, k, &me, &neighbours[k], traffic) else {
             continue;
-        }
+        };
+        uavs[k].traffic.restriction.keep_lane = oncoming;
         let direction = me.direction();
         let leader = neighbours[k]
             .iter()
@@ -101,7 +103,8 @@ impl TrafficAlong {
 /// Whether UAV k (at `me` on its route) follows at all: not within r_s of its goal (where it slows
 /// down to park among others), and only with oncoming traffic among its neighbours or within r_s
 /// ahead along the road, or with [`CROWD_NEIGHBOURS`] neighbours within [`CROWD_RADIUS_M`] where
-/// the road narrows ahead.
+/// the road narrows ahead. `Some(true)` when traffic comes the other way (the UAV also keeps to its
+/// lane through bends), `None` when it does not follow.
 fn applies(
     nav: &Navigator,
     uavs: &[Uav],
@@ -109,15 +112,15 @@ fn applies(
     me: &RoutePosition,
     neighbours: &[usize],
     traffic: &TrafficAlong,
-) -> bool {
+) -> Option<bool> {
     if (me.goal_s - me.s).abs() < nav.r_s {
-        return false;
+        return None;
     }
     let oncoming = traffic.oncoming_within(me, nav.r_s)
         || neighbours.iter().any(|&d| uavs[d].traffic.route.is_some_and(|o| o.direction() != me.direction()));
     let p = uavs[k].state.p;
     let close = || neighbours.iter().filter(|&&d| (uavs[d].state.p - p).norm() < CROWD_RADIUS_M).count();
-    oncoming || (narrows_ahead(nav, me) && close() >= CROWD_NEIGHBOURS)
+    (oncoming || (narrows_ahead(nav, me) && close() >= CROWD_NEIGHBOURS)).then_some(oncoming)
 }
 
 /// True when the road within r_s ahead of `me` gets narrower than [`NARROWING`] of its width here

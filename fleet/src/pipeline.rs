@@ -135,8 +135,8 @@ impl TickPipeline {
             let me = &fleet.uavs[k];
             let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { continue };
             let flying = self.neighbours.lists[k].iter().map(|&d| &fleet.uavs[d]).filter_map(|u| {
-                let goal = u.nav.goal().filter(|_| !u.nav.arrived)?;
-                Some(Flying { p: u.state.p, goal })
+                u.nav.goal().filter(|_| !u.nav.arrived)?;
+                Some(Flying { p: u.state.p, target: u.last.target })
             });
             fleet.uavs[k].last.target = make_way(me.state.p, goal, flying, d_c);
         }

@@ -288,7 +288,7 @@ impl TrafficRules {
                 let going = other.traffic.restriction.hold_at.is_none();
                 let gives_way = if held { towards_me } else { facing && first };
                 (near && going && gives_way && other.traffic.back_off.is_none())
-                    .then_some(Flying { p, goal: target })
+                    .then_some(Flying { p, target })
             });
             let aside = make_way(me, me, winners, nav.d_c);
             if aside != me {

@@ -9,25 +9,26 @@
 use uav::Vec2;
 
 /// Distance (in units of D_c) within which an arrived UAV makes way for a flying neighbour.
-pub const YIELD_RADIUS_IN_DC: f64 = 2.0;
+pub const YIELD_RADIUS_IN_DC: f64 = 5.0;
 
-/// A neighbour that is still flying: its position and goal.
+/// A neighbour that is still flying: its position and where it is heading now.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Flying {
     /// Position (m).
     pub p: Vec2,
-    /// Goal (m).
-    pub goal: Vec2,
+    /// Its temporary target (m): the way it takes along the road, which its goal (across a bend,
+    /// say) need not show.
+    pub target: Vec2,
 }
 
 /// The target of an arrived UAV at `p` (goal `goal`) given flying neighbours `others`: `goal` unless
-/// the UAV is within [`YIELD_RADIUS_IN_DC`]·`d_c` of a neighbour whose way to its goal points at it
-/// (less than 90° off); then a point `d_c` to the side of those neighbours' paths.
+/// the UAV is within [`YIELD_RADIUS_IN_DC`]·`d_c` of a neighbour whose way to its temporary target
+/// points at it (less than 90° off); then a point `d_c` to the side of those neighbours' paths.
 pub fn make_way(p: Vec2, goal: Vec2, others: impl Iterator<Item = Flying>, d_c: f64) -> Vec2 {
     let mut side = Vec2::zeros();
     let mut blocking = false;
     for o in others {
-        let (to_me, to_goal) = (p - o.p, o.goal - o.p);
+        let (to_me, to_goal) = (p - o.p, o.target - o.p);
         let (dist, way) = (to_me.norm(), to_goal.norm());
         if dist >= YIELD_RADIUS_IN_DC * d_c || dist == 0.0 || way == 0.0 {
             continue;
@@ -56,14 +57,14 @@ mod tests {
     fn steps_aside_only_for_a_neighbour_heading_past_it() {
         let (p, goal, d_c) = (Vec2::new(0.0, 0.0), Vec2::new(0.0, 0.0), 0.3);
         // A neighbour behind and slightly below, flying to the right through p: step up, off its path.
-        let behind = Flying { p: Vec2::new(-0.4, -0.1), goal: Vec2::new(3.0, -0.1) };
+        let behind = Flying { p: Vec2::new(-0.4, -0.1), target: Vec2::new(0.6, -0.1) };
         let t = make_way(p, goal, [behind].into_iter(), d_c);
         assert!((t - Vec2::new(0.0, d_c)).norm() < 1e-12, "{t:?}");
         // The same neighbour flying away (its goal behind it): stay at the goal.
-        let away = Flying { goal: Vec2::new(-3.0, -0.1), ..behind };
+        let away = Flying { target: Vec2::new(-1.4, -0.1), ..behind };
         assert_eq!(make_way(p, goal, [away].into_iter(), d_c), goal);
         // Too far away to matter.
-        let far = Flying { p: Vec2::new(-1.0, -0.1), ..behind };
+        let far = Flying { p: Vec2::new(-1.6, -0.1), ..behind };
         assert_eq!(make_way(p, goal, [far].into_iter(), d_c), goal);
     }
 }

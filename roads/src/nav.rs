@@ -159,6 +159,9 @@ pub struct Restriction {
     /// Follow: the target may not pass this arc length in the direction of travel (a follow gap
     /// behind the UAV ahead in its lane); when past it, wait where it is.
     pub follow_at: Option<f64>,
+    /// Keep to the lane through sharp left bends (traffic comes the other way): the straight path to
+    /// the target may not cut a bend's inside corner across the centre line into the oncoming lane.
+    pub keep_lane: bool,
 }
 
 /// Chooses temporary targets on one road.

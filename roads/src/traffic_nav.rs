@@ -22,6 +22,10 @@ pub const PASSING_MARGIN_M: f64 = 0.05;
 /// sides of it.
 pub const ROOMY_MARGIN_M: f64 = 0.2;
 
+/// Sine of the smallest turn that counts as a sharp bend for [`Restriction::keep_lane`] (20°):
+/// gentler bends are cut by less than the lane gap.
+pub const SHARP_BEND_SIN: f64 = 0.34;
+
 /// One UAV's situation on its route.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Route {
@@ -76,6 +80,26 @@ impl Navigator<'_> {
         right.min(left) - self.d_s - CLEARANCE_MARGIN_M - inner
     }
 
+    /// True when the straight path p→c, for a UAV travelling towards `direction` (±1) from arc
+    /// length `s0` to `s1`, keeps the centre-line vertex of every sharp left bend between them on its
+    /// left, where the road is two-way there: it does not cut the bend's inside corner through the
+    /// oncoming lane.
+    pub fn keeps_lane(&self, p: Vec2, c: Vec2, s0: f64, s1: f64, direction: f64) -> bool {
+        let line = self.road.centerline();
+        let (points, arc) = (line.points(), line.arc());
+        let (lo, hi) = (s0.min(s1), s0.max(s1));
+        let path = c - p;
+        let cross = |a: Vec2, b: Vec2| a.x * b.y - a.y * b.x;
+        (arc.partition_point(|&a| a <= lo).max(1)..points.len().saturating_sub(1))
+            .take_while(|&k| arc[k] < hi)
+            .all(|k| {
+                let (v, before, after) = (points[k], points[k - 1], points[k + 1]);
+                let (t_in, t_out) = ((v - before).normalize(), (after - v).normalize());
+                let left_turn = direction * cross(t_in, t_out);
+                left_turn < SHARP_BEND_SIN || !self.two_way_at(arc[k]) || cross(path, v - p) >= 0.0
+            })
+    }
+
     pub(crate) fn traffic_target(&self, route: &Route, restriction: &Restriction) -> Vec2 {
         if let Some(back_off) = restriction.back_off {
             return back_off;
@@ -96,12 +120,22 @@ impl Navigator<'_> {
         };
         let goal_allowed = stop.is_none_or(|stop| (pos.goal_s - pos.s).abs() <= room_to(stop).max(0.0));
         // Level with the goal there is no lane point left to aim at: any path that crosses no wall.
-        let goal_need = if (pos.goal_s - pos.s).abs() <= PROFILE_STEP_M { 0.0 } else { need };
+        let level = (pos.goal_s - pos.s).abs() <= PROFILE_STEP_M;
+        let goal_need = if level { 0.0 } else { need };
+        let to_goal = route.goal - route.p;
         if goal_allowed
-            && (route.goal - route.p).norm() <= self.r_s
+            && to_goal.norm() <= self.r_s
             && self.road.path_clear(&route.p, route.segment, &route.goal, route.goal_segment, goal_need)
         {
             return route.goal;
+        }
+        // Level with a goal farther than r_s across a wide road, the lane ends beside the UAV: go
+        // r_s straight across towards the goal instead of hovering there.
+        if goal_allowed && level && to_goal.norm() > self.r_s {
+            let across = route.p + to_goal * (self.r_s / to_goal.norm());
+            if self.road.path_clear(&route.p, route.segment, &across, route.goal_segment, 0.0) {
+                return across;
+            }
         }
         if let Some((at, wait_here)) = stop {
             let room = room_to((at, wait_here));
@@ -119,19 +153,25 @@ impl Navigator<'_> {
             let s = pos.s + direction * ahead * (k as f64 / count as f64);
             (line.point_beside(s, self.lane_offset(s, direction, pos.lateral)), line.piece_at(s))
         };
-        let clear =
-            |(c, segment): (Vec2, usize)| self.road.path_clear(&route.p, route.segment, &c, segment, need);
+        let keeps_lane = |c: Vec2, k: usize, count: usize| {
+            let s = pos.s + direction * ahead * (k as f64 / count as f64);
+            !restriction.keep_lane || self.keeps_lane(route.p, c, pos.s, s, direction)
+        };
+        let clear = |k: usize, count: usize| {
+            let (c, segment) = candidate(k, count);
+            self.road.path_clear(&route.p, route.segment, &c, segment, need) && keeps_lane(c, k, count)
+        };
         // The farthest clear candidate, by bisection: a candidate behind an occluding vertex hides the
         // ones beyond it too, so "clear" holds for a prefix of the candidates (up to the rare exception).
         let count = (ahead / PROFILE_STEP_M).ceil() as usize;
         // Most of the time (straight or gentle roads) the farthest one is clear: one test.
-        if count > 0 && clear(candidate(count, count)) {
+        if count > 0 && clear(count, count) {
             return candidate(count, count).0;
         }
         let (mut lo, mut hi) = (0, count.saturating_sub(1));
         while lo < hi {
             let mid = (lo + hi).div_ceil(2);
-            if clear(candidate(mid, count)) { lo = mid } else { hi = mid - 1 }
+            if clear(mid, count) { lo = mid } else { hi = mid - 1 }
         }
         // lo = 0: the lane point beside the UAV (it and the UAV share a segment, or nearly).
         candidate(lo, count.max(1)).0

@@ -57,6 +57,40 @@ proptest! {
         prop_assert!(path >= need.min(ends) - 1e-6, "path {p:?} → {t:?} passes {path:.3} m from a wall (need {need:.3}, ends {ends:.3})");
     }
 
+    /// Keeping to the lane (oncoming traffic): from anywhere in its right lane before a sharp left
+    /// bend, a UAV's straight path to its target never enters the bend's inside corner (left of
+    /// both centre-line pieces that meet at it), which is the oncoming lane; without the rule the
+    /// farthest clear lane point cuts that corner.
+    #[test]
+    fn keeping_the_lane_never_cuts_a_left_bend_through_the_oncoming_lane(
+        turn in 25.0f64..130.0, width in 1.2f64..4.0, before in 0.0f64..3.0, across in 0.0f64..1.0,
+        speed in 0.0f64..1.0,
+    ) {
+        let road = winding(turn, width);
+        let params = Params::default();
+        let nav = Navigator::new(&road, NavMode::Traffic, &params);
+        let line = road.centerline();
+        let (points, arc) = (line.points(), line.arc());
+        let s = arc[1] - before;
+        prop_assume!(nav.two_way_at(arc[1]));
+        let lane = nav.lane_offset(s, 1.0, -1.0);
+        let p = line.point_beside(s, lane * (0.5 + 0.5 * across));
+        let goal = line.point_beside(line.length() - 0.5, 0.0);
+        let mut state = NavState::new(p);
+        state.set_goal(&road, Some(goal), p);
+        let v = line.tangent_at(s) * speed;
+        let keep = Restriction { keep_lane: true, ..Restriction::default() };
+        let t = nav.target_with(&mut state, p, v, &keep);
+        let left_of = |a: Vec2, b: Vec2, x: Vec2| (b - a).x * (x - a).y - (b - a).y * (x - a).x > 1e-9;
+        let (a, v_, b) = (points[0], points[1], points[2]);
+        for k in 0..=100 {
+            let x = p + (t - p) * (k as f64 / 100.0);
+            prop_assert!(!(left_of(a, v_, x) && left_of(v_, b, x)), "path {p:?} → {t:?} enters the oncoming lane at {x:?}");
+        }
+        // Not stuck either: the target is ahead of the UAV.
+        prop_assert!((t - p).norm() > 0.05, "target {t:?} beside {p:?}");
+    }
+
     /// Lanes: where both exist, opposite lanes are at least D_c + 2·margin apart and each keeps
     /// D_s + margin from its wall, whatever lateral offset the UAVs are at.
     #[test]
@@ -92,4 +126,19 @@ fn a_hold_keeps_the_target_before_the_hold_point() {
     let away = Vec2::new(1.0, 1.0);
     let backing = Restriction { back_off: Some(away), ..Restriction::default() };
     assert_eq!(nav.target_with(&mut state, p, Vec2::zeros(), &backing), away);
+}
+
+#[test]
+fn level_with_a_goal_across_a_wide_road_the_target_heads_for_it() {
+    // A 12 m wide road: the goal at the far side lies more than r_s across from the lane.
+    let road = Road::new(RoadLayout::from_centerline(&[[0.0, 0.0], [20.0, 0.0]], &[12.0, 12.0])).unwrap();
+    let params = Params::default();
+    let nav = Navigator::new(&road, NavMode::Traffic, &params);
+    let (p, goal) = (Vec2::new(10.0, -4.0), Vec2::new(10.05, 4.5));
+    let mut state = NavState::new(p);
+    state.set_goal(&road, Some(goal), p);
+    let t = nav.target_with(&mut state, p, Vec2::zeros(), &Restriction::default());
+    // r_s straight towards the goal, not the lane point beside the UAV (where it would hover).
+    assert!(((t - p).norm() - nav.r_s).abs() < 1e-9, "{t:?}");
+    assert!((t - p).normalize().dot(&(goal - p).normalize()) > 1.0 - 1e-9, "{t:?}");
 }
