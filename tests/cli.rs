@@ -233,15 +233,16 @@ fn run_plot_to_an_unwritable_place_fails_with_the_file_named() {
 fn stress_reports_time_to_arrival_and_saves_unfinished_cases_with_save_failing() {
     let dir = scratch("stress-saved");
     let _ = std::fs::remove_dir_all(&dir);
-    // Seeds 14–19 of `mixed`: seed 18 leaves one of its 8 UAVs short of its goal when measured.
+    // Seeds 211–214 of `mixed`: 211 and 212 leave some of their 26 and 27 UAVs short of their goals
+    // within 60 s when measured (two, so that one rule change that lets one finish keeps the test).
     let run = airroads(&[
         "stress",
         "--family",
         "mixed",
         "--scenarios",
-        "6",
+        "4",
         "--seed",
-        "14",
+        "211",
         "--policy",
         "pd",
         "--save-failing",

@@ -45,11 +45,13 @@ pub fn follow(nav: &Navigator, uavs: &mut [Uav], neighbours: &Ragged<usize>, tra
     for k in 0..uavs.len() {
         uavs[k].traffic.restriction.follow_at = None;
         uavs[k].traffic.restriction.keep_lane = false;
+        uavs[k].traffic.in_traffic = false;
         let Some(me) = uavs[k].traffic.route else { continue };
         let Some(oncoming) = applies(nav, uavs, k, &me, &neighbours[k], traffic) else {
             continue;
         };
         uavs[k].traffic.restriction.keep_lane = oncoming;
+        uavs[k].traffic.in_traffic = true;
         let direction = me.direction();
         let leader = neighbours[k]
             .iter()

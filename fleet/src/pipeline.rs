@@ -10,7 +10,7 @@ use crate::filtering::FilterStage;
 use crate::fleet::{Fleet, StageTimes, Uav, parallel};
 use crate::neighbours::NeighbourSearch;
 use crate::rows::RowBuilder;
-use crate::speed::{govern, keep_distance};
+use crate::speed::{crowd_limit, govern, keep_distance};
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::LinkPhase;
 use policies::{Observation, observation};
@@ -197,7 +197,7 @@ impl TickPipeline {
         }
     }
 
-    /// The traffic rules' speed limit (narrower road, slower flight) and the distance kept to every
+    /// The traffic rules' speed limit (narrower road, slower flight; slower still in a dense crowd) and the distance kept to every
     /// neighbour (`fleet::speed`), applied to each flying UAV's nominal input. Per UAV, reading its
     /// neighbours' states from plain copies (a link is not shared across threads): in parallel for
     /// large fleets, with the same result on any number of threads.
@@ -210,7 +210,10 @@ impl TickPipeline {
                 return;
             };
             let (p, v) = (me.state.p, me.state.v);
-            let limit = traffic.speed_limit(pos.s, pos.direction());
+            let mut limit = traffic.speed_limit(pos.s, pos.direction());
+            if me.traffic.in_traffic {
+                limit = crowd_limit(limit, p, lists[k].iter().map(|&d| positions[d]));
+            }
             let mut u = govern(v, me.last.u_ref, limit, delta, dt);
             for &d in &lists[k] {
                 u = keep_distance(v, u, positions[d] - p, velocities[d], d_c, delta, dt);

@@ -23,6 +23,26 @@ pub fn speed_limit(width: f64) -> f64 {
     BASE_SPEED_MPS + SPEED_PER_WIDTH * width.clamp(0.0, FREE_WIDTH_M)
 }
 
+/// Speed limit (m/s) in a dense crowd: [`CROWD_AROUND`] or more neighbours within
+/// [`CROWD_AROUND_M`]. Blocks of 40–60 UAVs packed D_c + 0.3 m apart that set off together at the
+/// width's limit (up to 3 m/s) pressed into each other where they funnelled, 1–3 cm inside D_c
+/// (`headon` family, 4 of 300 cases with `pd`, 11 with `rl`; none with `pd` and 3 with `rl` at this
+/// limit, BENCHMARKS.md).
+pub const CROWD_SPEED_MPS: f64 = 0.5;
+
+/// Neighbours within [`CROWD_AROUND_M`] that make a crowd for [`CROWD_SPEED_MPS`].
+pub const CROWD_AROUND: usize = 4;
+
+/// Radius (m) within which neighbours count towards a crowd.
+pub const CROWD_AROUND_M: f64 = 1.0;
+
+/// The speed limit `limit` of a UAV at `p`, lowered to [`CROWD_SPEED_MPS`] when [`CROWD_AROUND`]
+/// of the neighbours at `others` are within [`CROWD_AROUND_M`].
+pub fn crowd_limit(limit: f64, p: Vec2, others: impl Iterator<Item = Vec2>) -> f64 {
+    let close = others.filter(|o| (o - p).norm() < CROWD_AROUND_M).take(CROWD_AROUND).count();
+    if close >= CROWD_AROUND { limit.min(CROWD_SPEED_MPS) } else { limit }
+}
+
 /// Deceleration (m/s²) at which the look-ahead of [`SpeedProfile`] slows a UAV down before a
 /// narrower part: a quarter of δ = 5, so that a queue slowing down together keeps most of δ for
 /// its collision rows (docs/safety.md §10.3).
@@ -150,6 +170,18 @@ mod tests {
             }
             prop_assert!(next <= (v + u_ref * dt).norm().max(limit) + 1e-9);
         }
+    }
+
+    #[test]
+    fn a_crowd_lowers_the_limit_only_with_enough_neighbours_close() {
+        let p = Vec2::new(0.0, 0.0);
+        let ring =
+            |r: f64, n: usize| (0..n).map(move |k| Vec2::new(r * (k as f64).cos(), r * (k as f64).sin()));
+        assert_eq!(crowd_limit(2.4, p, ring(0.6, CROWD_AROUND)), CROWD_SPEED_MPS);
+        assert_eq!(crowd_limit(2.4, p, ring(0.6, CROWD_AROUND - 1)), 2.4);
+        assert_eq!(crowd_limit(2.4, p, ring(1.2, 10)), 2.4);
+        // Never raises a lower limit.
+        assert_eq!(crowd_limit(0.3, p, ring(0.6, 10)), 0.3);
     }
 
     proptest! {

@@ -79,6 +79,10 @@ pub struct UavTraffic {
     pub restriction: Restriction,
     /// Why the rules keep it from its way this tick, if they do.
     pub waiting: Option<WaitReason>,
+    /// The following rule applies to it this tick (traffic comes the other way, or a crowd funnels
+    /// into a narrower part: `fleet::following`), which also lowers its speed limit in a dense
+    /// crowd ([`crate::speed::crowd_limit`]).
+    pub in_traffic: bool,
 }
 
 /// The rules' state between ticks.

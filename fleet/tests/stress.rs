@@ -12,7 +12,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Cases (of seeds 1..=N, `pd`) in which every UAV arrived when last measured (`airroads stress
 /// --family F --scenarios N --seed 1 --policy pd`); a change may raise these, never lower them.
-const MIXED_ARRIVED: usize = 283;
+const MIXED_ARRIVED: usize = 286;
 const BENDS_ARRIVED: usize = 98;
 const BOTTLENECK_ARRIVED: usize = 100;
 const HAIRPIN_ARRIVED: usize = 100;
