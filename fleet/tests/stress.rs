@@ -16,7 +16,7 @@ const MIXED_ARRIVED: usize = 286;
 const BENDS_ARRIVED: usize = 98;
 const BOTTLENECK_ARRIVED: usize = 100;
 const HAIRPIN_ARRIVED: usize = 100;
-const HEADON_ARRIVED: usize = 36;
+const HEADON_ARRIVED: usize = 38;
 const CROWD_ARRIVED: usize = 40;
 
 /// Runs cases 1..=`cases` of `family` with `pd` on every core; returns the unsafe ones (seed and
