@@ -135,8 +135,8 @@ impl TickPipeline {
             let me = &fleet.uavs[k];
             let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { continue };
             let flying = self.neighbours.lists[k].iter().map(|&d| &fleet.uavs[d]).filter_map(|u| {
-                u.nav.goal().filter(|_| !u.nav.arrived)?;
-                Some(Flying { p: u.state.p, target: u.last.target })
+                (u.nav.goal().is_some() && !u.nav.arrived)
+                    .then_some(Flying { p: u.state.p, target: u.last.target })
             });
             fleet.uavs[k].last.target = make_way(me.state.p, goal, flying, d_c);
         }
@@ -197,8 +197,9 @@ impl TickPipeline {
         }
     }
 
-    /// The traffic rules' speed limit (narrower road, slower flight; slower still in a dense crowd) and the distance kept to every
-    /// neighbour (`fleet::speed`), applied to each flying UAV's nominal input. Per UAV, reading its
+    /// The traffic rules' speed limit (narrower road, slower flight; slower still in dense traffic)
+    /// and the distance kept to every neighbour (`fleet::speed`), applied to each flying UAV's
+    /// nominal input. Per UAV, reading its
     /// neighbours' states from plain copies (a link is not shared across threads): in parallel for
     /// large fleets, with the same result on any number of threads.
     fn limit_speeds(&mut self, fleet: &mut Fleet) {

@@ -6,6 +6,7 @@
 //! stop from, braking at δ, well before D_c (the `crowd` family showed blocks pressing into each
 //! other at full δ until the filter ran out of input and used slack).
 
+use crate::following::CROWD_RADIUS_M;
 use roads::{ClearanceProfile, PROFILE_STEP_M};
 use uav::Vec2;
 
@@ -23,23 +24,20 @@ pub fn speed_limit(width: f64) -> f64 {
     BASE_SPEED_MPS + SPEED_PER_WIDTH * width.clamp(0.0, FREE_WIDTH_M)
 }
 
-/// Speed limit (m/s) in a dense crowd: [`CROWD_AROUND`] or more neighbours within
-/// [`CROWD_AROUND_M`]. Blocks of 40–60 UAVs packed D_c + 0.3 m apart that set off together at the
+/// Speed limit (m/s) in dense traffic: where the following rule applies and [`CROWD_AROUND`] or
+/// more neighbours are within [`CROWD_RADIUS_M`] (the following rule's crowd radius). Blocks of 40–60 UAVs packed D_c + 0.3 m apart that set off together at the
 /// width's limit (up to 3 m/s) pressed into each other where they funnelled, 1–3 cm inside D_c
 /// (`headon` family, 4 of 300 cases with `pd`, 11 with `rl`; none with `pd` and 3 with `rl` at this
 /// limit, BENCHMARKS.md).
 pub const CROWD_SPEED_MPS: f64 = 0.5;
 
-/// Neighbours within [`CROWD_AROUND_M`] that make a crowd for [`CROWD_SPEED_MPS`].
+/// Neighbours within [`CROWD_RADIUS_M`] that make a crowd for [`CROWD_SPEED_MPS`].
 pub const CROWD_AROUND: usize = 4;
 
-/// Radius (m) within which neighbours count towards a crowd.
-pub const CROWD_AROUND_M: f64 = 1.0;
-
 /// The speed limit `limit` of a UAV at `p`, lowered to [`CROWD_SPEED_MPS`] when [`CROWD_AROUND`]
-/// of the neighbours at `others` are within [`CROWD_AROUND_M`].
+/// of the neighbours at `others` are within [`CROWD_RADIUS_M`].
 pub fn crowd_limit(limit: f64, p: Vec2, others: impl Iterator<Item = Vec2>) -> f64 {
-    let close = others.filter(|o| (o - p).norm() < CROWD_AROUND_M).take(CROWD_AROUND).count();
+    let close = others.filter(|o| (o - p).norm() < CROWD_RADIUS_M).take(CROWD_AROUND).count();
     if close >= CROWD_AROUND { limit.min(CROWD_SPEED_MPS) } else { limit }
 }
 

@@ -28,12 +28,12 @@ pub fn make_way(p: Vec2, goal: Vec2, others: impl Iterator<Item = Flying>, d_c: 
     let mut side = Vec2::zeros();
     let mut blocking = false;
     for o in others {
-        let (to_me, to_goal) = (p - o.p, o.target - o.p);
-        let (dist, way) = (to_me.norm(), to_goal.norm());
+        let (to_me, to_target) = (p - o.p, o.target - o.p);
+        let (dist, way) = (to_me.norm(), to_target.norm());
         if dist >= YIELD_RADIUS_IN_DC * d_c || dist == 0.0 || way == 0.0 {
             continue;
         }
-        let heading = to_goal / way;
+        let heading = to_target / way;
         let along = to_me.dot(&heading);
         if along <= 0.0 {
             continue;
@@ -60,7 +60,7 @@ mod tests {
         let behind = Flying { p: Vec2::new(-0.4, -0.1), target: Vec2::new(0.6, -0.1) };
         let t = make_way(p, goal, [behind].into_iter(), d_c);
         assert!((t - Vec2::new(0.0, d_c)).norm() < 1e-12, "{t:?}");
-        // The same neighbour flying away (its goal behind it): stay at the goal.
+        // The same neighbour flying away (its target behind it): stay at the goal.
         let away = Flying { target: Vec2::new(-1.4, -0.1), ..behind };
         assert_eq!(make_way(p, goal, [away].into_iter(), d_c), goal);
         // Too far away to matter.

@@ -10,6 +10,8 @@ pub struct CenterLine {
     points: Vec<Vec2>,
     /// Arc length (m) at each point; `arc[0] = 0`.
     arc: Vec<f64>,
+    /// Sine of the turn at each point towards increasing s (positive: left; 0 at both ends).
+    turns: Vec<f64>,
 }
 
 impl CenterLine {
@@ -28,7 +30,21 @@ impl CenterLine {
             }
             arc.push(s);
         }
-        Self { points, arc }
+        let turns = (0..points.len())
+            .map(|k| match (k.checked_sub(1).map(|j| points[j]), points.get(k + 1)) {
+                (Some(before), Some(after)) => {
+                    let v = points[k];
+                    uav::cross(&(v - before).normalize(), &(after - v).normalize())
+                }
+                _ => 0.0,
+            })
+            .collect();
+        Self { points, arc, turns }
+    }
+
+    /// Sine of the turn at each vertex towards increasing s (positive: a left bend; 0 at both ends).
+    pub fn turns(&self) -> &[f64] {
+        &self.turns
     }
 
     /// The polyline's vertices.

@@ -86,18 +86,14 @@ impl Navigator<'_> {
     /// oncoming lane.
     pub fn keeps_lane(&self, p: Vec2, c: Vec2, s0: f64, s1: f64, direction: f64) -> bool {
         let line = self.road.centerline();
-        let (points, arc) = (line.points(), line.arc());
+        let (points, arc, turns) = (line.points(), line.arc(), line.turns());
         let (lo, hi) = (s0.min(s1), s0.max(s1));
         let path = c - p;
-        let cross = |a: Vec2, b: Vec2| a.x * b.y - a.y * b.x;
-        (arc.partition_point(|&a| a <= lo).max(1)..points.len().saturating_sub(1))
-            .take_while(|&k| arc[k] < hi)
-            .all(|k| {
-                let (v, before, after) = (points[k], points[k - 1], points[k + 1]);
-                let (t_in, t_out) = ((v - before).normalize(), (after - v).normalize());
-                let left_turn = direction * cross(t_in, t_out);
-                left_turn < SHARP_BEND_SIN || !self.two_way_at(arc[k]) || cross(path, v - p) >= 0.0
-            })
+        (arc.partition_point(|&a| a <= lo)..points.len()).take_while(|&k| arc[k] < hi).all(|k| {
+            direction * turns[k] < SHARP_BEND_SIN
+                || !self.two_way_at(arc[k])
+                || uav::cross(&path, &(points[k] - p)) >= 0.0
+        })
     }
 
     pub(crate) fn traffic_target(&self, route: &Route, restriction: &Restriction) -> Vec2 {
@@ -149,17 +145,15 @@ impl Navigator<'_> {
         }
         // Candidate k of `count`, with its segment (piece i of the centre line runs through segment i;
         // an offset point may lie in a neighbour, which the route's walls include).
+        let arc_at = |k: usize, count: usize| pos.s + direction * ahead * (k as f64 / count as f64);
         let candidate = |k: usize, count: usize| {
-            let s = pos.s + direction * ahead * (k as f64 / count as f64);
+            let s = arc_at(k, count);
             (line.point_beside(s, self.lane_offset(s, direction, pos.lateral)), line.piece_at(s))
-        };
-        let keeps_lane = |c: Vec2, k: usize, count: usize| {
-            let s = pos.s + direction * ahead * (k as f64 / count as f64);
-            !restriction.keep_lane || self.keeps_lane(route.p, c, pos.s, s, direction)
         };
         let clear = |k: usize, count: usize| {
             let (c, segment) = candidate(k, count);
-            self.road.path_clear(&route.p, route.segment, &c, segment, need) && keeps_lane(c, k, count)
+            self.road.path_clear(&route.p, route.segment, &c, segment, need)
+                && (!restriction.keep_lane || self.keeps_lane(route.p, c, pos.s, arc_at(k, count), direction))
         };
         // The farthest clear candidate, by bisection: a candidate behind an occluding vertex hides the
         // ones beyond it too, so "clear" holds for a prefix of the candidates (up to the rare exception).
