@@ -27,5 +27,5 @@ pub use lanes::{ClearanceProfile, PROFILE_STEP_M, segment_distance};
 pub use layout::RoadLayout;
 pub use nav::{NavMode, NavState, Navigator, Restriction, RoutePosition};
 pub use road::{Road, SegmentTracker};
-pub use traffic_nav::{CLEARANCE_MARGIN_M, LANE_GAP_MARGIN_M};
+pub use traffic_nav::{CLEARANCE_MARGIN_M, LANE_GAP_MARGIN_M, MIN_CLEARANCE_MARGIN_M};
 pub use validate::{MAX_COORDINATE_M, RoadError, RoadRule};

@@ -9,6 +9,10 @@ use uav::Vec2;
 /// Clearance (m) kept from walls beyond D_s and the braking distance, by paths and lanes.
 pub const CLEARANCE_MARGIN_M: f64 = 0.1;
 
+/// Clearance (m) beyond D_s that a path keeps when none ahead keeps the full clearance
+/// ([`Navigator::clearance_at`]): half of [`CLEARANCE_MARGIN_M`].
+pub const MIN_CLEARANCE_MARGIN_M: f64 = 0.05;
+
 /// Gap (m) kept beyond D_c/2 between a lane and the centre line, so two opposite lanes are at
 /// least D_c + 2·this apart.
 pub const LANE_GAP_MARGIN_M: f64 = 0.1;
@@ -150,7 +154,7 @@ impl Navigator<'_> {
             let s = arc_at(k, count);
             (line.point_beside(s, self.lane_offset(s, direction, pos.lateral)), line.piece_at(s))
         };
-        let clear = |k: usize, count: usize| {
+        let clear = |k: usize, count: usize, need: f64| {
             let (c, segment) = candidate(k, count);
             self.road.path_clear(&route.p, route.segment, &c, segment, need)
                 && (!restriction.keep_lane || self.keeps_lane(route.p, c, pos.s, arc_at(k, count), direction))
@@ -159,13 +163,23 @@ impl Navigator<'_> {
         // ones beyond it too, so "clear" holds for a prefix of the candidates (up to the rare exception).
         let count = (ahead / PROFILE_STEP_M).ceil() as usize;
         // Most of the time (straight or gentle roads) the farthest one is clear: one test.
-        if count > 0 && clear(count, count) {
+        if count > 0 && clear(count, count, need) {
             return candidate(count, count).0;
         }
-        let (mut lo, mut hi) = (0, count.saturating_sub(1));
-        while lo < hi {
-            let mid = (lo + hi).div_ceil(2);
-            if clear(mid, count) { lo = mid } else { hi = mid - 1 }
+        let farthest = |need: f64| {
+            let (mut lo, mut hi) = (0, count.saturating_sub(1));
+            while lo < hi {
+                let mid = (lo + hi).div_ceil(2);
+                if clear(mid, count, need) { lo = mid } else { hi = mid - 1 }
+            }
+            lo
+        };
+        let mut lo = farthest(need);
+        if lo == 0 && count > 1 {
+            // Nothing ahead is clear: the UAV stands at its lane's edge beside an inner vertex, where
+            // every path onwards passes the vertex a little closer than the clearance it keeps. Go on
+            // with the smallest clearance a path may have instead of hovering there.
+            lo = farthest(self.d_s + MIN_CLEARANCE_MARGIN_M);
         }
         // lo = 0: the lane point beside the UAV (it and the UAV share a segment, or nearly).
         candidate(lo, count.max(1)).0

@@ -3,7 +3,8 @@
 
 use proptest::prelude::*;
 use roads::{
-    CLEARANCE_MARGIN_M, LANE_GAP_MARGIN_M, NavMode, NavState, Navigator, Restriction, Road, RoadLayout,
+    CLEARANCE_MARGIN_M, LANE_GAP_MARGIN_M, MIN_CLEARANCE_MARGIN_M, NavMode, NavState, Navigator, Restriction,
+    Road, RoadLayout,
 };
 use uav::{Params, Vec2};
 
@@ -31,7 +32,9 @@ proptest! {
 
     /// The straight path to a `traffic` target never comes closer to a wall than the clearance
     /// D_s + v²/(2δ) + margin, or than the nearer of its two ends: in particular it never grazes an
-    /// inner vertex, which is what left UAVs hovering at bends.
+    /// inner vertex, which is what left UAVs hovering at bends. Where no path ahead keeps the full
+    /// clearance (a UAV at its lane's edge beside an inner vertex) the floor is D_s + the smaller
+    /// margin [`MIN_CLEARANCE_MARGIN_M`].
     #[test]
     fn targets_keep_their_clearance_from_walls_and_vertices(
         turn in 20.0f64..130.0, width in 1.0f64..4.0, along in 0.0f64..1.0, across in -1.0f64..1.0,
@@ -52,9 +55,10 @@ proptest! {
         let t = nav.target_with(&mut state, p, v, &Restriction::default());
         prop_assert!(road.contains(&t), "target {t:?} outside the road");
         let need = params.d_s + speed * speed / (2.0 * params.delta) + CLEARANCE_MARGIN_M;
+        let floor = need.min(params.d_s + MIN_CLEARANCE_MARGIN_M);
         let ends = wall_distance(&road, &p).min(wall_distance(&road, &t));
         let path = path_distance_to_walls(&road, &p, &t);
-        prop_assert!(path >= need.min(ends) - 1e-6, "path {p:?} → {t:?} passes {path:.3} m from a wall (need {need:.3}, ends {ends:.3})");
+        prop_assert!(path >= floor.min(ends) - 1e-6, "path {p:?} → {t:?} passes {path:.3} m from a wall (need {need:.3}, ends {ends:.3})");
     }
 
     /// Keeping to the lane (oncoming traffic): from anywhere in its right lane before a sharp left
@@ -141,4 +145,80 @@ fn level_with_a_goal_across_a_wide_road_the_target_heads_for_it() {
     // r_s straight towards the goal, not the lane point beside the UAV (where it would hover).
     assert!(((t - p).norm() - nav.r_s).abs() < 1e-9, "{t:?}");
     assert!((t - p).normalize().dot(&(goal - p).normalize()) > 1.0 - 1e-9, "{t:?}");
+}
+
+/// The road of a `headon` stress case (seed 166) where a UAV hovered for the rest of the run: it
+/// stood at its lane's edge beside an inner vertex, 0.19999 m from the walls, and every lane point
+/// ahead passed that vertex a hair closer than the 0.2 m clearance it kept, so its target was its
+/// own position.
+fn lane_edge_road() -> Road {
+    let segments = vec![
+        [[8.0, -2.5], [0.0, -2.5], [8.0, 2.5], [0.0, 2.5]],
+        [
+            [10.037022146093888, -0.4705930807115996],
+            [8.0, -2.5],
+            [9.962977853906112, 0.4705930807115996],
+            [8.0, 2.5],
+        ],
+        [
+            [16.433349317836957, 0.5420886877604669],
+            [10.037022146093888, -0.4705930807115996],
+            [16.300260329130268, 1.4739267520516406],
+            [9.962977853906112, 0.4705930807115996],
+        ],
+        [
+            [22.754537395246373, 1.3473630720719512],
+            [16.433349317836957, 0.5420886877604669],
+            [22.767927185951415, 2.2978614906289665],
+            [16.300260329130268, 1.4739267520516406],
+        ],
+        [
+            [29.117979499255824, 0.3538182841162975],
+            [22.754537395246373, 1.3473630720719512],
+            [29.142372560467464, 1.3025987264768433],
+            [22.767927185951415, 2.2978614906289665],
+        ],
+        [
+            [35.590411305092005, 1.0259488906693426],
+            [29.117979499255824, 0.3538182841162975],
+            [35.49319646135699, 1.9621009427485514],
+            [29.142372560467464, 1.3025987264768433],
+        ],
+        [
+            [37.78933078087593, -0.7860239521386754],
+            [35.590411305092005, 1.0259488906693426],
+            [37.272882241152345, 4.187232617335433],
+            [35.49319646135699, 1.9621009427485514],
+        ],
+        [
+            [45.7465412920345, 0.04029371141905269],
+            [37.78933078087593, -0.7860239521386754],
+            [45.23009275231092, 5.013550280893162],
+            [37.272882241152345, 4.187232617335433],
+        ],
+    ];
+    Road::new(RoadLayout { segments }).unwrap()
+}
+
+#[test]
+fn a_uav_at_its_lane_edge_beside_an_inner_vertex_gets_a_target_ahead() {
+    let road = lane_edge_road();
+    let params = Params::default();
+    let nav = Navigator::new(&road, NavMode::Traffic, &params);
+    let goal = Vec2::new(44.72090306575626, 0.23539939764278328);
+    for p in [Vec2::new(22.6158, 1.5313), Vec2::new(22.6158, 1.5813), Vec2::new(22.5658, 1.5313)] {
+        let mut state = NavState::new(p);
+        state.set_goal(&road, Some(goal), p);
+        let t = nav.target_with(&mut state, p, Vec2::zeros(), &Restriction::default());
+        assert!((t - p).norm() > 0.1, "from {p:?} the target {t:?} is not ahead");
+        assert!(
+            (goal - t).norm() < (goal - p).norm(),
+            "from {p:?} the target {t:?} leads away from the goal"
+        );
+        let path = path_distance_to_walls(&road, &p, &t);
+        assert!(
+            path >= params.d_s + MIN_CLEARANCE_MARGIN_M - 1e-6,
+            "path {p:?} → {t:?} passes {path:.3} m from a wall"
+        );
+    }
 }
