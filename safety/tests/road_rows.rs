@@ -1,11 +1,13 @@
 //! Road rows on random roads: whatever rule, state and road, every row with b ≥ 0 is satisfied by
 //! braking straight away from its wall (u = −δa), and the walls rule always includes the nearest wall
-//! once it is within the activation radius.
+//! once it is within the activation radius; in closed loop the walls rule keeps a UAV pushed at full
+//! input at D_s from every wall and vertex, and lets one on a narrow road pass its joints
+//! (docs/safety.md §10.5).
 
 use proptest::prelude::*;
 use roads::{Road, RoadLayout, SegmentTracker};
-use safety::{RoadRule, Row, road_rows};
-use uav::{Params, Vec2};
+use safety::{RoadRule, Row, SafetyFilter, road_rows};
+use uav::{Params, UavState, Vec2};
 
 /// A random road: 2–6 pieces of 2–8 m with turns of up to ±120°, 1–5 m wide (invalid ones are skipped).
 fn road() -> impl Strategy<Value = Road> {
@@ -114,4 +116,107 @@ fn the_next_wall_is_guarded_from_behind_past_a_sharp_inner_vertex() {
     road_rows(&road, RoadRule::Walls, p, v, segment, &params, &mut rows);
     let radius = safety::activation_radius(params.d_s, v.norm(), params.delta);
     assert_eq!(unguarded_wall(&road, p, v, &params, radius, &rows), None, "{rows:#?}");
+}
+
+/// How far below D_s the closed loop may dip (sampling at dt = 0.05 s, as in `corner.rs`).
+const SAMPLING_SLACK_M: f64 = 0.02;
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(4000))]
+
+    /// A UAV that starts anywhere in a random road where it could still stop and is pushed at full
+    /// input δ in a random direction for 3 s never comes closer than D_s (less the sampling slack) to
+    /// a wall or vertex under the walls rule, also where the faster class-K function of covered
+    /// vertices (§10.5) applies.
+    #[test]
+    fn pushed_at_full_input_a_uav_keeps_d_s_from_every_wall(
+        road in road(),
+        t in 0.0..1.0f64,
+        lateral in -1.0..1.0f64,
+        (fraction, angle) in (0.0..0.8f64, 0.0..std::f64::consts::TAU),
+        push in 0.0..std::f64::consts::TAU,
+    ) {
+        let line = road.centerline();
+        let c = line.point_at(t * line.length());
+        let normal = { let d = line.tangent_at(t * line.length()); Vec2::new(-d.y, d.x) };
+        let p = c + normal * (lateral * road.boundary_distance(&c).max(0.0));
+        let params = Params::default();
+        let d = road.boundary_distance(&p);
+        prop_assume!(d > params.d_s);
+        // Recoverable: braking straight at full δ stops the UAV before D_s of any wall (two walls of
+        // a convex corner can each have b ≥ 0 and still ask for more than δ together).
+        let speed = fraction * (2.0 * params.delta * (d - params.d_s)).sqrt().min(4.0);
+        let mut state = UavState { p, v: Vec2::new(angle.cos(), angle.sin()) * speed };
+        let (mut tracker, mut rows) = (SegmentTracker::default(), Vec::new());
+        let u_ref = Vec2::new(push.cos(), push.sin()) * params.delta;
+        let mut filter = SafetyFilter::default();
+        for tick in 0..60 {
+            let segment = tracker.update(&road, &state.p);
+            rows.clear();
+            road_rows(&road, RoadRule::Walls, state.p, state.v, segment, &params, &mut rows);
+            let f = filter.filter(u_ref, state.v, &rows, params.delta, params.dt);
+            state = state.stepped(f.u, params.dt);
+            let d = road.boundary_distance(&state.p);
+            prop_assert!(d >= params.d_s - SAMPLING_SLACK_M, "tick {tick}: {d:.4} m from the walls at {:?}", state.p);
+        }
+    }
+}
+
+/// A 0.5 m wide road of 2 m segments with gentle bends of ±`turn_deg`: the centre is 0.25 m from
+/// both walls, and every joint is a vertex that the UAV passes at that distance.
+fn narrow_winding(turn_deg: f64) -> Road {
+    let mut points = vec![[0.0, 0.0]];
+    let (mut heading, mut p) = (0.0f64, Vec2::zeros());
+    for k in 0..8 {
+        heading += if k % 4 < 2 { turn_deg } else { -turn_deg }.to_radians();
+        p += Vec2::new(heading.cos(), heading.sin()) * 2.0;
+        points.push([p.x, p.y]);
+    }
+    Road::new(RoadLayout::from_centerline(&points, &vec![0.5; points.len()])).unwrap()
+}
+
+/// Seconds a UAV takes along `road`'s centre line from 0.5 m to `length − 1` m, steered by a PD
+/// towards the centre-line point 1.5 m ahead at `cruise` m/s through the walls-rule filter (None
+/// when it takes longer than `limit_s`); also the smallest distance to the walls on the way.
+fn traverse(road: &Road, cruise: f64, limit_s: f64) -> (Option<f64>, f64) {
+    let params = Params::default();
+    let line = road.centerline();
+    let mut state = UavState { p: line.point_at(0.5), v: Vec2::zeros() };
+    let (mut tracker, mut filter, mut rows) =
+        (SegmentTracker::default(), SafetyFilter::default(), Vec::new());
+    let mut closest = f64::INFINITY;
+    let ticks = (limit_s / params.dt) as usize;
+    for tick in 0..ticks {
+        let segment = tracker.update(road, &state.p);
+        let s = line.project_on_piece(segment, &state.p);
+        if s >= line.length() - 1.0 {
+            return (Some(tick as f64 * params.dt), closest);
+        }
+        let target = line.point_at((s + 1.5).min(line.length()));
+        let desired = (target - state.p).normalize() * cruise;
+        let u_ref = 3.0 * (desired - state.v);
+        let u_ref = if u_ref.norm() > params.delta { u_ref * (params.delta / u_ref.norm()) } else { u_ref };
+        rows.clear();
+        road_rows(road, RoadRule::Walls, state.p, state.v, segment, &params, &mut rows);
+        state = state.stepped(filter.filter(u_ref, state.v, &rows, params.delta, params.dt).u, params.dt);
+        closest = closest.min(road.boundary_distance(&state.p));
+    }
+    (None, closest)
+}
+
+/// Along a 0.5 m road the UAV passes every joint 0.25 m from its vertex. Under the end-point
+/// barrier's ζb³ alone, the vertex ahead throttled it (b_V falls from about 2 to 1 as it approaches,
+/// at a rate of at most ζb³ ≈ 0.05/s), so it crawled through each joint; with the covered-vertex
+/// rows of §10.5 it keeps most of its cruise speed, and still D_s from the walls.
+#[test]
+fn a_uav_on_a_narrow_winding_road_passes_its_joints_at_speed() {
+    let params = Params::default();
+    for turn in [0.0, 5.0, 10.0, 20.0, 30.0] {
+        let road = narrow_winding(turn);
+        let length = road.centerline().length() - 1.5;
+        let (time, closest) = traverse(&road, 1.0, 60.0);
+        let time = time.unwrap_or_else(|| panic!("turn {turn}°: not through {length:.1} m in 60 s"));
+        assert!(time <= 1.5 * length + 1.0, "turn {turn}°: {length:.1} m took {time:.2} s at 1 m/s cruise");
+        assert!(closest >= params.d_s - SAMPLING_SLACK_M, "turn {turn}°: {closest:.3} m from a wall");
+    }
 }
