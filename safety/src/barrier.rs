@@ -34,10 +34,10 @@ pub struct Row {
 }
 
 /// `δ ẋ / max(h, h_min)` written so it is exact when h ≥ h_min and only tightens otherwise:
-/// with b = h + ẋ, `δẋ/h = −δ + δb/h`, and the clamp applies to the second form
-/// (docs/safety.md §4.1).
+/// with b = h + ẋ, `δẋ/h = −δ + δb/h`, and the clamp applies to the second form, capped at 0 so
+/// that inside the clearance a UAV moving away may not accelerate back in (docs/safety.md §4.1).
 fn braking_term(delta: f64, rate: f64, h: f64, b: f64) -> f64 {
-    if h >= H_MIN { delta * rate / h } else { -delta + delta * b / H_MIN }
+    if h >= H_MIN { delta * rate / h } else { (-delta + delta * b / H_MIN).min(0.0) }
 }
 
 /// Collision row of UAV k against neighbour d (docs/safety.md §1, §2; paper eq. 4, 11, 14):

@@ -120,6 +120,9 @@ fn the_next_wall_is_guarded_from_behind_past_a_sharp_inner_vertex() {
 
 /// How far below D_s the closed loop may dip (sampling at dt = 0.05 s, as in `corner.rs`).
 const SAMPLING_SLACK_M: f64 = 0.02;
+/// How much deeper than it started a UAV inside D_s may get while pushed into the wall: one tick of
+/// full push from just outside D_s, ½δdt² ≈ 6 mm.
+const CREEP_M: f64 = 0.007;
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(4000))]
@@ -218,5 +221,40 @@ fn a_uav_on_a_narrow_winding_road_passes_its_joints_at_speed() {
         let time = time.unwrap_or_else(|| panic!("turn {turn}°: not through {length:.1} m in 60 s"));
         assert!(time <= 1.5 * length + 1.0, "turn {turn}°: {length:.1} m took {time:.2} s at 1 m/s cruise");
         assert!(closest >= params.d_s - SAMPLING_SLACK_M, "turn {turn}°: {closest:.3} m from a wall");
+    }
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(3000))]
+
+    /// A UAV that a sampling error left inside D_s of a wall, moving away from it, goes no more than
+    /// [`CREEP_M`] deeper in 2 s however hard its nominal input pushes into the wall: inside D_s the
+    /// row allows no acceleration towards the wall (docs/safety.md §4.1). Before, the row was dropped
+    /// whenever the UAV moved away, the push won the next tick, full braking the one after, and the
+    /// UAV crept in by about 2 mm per two ticks for as long as the push lasted. (Just outside D_s the
+    /// row δṡ/g still lets one tick's push through, which the bound allows for.)
+    #[test]
+    fn inside_d_s_a_uav_moving_away_never_goes_deeper(
+        depth in 0.001..0.04f64,
+        away in 0.0..0.3f64,
+        along in -2.0..2.0f64,
+        push_angle in 0.0..std::f64::consts::PI,
+    ) {
+        // A straight road 2 m wide along x; its lower wall is y = −1.
+        let road = Road::new(RoadLayout::from_centerline(&[[0.0, 0.0], [20.0, 0.0]], &[2.0, 2.0])).unwrap();
+        let params = Params::default();
+        let start = -1.0 + params.d_s - depth;
+        let mut state = UavState { p: Vec2::new(10.0, start), v: Vec2::new(along, away) };
+        // Any push with a component into the wall (−y), at full δ.
+        let u_ref = Vec2::new(push_angle.cos(), -push_angle.sin()) * params.delta;
+        let (mut tracker, mut filter, mut rows) = (SegmentTracker::default(), SafetyFilter::default(), Vec::new());
+        for tick in 0..40 {
+            let segment = tracker.update(&road, &state.p);
+            rows.clear();
+            road_rows(&road, RoadRule::Walls, state.p, state.v, segment, &params, &mut rows);
+            state = state.stepped(filter.filter(u_ref, state.v, &rows, params.delta, params.dt).u, params.dt);
+            let s = state.p.y + 1.0;
+            prop_assert!(s >= start + 1.0 - CREEP_M, "tick {tick}: {s:.4} m from the wall, started at {:.4} m", start + 1.0);
+        }
     }
 }
