@@ -3,7 +3,10 @@
 //! or a merge (entries: its arms). The ground station sees every UAV, so it admits UAVs from one
 //! entry at a time: the zone opens to the entry whose first UAV has waited longest, admits from it
 //! while others wait less than [`MAX_WAIT_S`] or until [`MAX_BATCH`] went in while others wait, and
-//! once everyone admitted has left, opens to the longest waiting entry again. Invariants: UAVs from
+//! once everyone admitted has left, opens to the longest waiting of the other entries (round robin:
+//! with equal waits, the entry that just had its phase would otherwise win every tie, and a side
+//! whose UAVs waited as long as a crowd on the other side never got in), or to the same entry when
+//! nobody else waits. Invariants: UAVs from
 //! two entries never hold grants of one zone at once, and a waiting UAV is admitted after at most
 //! one batch from each other entry (no starvation), given that admitted UAVs leave. Admitted UAVs
 //! go in one after another: the next is admitted once the previous one is clear of the entry.
@@ -31,6 +34,8 @@ struct Zone {
     held_entry: Option<usize>,
     /// Holders not yet clear of their entry (the next UAV waits for them).
     entering: u32,
+    /// The entry of the last phase that ended: the next phase prefers the others.
+    last_open: Option<usize>,
 }
 
 /// A UAV that asks to enter a zone from one of its entries.
@@ -110,6 +115,7 @@ impl Reservations {
         for z in &mut self.zones {
             if z.held == 0 {
                 // Everyone admitted has left: the phase is over.
+                z.last_open = z.open.or(z.last_open);
                 (z.open, z.admitted, z.closed) = (None, 0, false);
             } else if z.open.is_none() {
                 // Grants held without a phase (a UAV that started inside): their entry is open.
@@ -127,8 +133,11 @@ impl Reservations {
 
     fn decide_zone(&mut self, requests: &[Request], now: f64, grant: &mut impl FnMut(&Request)) {
         let z = &mut self.zones[requests[0].zone];
-        // A free zone opens to the entry of the longest waiting request.
-        let first = requests.iter().min_by(|a, b| a.since.total_cmp(&b.since).then(a.rank.cmp(&b.rank)));
+        // A free zone opens to the entry of the longest waiting request, from another entry than
+        // the last phase's if one waits.
+        let other = |r: &&Request| Some(r.entry) != z.last_open;
+        let oldest = |a: &&Request, b: &&Request| a.since.total_cmp(&b.since).then(a.rank.cmp(&b.rank));
+        let first = requests.iter().filter(other).min_by(oldest).or_else(|| requests.iter().min_by(oldest));
         let open = *z.open.get_or_insert(first.map_or(requests[0].entry, |r| r.entry));
         let oldest_other =
             requests.iter().filter(|r| r.entry != open).map(|r| now - r.since).max_by(f64::total_cmp);
@@ -233,5 +242,22 @@ mod tests {
         let first_from_1 = granted[n..].iter().flatten().min().copied().unwrap();
         let before = granted[..n].iter().flatten().filter(|&&g| g < first_from_1).count();
         assert!(before <= MAX_BATCH as usize, "{before} went first");
+    }
+
+    #[test]
+    fn after_a_phase_the_other_side_goes_first_when_both_waited_as_long() {
+        // A crowd at entry 0 and two UAVs at entry 1, all waiting since t = 0; entry 0's UAVs rank
+        // first. Each crossing takes longer than MAX_WAIT_S, so each phase after the first closes
+        // after one admission.
+        let n = MAX_BATCH as usize + 10;
+        let mut arrivals: Vec<(usize, usize)> = (0..n).map(|_| (0, 0)).collect();
+        arrivals.extend([(0, 1), (0, 1)]);
+        let stay = MAX_WAIT_S as usize + 10;
+        let (granted, entries) = simulate(&arrivals, stay, 4 * stay * MAX_BATCH as usize);
+        assert_eq!(entries, 1, "two entries held grants at once");
+        let first_from_1 = granted[n..].iter().flatten().min().copied().expect("entry 1 got in");
+        let before = granted[..n].iter().flatten().filter(|&&g| g < first_from_1).count();
+        assert!(before <= MAX_BATCH as usize, "{before} went first");
+        assert!(granted.iter().all(Option::is_some), "{granted:?}");
     }
 }
