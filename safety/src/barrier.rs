@@ -70,27 +70,19 @@ pub fn point_row(p: Vec2, v: Vec2, vertex: Vec2, delta: f64, d_s: f64, zeta: f64
     collision_row(p - vertex, v, delta, 0.0, d_s, zeta, kind)
 }
 
-/// Gain κ (1/s) of the linear class-K term that [`covered_point_row`] adds to ζb³.
-pub const COVERED_VERTEX_GAIN: f64 = 4.0;
-/// b₀ (m/s): below this barrier value a covered vertex's row is the paper's again.
-pub const COVERED_VERTEX_FLOOR: f64 = 0.5;
+/// Gain κ (1/s) of the linear class-K term that [`vertex_row`] adds to ζb³.
+pub const VERTEX_GAIN: f64 = 4.0;
+/// b₀ (m/s): below this barrier value a vertex's row is the paper's again.
+pub const VERTEX_FLOOR: f64 = 0.5;
 
-/// End-point barrier of a vertex V that also ends a wall A whose slab holds the UAV (docs/safety.md
-/// §10.5): the row of [`point_row`] with the class-K function ζb³ + κ·max(b − b₀, 0) (κ =
-/// [`COVERED_VERTEX_GAIN`], b₀ = [`COVERED_VERTEX_FLOOR`]) instead of ζb³. It still keeps b ≥ 0 and
-/// is the paper's row below b₀; above b₀ it no longer throttles a UAV flying along A towards V,
-/// whose distance to V shrinks while its distance to the road does not.
-pub fn covered_point_row(
-    p: Vec2,
-    v: Vec2,
-    vertex: Vec2,
-    delta: f64,
-    d_s: f64,
-    zeta: f64,
-    kind: RowKind,
-) -> Row {
+/// End-point barrier of a road vertex V (docs/safety.md §10.5): the row of [`point_row`] with the
+/// class-K function ζb³ + κ·max(b − b₀, 0) (κ = [`VERTEX_GAIN`], b₀ = [`VERTEX_FLOOR`]) instead of
+/// ζb³. It still keeps b ≥ 0 and is the paper's row below b₀; above b₀ it no longer throttles a UAV
+/// flying past V (along a wall that V ends, or through the mouth of a narrowing) to a crawl while
+/// its braking margin to V is large.
+pub fn vertex_row(p: Vec2, v: Vec2, vertex: Vec2, delta: f64, d_s: f64, zeta: f64, kind: RowKind) -> Row {
     let row = point_row(p, v, vertex, delta, d_s, zeta, kind);
-    Row { c: row.c + COVERED_VERTEX_GAIN * (row.b - COVERED_VERTEX_FLOOR).max(0.0), ..row }
+    Row { c: row.c + VERTEX_GAIN * (row.b - VERTEX_FLOOR).max(0.0), ..row }
 }
 
 /// Signed line barrier (docs/safety.md §3, E5): with s = n̂_inᵀ(p − a) and ṡ = n̂_inᵀv,

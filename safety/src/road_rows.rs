@@ -1,8 +1,8 @@
 //! Which walls a UAV enforces, and their rows: rule R2 `walls` (default), R3 `halfplanes`, R1 `paper`
 //! (docs/safety.md §5, amended by §10.1).
 
-use crate::barrier::{Row, RowKind, covered_point_row, line_row, point_row};
-use roads::{Road, Wall};
+use crate::barrier::{Row, RowKind, line_row, vertex_row};
+use roads::Road;
 use uav::{Params, Vec2};
 
 /// Barrier value B (m/s) below which every row is present: walls and neighbours are searched within
@@ -137,7 +137,6 @@ fn walls_rows(
     // The index (or the tracked segment's list) gives a superset of the walls within the radius, in
     // index order: the same rows, in the same order, as a loop over every wall.
     let near = road.walls_near_in(segment, &p, radius);
-    let covered = Covered::find(walls, near.clone(), p, radius);
     let mut seen = [Vec2::zeros(); 16];
     let mut n_seen = 0;
     for k in near {
@@ -157,40 +156,8 @@ fn walls_rows(
                 seen[n_seen] = c;
                 n_seen += 1;
             }
-            // A vertex that ends a wall whose slab holds the UAV is at least as far as that wall's
-            // line (§10.5): its row keeps b ≥ 0 with a faster class-K function.
-            let row = if covered.holds(c) { covered_point_row } else { point_row };
-            out.push(row(p, v, c, delta, d_s, zeta, RowKind::Road(k)));
+            // The row keeps b ≥ 0 with a class-K function that lets a UAV pass V at speed (§10.5).
+            out.push(vertex_row(p, v, c, delta, d_s, zeta, RowKind::Road(k)));
         }
-    }
-}
-
-/// The covered vertices around a UAV (docs/safety.md §10.5): the end points of the `near` walls
-/// whose slab holds `p` within `radius`; at most eight (four walls), in index order.
-struct Covered {
-    /// The end points found.
-    points: [Vec2; 8],
-    /// How many of `points` are in use.
-    len: usize,
-}
-
-impl Covered {
-    /// The end points of the `near` walls whose slab holds `p` within `radius`.
-    fn find(walls: &[Wall], near: impl Iterator<Item = usize>, p: Vec2, radius: f64) -> Self {
-        let mut covered = Self { points: [Vec2::zeros(); 8], len: 0 };
-        for k in near {
-            let (c, t) = walls[k].nearest(&p);
-            if t > 0.0 && t < 1.0 && (c - p).norm() <= radius && covered.len + 2 <= covered.points.len() {
-                covered.points[covered.len] = walls[k].a;
-                covered.points[covered.len + 1] = walls[k].b;
-                covered.len += 2;
-            }
-        }
-        covered
-    }
-
-    /// True when the vertex `c` is covered.
-    fn holds(&self, c: Vec2) -> bool {
-        self.points[..self.len].iter().any(|x| (x - c).norm() < 1e-9)
     }
 }
