@@ -110,10 +110,9 @@ pub fn govern(v: Vec2, u_ref: Vec2, limit: f64, delta: f64, dt: f64) -> Vec2 {
 pub const KEEP_MARGIN_M: f64 = 0.1;
 
 /// The nominal input `u_ref` of a UAV at velocity `v`, changed so that it closes on a neighbour at
-/// offset `rel` (from it to the neighbour) moving at `other_v` no faster than √(δ·gap) relative to
-/// it, gap = ‖rel‖ − D_c − [`KEEP_MARGIN_M`]: braking at δ, both would stop within gap/4. Only the
-/// velocity component towards the neighbour is limited (the UAV may still pass beside it), and the
-/// result stays within δ.
+/// offset `rel` (from it to the neighbour) moving at `other_v` no faster than [`closing_limit`]
+/// allows, gap = ‖rel‖ − D_c − [`KEEP_MARGIN_M`]. Only the velocity component towards the neighbour
+/// is limited (the UAV may still pass beside it), and the result stays within δ.
 pub fn keep_distance(v: Vec2, u_ref: Vec2, rel: Vec2, other_v: Vec2, d_c: f64, delta: f64, dt: f64) -> Vec2 {
     let distance = rel.norm();
     if distance <= 1e-9 {
@@ -121,8 +120,18 @@ pub fn keep_distance(v: Vec2, u_ref: Vec2, rel: Vec2, other_v: Vec2, d_c: f64, d
     }
     let dir = rel / distance;
     let gap = (distance - d_c - KEEP_MARGIN_M).max(0.0);
-    let limit = other_v.dot(&dir) + (delta * gap).sqrt();
+    let limit = closing_limit(other_v.dot(&dir), gap, delta);
     govern_along(v, u_ref, dir, limit, delta, dt)
+}
+
+/// The highest speed (m/s) towards a neighbour `gap` m away whose own speed away from the UAV is
+/// `lead`: for a neighbour standing or coming closer, lead + √(δ·gap) (braking at δ alone, the UAV
+/// stops within gap/2 relative to it); for one moving away, √(lead² + δ·gap), so that if it brakes
+/// at δ and the UAV does too, the UAV still stops within gap/2 of where it stops. (Plain
+/// lead + √(δ·gap) let a UAV tailgate one leaving a section at speed; when that one braked for a
+/// crowd, the pair row squeezed it between the two: `headon` with `rl`, BENCHMARKS.md.)
+pub fn closing_limit(lead: f64, gap: f64, delta: f64) -> f64 {
+    if lead > 0.0 { (lead * lead + delta * gap).sqrt() } else { lead + (delta * gap).sqrt() }
 }
 
 /// `u_ref` changed as little as possible so that the next velocity's component along the unit
@@ -197,9 +206,17 @@ mod tests {
             prop_assume!(rel.norm() > 1e-3);
             let (d_c, delta, dt) = (0.3, 5.0, 0.05);
             let u = keep_distance(v, u_ref, rel, other, d_c, delta, dt);
+            let gap = (rel.norm() - d_c - KEEP_MARGIN_M).max(0.0);
+            // Both braking at δ from the limit, the UAV stops within gap/2 of where the neighbour
+            // stops (relative to it when the neighbour does not move away).
+            let lead = other.dot(&(rel / rel.norm()));
+            let top = closing_limit(lead, gap, delta);
+            let lead_stop = lead.max(0.0).powi(2) / (2.0 * delta);
+            let own_stop = if lead > 0.0 { top * top / (2.0 * delta) } else { (top - lead).powi(2) / (2.0 * delta) };
+            prop_assert!(own_stop <= lead_stop + gap / 2.0 + 1e-9, "{own_stop} beyond {lead_stop} + {gap}/2");
             prop_assert!(u.norm() <= delta + 1e-9);
             let dir = rel / rel.norm();
-            let limit = other.dot(&dir) + (delta * (rel.norm() - d_c - KEEP_MARGIN_M).max(0.0)).sqrt();
+            let limit = closing_limit(other.dot(&dir), (rel.norm() - d_c - KEEP_MARGIN_M).max(0.0), delta);
             let (asked, got) = ((v + u_ref * dt).dot(&dir), (v + u * dt).dot(&dir));
             prop_assert!(got <= asked.max(limit) + 1e-9, "faster towards it: {got} > {asked}");
             if asked <= limit {
