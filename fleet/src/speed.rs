@@ -206,17 +206,14 @@ mod tests {
             prop_assume!(rel.norm() > 1e-3);
             let (d_c, delta, dt) = (0.3, 5.0, 0.05);
             let u = keep_distance(v, u_ref, rel, other, d_c, delta, dt);
-            let gap = (rel.norm() - d_c - KEEP_MARGIN_M).max(0.0);
-            // Both braking at δ from the limit, the UAV stops within gap/2 of where the neighbour
-            // stops (relative to it when the neighbour does not move away).
-            let lead = other.dot(&(rel / rel.norm()));
-            let top = closing_limit(lead, gap, delta);
-            let lead_stop = lead.max(0.0).powi(2) / (2.0 * delta);
-            let own_stop = if lead > 0.0 { top * top / (2.0 * delta) } else { (top - lead).powi(2) / (2.0 * delta) };
-            prop_assert!(own_stop <= lead_stop + gap / 2.0 + 1e-9, "{own_stop} beyond {lead_stop} + {gap}/2");
             prop_assert!(u.norm() <= delta + 1e-9);
-            let dir = rel / rel.norm();
-            let limit = closing_limit(other.dot(&dir), (rel.norm() - d_c - KEEP_MARGIN_M).max(0.0), delta);
+            let (dir, gap) = (rel / rel.norm(), (rel.norm() - d_c - KEEP_MARGIN_M).max(0.0));
+            let (lead, limit) = (other.dot(&dir), closing_limit(other.dot(&dir), gap, delta));
+            // From the limit, braking at δ (and the neighbour too, if it moves away), the UAV stops
+            // within gap/2 of where the neighbour stops (relative to it, if it does not move away).
+            let lead_stop = lead.max(0.0).powi(2) / (2.0 * delta);
+            let own_stop = if lead > 0.0 { limit * limit } else { (limit - lead).powi(2) } / (2.0 * delta);
+            prop_assert!(own_stop <= lead_stop + gap / 2.0 + 1e-9, "{own_stop} beyond {lead_stop} + {gap}/2");
             let (asked, got) = ((v + u_ref * dt).dot(&dir), (v + u * dt).dot(&dir));
             prop_assert!(got <= asked.max(limit) + 1e-9, "faster towards it: {got} > {asked}");
             if asked <= limit {

@@ -6,10 +6,10 @@
 //! once everyone admitted has left, opens to the longest waiting of the other entries (round robin:
 //! with equal waits, the entry that just had its phase would otherwise win every tie, and a side
 //! whose UAVs waited as long as a crowd on the other side never got in), or to the same entry when
-//! nobody else waits. Invariants: UAVs from
-//! two entries never hold grants of one zone at once, and a waiting UAV is admitted after at most
-//! one batch from each other entry (no starvation), given that admitted UAVs leave. Admitted UAVs
-//! go in one after another: the next is admitted once the previous one is clear of the entry.
+//! nobody else waits. Invariants: UAVs from two entries never hold grants of one zone at once, and
+//! a waiting UAV is admitted after at most one batch from each other entry (no starvation), given
+//! that admitted UAVs leave. Admitted UAVs go in one after another: the next is admitted once the
+//! previous one is clear of the entry.
 
 /// Most UAVs admitted from one entry in a row while another entry has UAVs waiting (a crossing of
 /// a long section costs up to 30 s; batches of 6 and waits of 20 s alternated so often that groups
@@ -135,9 +135,10 @@ impl Reservations {
         let z = &mut self.zones[requests[0].zone];
         // A free zone opens to the entry of the longest waiting request, from another entry than
         // the last phase's if one waits.
-        let other = |r: &&Request| Some(r.entry) != z.last_open;
-        let oldest = |a: &&Request, b: &&Request| a.since.total_cmp(&b.since).then(a.rank.cmp(&b.rank));
-        let first = requests.iter().filter(other).min_by(oldest).or_else(|| requests.iter().min_by(oldest));
+        let again = |r: &Request| Some(r.entry) == z.last_open;
+        let first = requests.iter().min_by(|a, b| {
+            again(a).cmp(&again(b)).then(a.since.total_cmp(&b.since)).then(a.rank.cmp(&b.rank))
+        });
         let open = *z.open.get_or_insert(first.map_or(requests[0].entry, |r| r.entry));
         let oldest_other =
             requests.iter().filter(|r| r.entry != open).map(|r| now - r.since).max_by(f64::total_cmp);
@@ -247,8 +248,8 @@ mod tests {
     #[test]
     fn after_a_phase_the_other_side_goes_first_when_both_waited_as_long() {
         // A crowd at entry 0 and two UAVs at entry 1, all waiting since t = 0; entry 0's UAVs rank
-        // first. Each crossing takes longer than MAX_WAIT_S, so each phase after the first closes
-        // after one admission.
+        // first and win every tie of waiting times. Each crossing takes longer than MAX_WAIT_S, so
+        // entry 1 has waited that long whenever the zone comes free.
         let n = MAX_BATCH as usize + 10;
         let mut arrivals: Vec<(usize, usize)> = (0..n).map(|_| (0, 0)).collect();
         arrivals.extend([(0, 1), (0, 1)]);

@@ -136,10 +136,9 @@ fn walls_rows(
     }
     // The index (or the tracked segment's list) gives a superset of the walls within the radius, in
     // index order: the same rows, in the same order, as a loop over every wall.
-    let near = road.walls_near_in(segment, &p, radius);
     let mut seen = [Vec2::zeros(); 16];
     let mut n_seen = 0;
-    for k in near {
+    for k in road.walls_near_in(segment, &p, radius) {
         let w = &walls[k];
         let (c, t) = w.nearest(&p);
         if (c - p).norm() > radius {

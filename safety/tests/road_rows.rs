@@ -53,34 +53,6 @@ fn rule() -> impl Strategy<Value = RoadRule> {
     prop_oneof![Just(RoadRule::Walls), Just(RoadRule::Halfplanes), Just(RoadRule::Paper)]
 }
 
-/// A road 5 m wide that narrows to 0.55 m over 2 m (a funnel) and stays that narrow for 8 m: the
-/// UAV passes between the two vertices of the funnel's mouth, 0.27 m from each, beyond both walls'
-/// slabs (neither wall's line row covers them).
-fn funnel() -> Road {
-    let points = [[0.0, 0.0], [6.0, 0.0], [8.0, 0.0], [16.0, 0.0]];
-    Road::new(RoadLayout::from_centerline(&points, &[5.0, 5.0, 0.55, 0.55])).unwrap()
-}
-
-/// A UAV setting off from rest 1.2 m before the mouth of a funnel (where UAVs wait for their turn at a
-/// single-file section), anywhere across the mouth's width, approaches the mouth vertices head-on.
-/// Under ζb³ alone their rows let it creep into the mouth (in the `headon` family's queues, behind
-/// each other, about 5 s per UAV, too slow for groups of 40–60 to swap ends in time); with the
-/// vertex rows of §10.5 it keeps its cruise speed, and still D_s from the walls.
-#[test]
-fn a_uav_enters_a_narrow_section_through_its_funnel_at_speed() {
-    let params = Params::default();
-    let road = funnel();
-    let start = 6.8;
-    let length = road.centerline().length() - 1.0 - start;
-    for offset in [-0.275, -0.15, 0.0, 0.15, 0.275] {
-        let (time, closest) = traverse(&road, (start, offset), 1.0, 60.0);
-        let time = time.unwrap_or_else(|| panic!("offset {offset}: not through {length:.1} m in 60 s"));
-        // About 10 s; under ζb³ alone 12.5 s, the extra 2.3 s spent creeping into the mouth.
-        assert!(time <= length + 2.5, "offset {offset}: {length:.1} m took {time:.2} s at 1 m/s cruise");
-        assert!(closest >= params.d_s - SAMPLING_SLACK_M, "offset {offset}: {closest:.3} m from a wall");
-    }
-}
-
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(3000))]
 
@@ -229,9 +201,9 @@ fn narrow_winding(turn_deg: f64) -> Road {
 }
 
 /// Seconds a UAV takes along `road`'s centre line from `start` m (at rest, `offset` m to the left of
-/// the line) to `length − 1` m, steered by a PD
-/// towards the centre-line point 1.5 m ahead at `cruise` m/s through the walls-rule filter (None
-/// when it takes longer than `limit_s`); also the smallest distance to the walls on the way.
+/// the line) to `length − 1` m, steered by a PD towards the centre-line point 1.5 m ahead at
+/// `cruise` m/s through the walls-rule filter (None when it takes longer than `limit_s`); also the
+/// smallest distance to the walls on the way.
 fn traverse(road: &Road, (start, offset): (f64, f64), cruise: f64, limit_s: f64) -> (Option<f64>, f64) {
     let params = Params::default();
     let line = road.centerline();
@@ -273,6 +245,34 @@ fn a_uav_on_a_narrow_winding_road_passes_its_joints_at_speed() {
         let time = time.unwrap_or_else(|| panic!("turn {turn}°: not through {length:.1} m in 60 s"));
         assert!(time <= 1.5 * length + 1.0, "turn {turn}°: {length:.1} m took {time:.2} s at 1 m/s cruise");
         assert!(closest >= params.d_s - SAMPLING_SLACK_M, "turn {turn}°: {closest:.3} m from a wall");
+    }
+}
+
+/// A road 5 m wide that narrows to 0.55 m over 2 m (a funnel) and stays that narrow for 8 m: the
+/// UAV passes between the two vertices of the funnel's mouth, 0.27 m from each, beyond both walls'
+/// slabs (neither wall's line row covers them).
+fn funnel() -> Road {
+    let points = [[0.0, 0.0], [6.0, 0.0], [8.0, 0.0], [16.0, 0.0]];
+    Road::new(RoadLayout::from_centerline(&points, &[5.0, 5.0, 0.55, 0.55])).unwrap()
+}
+
+/// A UAV setting off from rest 1.2 m before the mouth of a funnel (where UAVs wait for their turn at a
+/// single-file section), from anywhere across the mouth's width up to level with a mouth vertex.
+/// Under ζb³ alone their rows let it creep into the mouth (in the `headon` family's queues, behind
+/// each other, about 5 s per UAV, too slow for groups of 40–60 to swap ends in time); with the
+/// vertex rows of §10.5 it keeps its cruise speed, and still D_s from the walls.
+#[test]
+fn a_uav_enters_a_narrow_section_through_its_funnel_at_speed() {
+    let params = Params::default();
+    let road = funnel();
+    let start = 6.8;
+    let length = road.centerline().length() - 1.0 - start;
+    for offset in [-0.275, -0.15, 0.0, 0.15, 0.275] {
+        let (time, closest) = traverse(&road, (start, offset), 1.0, 60.0);
+        let time = time.unwrap_or_else(|| panic!("offset {offset}: not through {length:.1} m in 60 s"));
+        // About 10 s; under ζb³ alone 12.5 s, the extra 2.3 s spent creeping into the mouth.
+        assert!(time <= length + 2.5, "offset {offset}: {length:.1} m took {time:.2} s at 1 m/s cruise");
+        assert!(closest >= params.d_s - SAMPLING_SLACK_M, "offset {offset}: {closest:.3} m from a wall");
     }
 }
 
