@@ -100,3 +100,27 @@ pub fn braking_margin(dist: f64, rate: f64, delta: f64) -> f64 {
     let closing = rate.min(0.0);
     dist - closing * closing / (2.0 * delta)
 }
+
+/// The largest acceleration (m/s²) towards an obstacle that, held for one tick `dt`, leaves the
+/// braking margin non-negative at the next sample (docs/safety.md §4.4), for a UAV `gap` (m) beyond
+/// its clearance (taken as 0 inside it) moving away at `rate` (m/s). Negative: it must accelerate away.
+///
+/// With e = gap, w = rate + a·dt after a push a: the margin `e + (rate + w)dt/2 − min(w, 0)²/(2δ)` is
+/// increasing in w, so the bound is its root; it is ≥ −δ whenever the margin is ≥ 0 now, which is
+/// b ≥ 0, so full braking still meets it.
+pub fn held_push_limit(gap: f64, rate: f64, delta: f64, dt: f64) -> f64 {
+    let coast = gap.max(0.0) + rate * dt / 2.0;
+    let w_min = if coast >= 0.0 {
+        (delta * dt - (delta * delta * dt * dt + 8.0 * delta * coast).sqrt()) / 2.0
+    } else {
+        -2.0 * coast / dt
+    };
+    (rate - w_min) / dt
+}
+
+/// `row` tightened so that its input, held for `dt`, keeps the braking margin ≥ 0 at the next sample
+/// ([`held_push_limit`]); `bend` (m/s²) is the rate's own change at zero input (‖v_⊥‖²/n for a point,
+/// 0 for a line).
+pub fn held_for(row: Row, gap: f64, rate: f64, bend: f64, delta: f64, dt: f64) -> Row {
+    Row { c: row.c.min(bend + held_push_limit(gap, rate, delta, dt)), ..row }
+}

@@ -1,7 +1,7 @@
 //! Which walls a UAV enforces, and their rows: rule R2 `walls` (default), R3 `halfplanes`, R1 `paper`
 //! (docs/safety.md §5, amended by §10.1).
 
-use crate::barrier::{Row, RowKind, line_row, vertex_row};
+use crate::barrier::{MIN_DISTANCE_M, Row, RowKind, held_for, line_row, vertex_row};
 use roads::Road;
 use uav::{Params, Vec2};
 
@@ -68,10 +68,9 @@ pub fn road_rows(
     params: &Params,
     out: &mut Vec<Row>,
 ) {
-    let (delta, d_s, zeta) = (params.delta, params.d_s, params.zeta);
-    let radius = activation_radius(d_s, v.norm(), delta);
+    let radius = activation_radius(params.d_s, v.norm(), params.delta);
     let walls = road.walls();
-    let line = |k: usize, n: Vec2, s: f64| line_row(s, n.dot(&v), n, delta, d_s, zeta, RowKind::Road(k));
+    let line = |k: usize, n: Vec2, s: f64| wall_row(s, n, v, params, k);
     match rule {
         RoadRule::Walls => walls_rows(road, p, v, segment, radius, params, out),
         RoadRule::Halfplanes => {
@@ -115,21 +114,12 @@ fn walls_rows(
     params: &Params,
     out: &mut Vec<Row>,
 ) {
-    let (delta, d_s, zeta) = (params.delta, params.d_s, params.zeta);
     let walls = road.walls();
     if !road.contains(&p) {
         let nearest = (walls[road.nearest_wall(&p)].nearest(&p).0 - p).norm();
         for (k, w) in walls.iter().enumerate() {
             if (w.nearest(&p).0 - p).norm() <= nearest + 0.5 {
-                out.push(line_row(
-                    w.signed_distance(&p),
-                    w.n_in.dot(&v),
-                    w.n_in,
-                    delta,
-                    d_s,
-                    zeta,
-                    RowKind::Road(k),
-                ));
+                out.push(wall_row(w.signed_distance(&p), w.n_in, v, params, k));
             }
         }
         return;
@@ -148,7 +138,7 @@ fn walls_rows(
             // The distance to the finite wall, from whichever side the UAV is on (see the doc above).
             let s = w.signed_distance(&p);
             let n = if s >= 0.0 { w.n_in } else { -w.n_in };
-            out.push(line_row(s.abs(), n.dot(&v), n, delta, d_s, zeta, RowKind::Road(k)));
+            out.push(wall_row(s.abs(), n, v, params, k));
         } else if !seen[..n_seen].contains(&c) {
             // A vertex shared by two walls gets one end-point barrier, not two.
             if n_seen < seen.len() {
@@ -156,7 +146,24 @@ fn walls_rows(
                 n_seen += 1;
             }
             // The row keeps b ≥ 0 with a class-K function that lets a UAV pass V at speed (§10.5).
-            out.push(vertex_row(p, v, c, delta, d_s, zeta, RowKind::Road(k)));
+            out.push(corner_row(p, v, c, params, k));
         }
     }
+}
+
+/// The line row of wall `k` at signed distance `s` along normal `n`, held for one tick (§4.4).
+fn wall_row(s: f64, n: Vec2, v: Vec2, params: &Params, k: usize) -> Row {
+    let (delta, d_s, rate) = (params.delta, params.d_s, n.dot(&v));
+    let row = line_row(s, rate, n, delta, d_s, params.zeta, RowKind::Road(k));
+    held_for(row, s - d_s, rate, 0.0, delta, params.dt)
+}
+
+/// The end-point row of road vertex `c` (wall `k`), held for one tick (§4.4, §10.5).
+fn corner_row(p: Vec2, v: Vec2, c: Vec2, params: &Params, k: usize) -> Row {
+    let (delta, d_s) = (params.delta, params.d_s);
+    let row = vertex_row(p, v, c, delta, d_s, params.zeta, RowKind::Road(k));
+    let n = (p - c).norm().max(MIN_DISTANCE_M);
+    let rate = (p - c).dot(&v) / n;
+    let bend = (v.norm_squared() - rate * rate).max(0.0) / n;
+    held_for(row, n - d_s, rate, bend, delta, params.dt)
 }

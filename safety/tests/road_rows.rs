@@ -140,11 +140,13 @@ fn the_next_wall_is_guarded_from_behind_past_a_sharp_inner_vertex() {
     assert_eq!(unguarded_wall(&road, p, v, &params, radius, &rows), None, "{rows:#?}");
 }
 
-/// How far below D_s the closed loop may dip (sampling at dt = 0.05 s, as in `corner.rs`).
-const SAMPLING_SLACK_M: f64 = 0.02;
-/// How much deeper than it started a UAV inside D_s may get while pushed into the wall: one tick of
-/// full push from just outside D_s, ½δdt² ≈ 6 mm.
-const CREEP_M: f64 = 0.007;
+/// How far below D_s the closed loop may dip: the held-input bound (docs/safety.md §4.4) keeps every
+/// sample's braking margin ≥ 0 on the walls and nearly so at vertices; without it, 20 mm.
+const SAMPLING_SLACK_M: f64 = 0.001;
+/// How much deeper than it started a UAV inside D_s may get while pushed into the wall: nothing but
+/// the solver's tolerance. Without the held-input bound, one tick of full push from just outside D_s
+/// got through (up to δdt² = 12.5 mm; 7.9 mm in a CI run, kept in the regressions file).
+const CREEP_M: f64 = 1e-4;
 
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(4000))]
@@ -283,8 +285,8 @@ proptest! {
     /// [`CREEP_M`] deeper in 2 s however hard its nominal input pushes into the wall: inside D_s the
     /// row allows no acceleration towards the wall (docs/safety.md §4.1). Before, the row was dropped
     /// whenever the UAV moved away, the push won the next tick, full braking the one after, and the
-    /// UAV crept in by about 2 mm per two ticks for as long as the push lasted. (Just outside D_s the
-    /// row δṡ/g still lets one tick's push through, which the bound allows for.)
+    /// UAV crept in by about 2 mm per two ticks for as long as the push lasted. Just outside D_s the
+    /// row δṡ/g let one more tick's push through, which the held-input bound (§4.4) now stops.
     #[test]
     fn inside_d_s_a_uav_moving_away_never_goes_deeper(
         depth in 0.001..0.04f64,
