@@ -231,14 +231,14 @@ async fn shutdown_lands_every_crazyflie_before_the_server_exits() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn motion_capture_poses_reach_their_crazyflie_as_external_positions() {
-    use airroads::serve::mocap::{MocapCounters, ingest};
-    use std::sync::Arc;
+    use airroads::serve::mocap::ingest;
     use std::sync::atomic::Ordering::Relaxed;
     let (scenario, sims) = with_sims(shipped("lab3.json"));
     let server = airroads::serve::Server::start(config(&scenario)).unwrap();
     let socket = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
     let mocap_addr = socket.local_addr().unwrap();
-    let counters = Arc::new(MocapCounters::default());
+    // The server's own counters, as `/api/metrics` shows them (`serve --mocap` passes the same).
+    let counters = server.state().mocap.clone();
     tokio::spawn(ingest(socket, server.mocap.clone(), counters.clone(), Vec::new()));
     // The Crazyflie links register once created; wait until cf2 is connected.
     let deadline = Instant::now() + Duration::from_secs_f64(PATIENCE);
@@ -267,7 +267,10 @@ async fn motion_capture_poses_reach_their_crazyflie_as_external_positions() {
         assert!(Instant::now() < deadline, "bad datagrams not counted");
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
-    assert!(counters.forwarded.load(Relaxed) >= 1);
+    let report = server.state().mocap.report();
+    assert_eq!(report["listening"], true, "{report}");
+    assert!(report["forwarded"].as_u64() >= Some(1), "{report}");
+    assert!(report["unrouted"].as_u64() >= Some(1) && report["invalid"].as_u64() >= Some(2), "{report}");
     server.shutdown().await;
     for sim in sims {
         sim.shutdown().await;
@@ -291,6 +294,21 @@ async fn a_radio_uav_without_a_crazyradio_never_takes_the_server_down() {
     let cf9 = server.get("/api/uavs/cf9").await;
     assert_eq!(cf9["status"], "connecting", "{cf9}");
     assert_eq!(cf9["lost"], false, "never airborne, so not lost");
+    // The operator sees why: the radio's error in the UAV's snapshot and in the metrics.
+    let deadline = Instant::now() + Duration::from_secs_f64(PATIENCE);
+    let cf9 = loop {
+        let cf9 = server.get("/api/uavs/cf9").await;
+        if cf9["link_error"].is_string() || Instant::now() > deadline {
+            break cf9;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    };
+    let error = cf9["link_error"].as_str().unwrap_or_else(|| panic!("no link error shown: {cf9}"));
+    assert!(!error.is_empty());
+    let links = &server.get("/api/metrics").await["links"];
+    assert_eq!((links["crazyflies"].as_u64(), links["with_error"].as_u64()), (Some(1), Some(1)), "{links}");
+    assert_eq!(links["errors"][0]["id"], "cf9", "{links}");
+    assert_eq!(links["errors"][0]["error"], error, "{links}");
     let (status, reply) = server
         .call("POST", "/api/uavs", Some(r#"{"id": "x", "position": [12.0, 0.0], "link": "bluetooth://cf"}"#))
         .await;

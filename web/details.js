@@ -22,6 +22,7 @@ function card(u) {
     ["goal", u.goal ? `${fmt(u.goal[0])}, ${fmt(u.goal[1])} m` : "none (hovers)"],
     ["margins", `road ${fmt(u.road_margin_m, 3)} m, collision ${fmt(u.collision_margin_m, 3)} m`],
     ["link", `${u.link} (${u.phase})`],
+    ["link error", u.link_error ?? null],
   ];
   const el = document.createElement("section");
   el.dataset.uav = u.id;

@@ -222,17 +222,6 @@ impl CrazyflieLink {
         &self.shared
     }
 
-    /// How many emergency stops and landings were given up on without the Crazyflie's
-    /// confirmation (see [`Shared::unconfirmed_commands`]).
-    pub fn unconfirmed_commands(&self) -> u64 {
-        self.shared.unconfirmed_commands()
-    }
-
-    /// The last error (see [`Shared::error`]).
-    pub fn error(&self) -> Option<String> {
-        self.shared.error()
-    }
-
     /// A handle that sends this Crazyflie an emergency stop from outside the fleet loop (which may
     /// be stalled); it does not keep the session alive.
     pub fn stop_handle(&self) -> StopHandle {
@@ -287,5 +276,13 @@ impl Link for CrazyflieLink {
 
     fn describe(&self) -> &str {
         &self.uri
+    }
+
+    fn error(&self) -> Option<String> {
+        self.shared.error()
+    }
+
+    fn unconfirmed_commands(&self) -> u64 {
+        self.shared.unconfirmed_commands()
     }
 }

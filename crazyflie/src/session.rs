@@ -54,6 +54,22 @@ enum Intent {
     Stop,
 }
 
+/// The operator's words for a session task that ended without returning (a panic in the client
+/// library: for a radio link, typically no Crazyradio, or one this user may not open).
+fn task_failure(uri: &str, e: tokio::task::JoinError) -> String {
+    if !e.is_panic() {
+        return format!("session task failed: {e}");
+    }
+    let payload = e.into_panic();
+    let message = payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "no message".into());
+    let hint = if uri.starts_with("radio://") { "; is a Crazyradio plugged in and accessible?" } else { "" };
+    format!("the Crazyflie library failed on {uri}: {message}{hint}")
+}
+
 /// Runs sessions for `uri` until the link is dropped and the Crazyflie is down.
 pub async fn supervise(uri: String, config: RelayConfig, shared: Arc<Shared>, mut channels: Channels) {
     let mut intent = Intent::Fly;
@@ -78,7 +94,7 @@ pub async fn supervise(uri: String, config: RelayConfig, shared: Arc<Shared>, mu
                 // The channels went down with the task: the link can no longer be flown. The fleet
                 // sees no more states and treats the UAV as lost; its watchdog brings it down.
                 shared.set_phase(LinkPhase::Connecting);
-                shared.set_error(Some(format!("session task failed: {e}")));
+                shared.set_error(Some(task_failure(&uri, e)));
                 return;
             }
         };

@@ -98,6 +98,15 @@ pub trait Link: Send {
     fn describe(&self) -> &str {
         SIM_LINK
     }
+    /// The last error, for the operator: why the link is not connected, or a stop or landing the
+    /// UAV did not confirm. In-process links have none.
+    fn error(&self) -> Option<String> {
+        None
+    }
+    /// How many emergency stops and landings were given up on without the UAV's confirmation.
+    fn unconfirmed_commands(&self) -> u64 {
+        0
+    }
 }
 
 /// How long an in-process UAV takes to land (s).

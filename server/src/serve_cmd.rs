@@ -164,7 +164,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     let mocap = match args.mocap {
         Some(at) => {
             let socket = tokio::net::UdpSocket::bind(at).await.with_context(|| format!("--mocap {at}"))?;
-            let counters = std::sync::Arc::new(serve::mocap::MocapCounters::default());
+            let counters = server.state().mocap.clone();
             let senders = args.mocap_allow.clone();
             tokio::spawn(serve::mocap::ingest(socket, server.mocap.clone(), counters, senders));
             Some(at)

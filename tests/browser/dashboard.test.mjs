@@ -153,6 +153,28 @@ test("UAVs held by a traffic rule show as waiting: legend, reservation band and 
   });
 });
 
+test("a Crazyflie whose link fails shows the link's error in its details", async () => {
+  await withDashboard("link-error", [], async (page, { url }) => {
+    // No Crazyradio here: the radio link of a UAV added over REST cannot open, and says why.
+    const line = (await page.evaluate(() => window.__airroads.geometry)).centerline;
+    const spot = line[Math.floor(line.length * 0.9)];
+    const body = { id: "cf9", position: spot, link: "radio://0/80/2M/E7E7E7E7E9" };
+    await api(url, "POST", "/api/uavs", body);
+    const cf9 = await until("cf9's link error (GET /api/uavs/cf9)", async () => {
+      const u = await api(url, "GET", "/api/uavs/cf9");
+      return typeof u.link_error === "string" && u;
+    });
+    await selectHovering(page, url, "cf9");
+    const shown = page.locator('#details section[data-uav="cf9"] dd[data-field="link error"]');
+    await shown.waitFor({ timeout: 15000 });
+    assert.equal(await shown.textContent(), cf9.link_error);
+    const metrics = await api(url, "GET", "/api/metrics");
+    assert.equal(metrics.links.with_error, 1);
+    assert.equal(metrics.links.errors[0].id, "cf9");
+    await screenshot(page, "link-error");
+  });
+});
+
 test("add a UAV by clicking, give it a policy, remove it", async () => {
   await withDashboard("add", [], async (page, { url }) => {
     await page.click("#mode-add");

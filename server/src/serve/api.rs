@@ -286,6 +286,9 @@ async fn get_state(State(app): State<AppState>) -> Response {
     ([(header::CONTENT_TYPE, "application/json")], text).into_response()
 }
 
+/// Links with an error listed by id in `GET /api/metrics` (`links.errors`).
+pub const LISTED_LINK_ERRORS: usize = 16;
+
 async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
     use std::sync::atomic::Ordering::Relaxed;
     let metrics = app.metrics.borrow().clone();
@@ -313,6 +316,16 @@ async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
         "rate_limited": app.auth_failures.rate_limited.load(Relaxed),
     });
     doc["storage"] = serde_json::to_value(app.storage.report()).unwrap_or(Value::Null);
+    doc["mocap"] = app.mocap.report();
+    // The first links with an error, by UAV (the count of all is `links.with_error`).
+    let snapshot = app.snapshots.borrow().clone();
+    let errors: Vec<Value> = snapshot
+        .uavs
+        .iter()
+        .filter_map(|u| u.link_error.as_ref().map(|e| json!({"id": u.id, "link": u.link, "error": e})))
+        .take(LISTED_LINK_ERRORS)
+        .collect();
+    doc["links"]["errors"] = json!(errors);
     doc["tick_age_ms"] = json!(app.clock.tick_age().as_secs_f64() * 1e3);
     doc["max_uavs"] = json!(app.max_uavs);
     Json(doc)

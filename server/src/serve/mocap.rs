@@ -23,9 +23,11 @@ pub struct Pose {
     pub p: [f64; 3],
 }
 
-/// What the ingestion has seen.
+/// What the ingestion has seen (`mocap` in `GET /api/metrics`).
 #[derive(Debug, Default)]
 pub struct MocapCounters {
+    /// True once `--mocap` is listening.
+    pub listening: std::sync::atomic::AtomicBool,
     /// Poses forwarded to a Crazyflie.
     pub forwarded: AtomicU64,
     /// Poses for an id without a Crazyflie link (or whose queue was full).
@@ -34,6 +36,19 @@ pub struct MocapCounters {
     pub invalid: AtomicU64,
     /// Datagrams from a sender that is not allowed (dropped unread).
     pub rejected_sender: AtomicU64,
+}
+
+impl MocapCounters {
+    /// The counters as `GET /api/metrics` shows them.
+    pub fn report(&self) -> serde_json::Value {
+        serde_json::json!({
+            "listening": self.listening.load(Relaxed),
+            "forwarded": self.forwarded.load(Relaxed),
+            "unrouted": self.unrouted.load(Relaxed),
+            "invalid": self.invalid.load(Relaxed),
+            "rejected_sender": self.rejected_sender.load(Relaxed),
+        })
+    }
 }
 
 /// True when `sender` may send poses: a loopback address, or one of `allowed` (`--mocap-allow`).
@@ -60,6 +75,7 @@ pub async fn ingest(
     allowed: Vec<std::net::IpAddr>,
 ) {
     let mut buf = vec![0u8; 2048];
+    counters.listening.store(true, Relaxed);
     loop {
         let n = match socket.recv_from(&mut buf).await {
             Ok((_, from)) if !sender_allowed(from.ip(), &allowed) => {
@@ -69,6 +85,7 @@ pub async fn ingest(
             Ok((n, _)) => n,
             Err(e) => {
                 tracing::error!("motion capture socket failed: {e}");
+                counters.listening.store(false, Relaxed);
                 return;
             }
         };

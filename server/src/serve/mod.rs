@@ -257,6 +257,7 @@ impl Server {
             connections: Arc::default(),
             body_budget: state::body_budget(),
             validation: Arc::new(tokio::sync::Semaphore::new(1)),
+            mocap: Arc::default(),
         };
         Ok(Self {
             app,

@@ -66,6 +66,9 @@ pub struct UavSnapshot {
     pub phase: &'static str,
     /// Its link is lost (see `status`).
     pub lost: bool,
+    /// The link's last error (why it is not connected, or a stop or landing not confirmed), null
+    /// when none.
+    pub link_error: Option<String>,
     /// Why a traffic rule holds it back (`single_file`, `deadlock_backoff`), null when none does.
     pub wait_reason: Option<&'static str>,
     /// CBF rows binding at u.
@@ -206,6 +209,7 @@ impl Snapshot {
                     link: u.link.describe().to_string(),
                     phase: u.phase.name(),
                     lost: u.condition == Condition::Lost,
+                    link_error: u.link.error(),
                     wait_reason: u.traffic.waiting.map(|w| w.name()),
                     active_rows: l.active_rows,
                     slack: l.max_slack,

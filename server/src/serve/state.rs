@@ -97,6 +97,8 @@ pub struct AppState {
     pub body_budget: Arc<Semaphore>,
     /// Validations of large inputs (roads, scenarios) run one at a time, off the async workers.
     pub validation: Arc<Semaphore>,
+    /// Motion-capture counters (all zero without `--mocap`).
+    pub mocap: Arc<super::mocap::MocapCounters>,
 }
 
 /// Permits of the body budget.

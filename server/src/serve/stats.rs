@@ -33,6 +33,18 @@ pub struct QpCounters {
     pub failures: u64,
 }
 
+/// The UAVs' links (`links` in `GET /api/metrics`), counted every tick.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+pub struct LinkCounters {
+    /// UAVs flown over a Crazyflie link (the others are simulated in process).
+    pub crazyflies: u64,
+    /// Links whose last error is set now (see `link_error` in the UAV's snapshot).
+    pub with_error: u64,
+    /// Emergency stops and landings given up on without the Crazyflie's confirmation, summed over
+    /// the current links.
+    pub unconfirmed_commands: u64,
+}
+
 /// The document of `GET /api/metrics`.
 #[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct LoopMetrics {
@@ -70,6 +82,8 @@ pub struct LoopMetrics {
     pub stalled_uavs: u64,
     /// The longest stall going on now (s).
     pub longest_stall_s: f64,
+    /// The UAVs' links.
+    pub links: LinkCounters,
 }
 
 /// Accumulates [`LoopMetrics`] tick by tick without allocating.
@@ -125,7 +139,7 @@ impl TickStats {
             self.window.pop_front();
         }
         self.window.push_back(duration_us);
-        (m.stalled_uavs, m.longest_stall_s) = (0, 0.0);
+        (m.stalled_uavs, m.longest_stall_s, m.links) = (0, 0.0, LinkCounters::default());
         for u in fleet.uavs() {
             let l = &u.last;
             // As METRICS.json counts it.
@@ -138,6 +152,9 @@ impl TickStats {
             m.qp.failures += u64::from(l.failed);
             m.policy_fallbacks += u64::from(l.policy_fallback);
             m.stale_states += u64::from(u.stale_ticks > 0);
+            m.links.crazyflies += u64::from(u.link.describe() != links::SIM_LINK);
+            m.links.with_error += u64::from(u.link.error().is_some());
+            m.links.unconfirmed_commands += u.link.unconfirmed_commands();
         }
         m.min_collision_margin_m = min_opt(m.min_collision_margin_m, snapshot.min_collision_margin_m);
         m.min_road_margin_m = min_opt(m.min_road_margin_m, snapshot.min_road_margin_m);
