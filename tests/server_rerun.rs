@@ -79,6 +79,24 @@ impl Recording {
         })
     }
 
+    /// The positions logged at `path`, one batch per row.
+    fn point_batches(&self, path: &str) -> Vec<(i64, Vec<[f32; 2]>)> {
+        let component = Points2D::descriptor_positions().component;
+        self.rows(path, component, |c| {
+            c.iter_component::<Position2D>(component)
+                .map(|b| b.iter().map(|p| [p.x(), p.y()]).collect())
+                .collect()
+        })
+    }
+
+    /// The label batches logged at `path`, one per row that has labels.
+    fn label_batches(&self, path: &str) -> Vec<(i64, Vec<String>)> {
+        let component = Points2D::descriptor_labels().component;
+        self.rows(path, component, |c| {
+            c.iter_slices::<String>(component).map(|s| s.iter().map(|l| l.to_string()).collect()).collect()
+        })
+    }
+
     /// The labels logged at `path` (one per row).
     fn labels(&self, path: &str) -> Vec<(i64, String)> {
         let component = Points2D::descriptor_labels().component;
@@ -115,12 +133,17 @@ struct Running {
 }
 
 async fn start(mode: &str) -> Running {
+    start_batching_above(mode, rerun_sink::BATCH_ABOVE_UAVS).await
+}
+
+/// As [`start`], logging fleets of more than `batch_above` UAVs as one batch.
+async fn start_batching_above(mode: &str, batch_above: usize) -> Running {
     let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
     let addr = listener.local_addr().unwrap();
     let server = Server::start(support::config(&support::small())).unwrap();
     let state = server.state().clone();
     let mode: RerunMode = mode.parse().unwrap();
-    let sink = rerun_sink::start(&mode, &state).unwrap().expect("a sink");
+    let sink = rerun_sink::start(&mode, &state, batch_above).unwrap().expect("a sink");
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let serving = tokio::spawn(airroads::serve::serve(listener, server, async move {
         let _ = stopped.await;
@@ -270,4 +293,54 @@ async fn single_file_reservations_are_logged_with_who_is_in_and_who_waits() {
     assert!(labels.iter().all(|(_, l)| l.starts_with("single file: ")), "{labels:?}");
     // One side goes in while the other waits.
     assert!(labels.iter().any(|(_, l)| l.contains(" in, ") && !l.ends_with(" 0 waiting")), "{labels:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_fleet_above_the_threshold_is_one_batch_and_only_selected_uavs_have_their_own_entities() {
+    let rrd = temp_rrd();
+    // The small fleet has two UAVs, `a` and `b`: above a threshold of 1 it is logged as a batch.
+    let server = start_batching_above(&format!("save={}", rrd.display()), 1).await;
+    let addr = server.addr;
+    let call = |method: &'static str, path: &'static str, body: Option<String>| async move {
+        let (status, text) = support::raw(addr, method, path, body.as_deref(), &[]).await;
+        (status, serde_json::from_str::<serde_json::Value>(&text).unwrap_or_default())
+    };
+    let put = |body: &str| call("PUT", "/api/rerun/selection", Some(body.to_string()));
+    let (status, body) = put(r#"{"ids": ["b", "b"]}"#).await;
+    assert_eq!((status, body["ids"].clone()), (200, serde_json::json!(["b"])), "{body}");
+    // Bad selections are refused with the field named, and change nothing.
+    let (status, body) = put(r#"{"ids": ["a", "nobody"]}"#).await;
+    assert_eq!((status, body["error"]["field"].as_str()), (422, Some("ids")), "{body}");
+    let many: Vec<String> = (0..=rerun_sink::MAX_SELECTED).map(|_| "a".to_string()).collect();
+    let (status, body) = put(&serde_json::json!({ "ids": many }).to_string()).await;
+    assert_eq!((status, body["error"]["field"].as_str()), (422, Some("ids")), "{body}");
+    let (status, body) = call("GET", "/api/rerun/selection", None).await;
+    assert_eq!((status, body["ids"].clone()), (200, serde_json::json!(["b"])), "{body}");
+    tokio::time::sleep(Duration::from_millis(800)).await;
+    let (_, metrics) = call("GET", "/api/metrics", None).await;
+    let rerun = &metrics["rerun"];
+    assert_eq!((rerun["active"].as_bool(), rerun["batched"].as_bool()), (Some(true), Some(true)), "{rerun}");
+    assert!(rerun["logged"].as_u64() > Some(5) && rerun["errors"].as_u64() == Some(0), "{rerun}");
+    let state = server.state.clone();
+    let stats = server.stop().await;
+    assert_eq!(stats.errors, 0);
+    let last = state.snapshots.borrow().clone();
+
+    let rec = read_rrd(&rrd);
+    std::fs::remove_file(&rrd).unwrap();
+    // Every tick one batch of both positions, in snapshot order; the ids as labels, logged once.
+    let fleet = rec.point_batches("world/fleet");
+    assert!(fleet.len() >= 5 && fleet.iter().all(|(_, b)| b.len() == 2), "{fleet:?}");
+    let (last_tick, last_batch) = fleet.last().unwrap();
+    assert_eq!(*last_tick, i64::try_from(last.tick).unwrap());
+    for (logged, u) in last_batch.iter().zip(&last.uavs) {
+        assert!((f64::from(logged[0]) - u.p[0]).abs() < 1e-4 && (f64::from(logged[1]) - u.p[1]).abs() < 1e-4);
+    }
+    let labels = rec.label_batches("world/fleet");
+    assert_eq!(labels.len(), 1, "labels only when the roster changes: {labels:?}");
+    assert_eq!(labels[0].1, vec!["a".to_string(), "b".to_string()]);
+    assert!(rec.chunks("world/fleet/velocity").iter().map(|c| c.num_rows()).sum::<usize>() >= 5);
+    // Only the selected UAV has its own entities and series.
+    assert!(rec.points("world/uavs/b").len() >= 5 && rec.scalars("slack/b").len() >= 5);
+    assert!(rec.chunks("world/uavs/a").is_empty() && rec.chunks("slack/a").is_empty());
 }

@@ -37,7 +37,8 @@ export class Api {
     return this.asking;
   }
 
-  async request(method, path, body) {
+  /** Sends a request; a change refused for want of a token asks for one unless `ask` is false. */
+  async request(method, path, body, ask = true) {
     const change = method !== "GET";
     for (let attempt = 0; ; attempt++) {
       const headers = {};
@@ -48,7 +49,7 @@ export class Api {
       if (change && sent) headers["Authorization"] = `Bearer ${sent}`;
       const text = typeof body === "string" ? body : JSON.stringify(body);
       const res = await fetch(path, { method, headers, body: body === undefined ? undefined : text });
-      if (res.status === 401 && change && attempt === 0) {
+      if (res.status === 401 && change && attempt === 0 && ask) {
         // Another request may have been given a token meanwhile: retry with it, else ask.
         if (this.token && this.token !== sent) continue;
         if (await this.newToken(sent !== null)) continue;
@@ -70,6 +71,8 @@ export class Api {
   road() { return this.request("GET", "/api/road"); }
   geometry() { return this.request("GET", "/api/road/geometry"); }
   policies() { return this.request("GET", "/api/policies"); }
+  /** The UAVs Rerun logs one by one in a batched fleet (view state: never asks for a token). */
+  rerunSelection(ids) { return this.request("PUT", "/api/rerun/selection", { ids }, false); }
   putRoad(layout) { return this.request("PUT", "/api/road", layout); }
   addUav(id, position, policy) { return this.request("POST", "/api/uavs", { id, position, policy }); }
   removeUav(id) { return this.request("DELETE", `/api/uavs/${encodeURIComponent(id)}`); }

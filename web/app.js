@@ -31,6 +31,9 @@ export class App {
     this.trails = new Trails();
     this.plot = new MarginPlot($("plot"));
     this.selection = new Set();
+    /** The selection last sent to Rerun (ids joined by newlines), and whether Rerun is logging. */
+    this.rerunSent = "";
+    this.rerunActive = false;
     this.mode = "select";
     this.drawing = false;
     this.snapshot = null;
@@ -97,6 +100,7 @@ export class App {
     while (s.length > 2 && s[0][0] < now - 2000) s.shift();
     this.updateHeader(snap);
     showDetails($("details"), snap, this.selection);
+    this.syncRerunSelection();
     this.dirty = true;
   }
 
@@ -138,11 +142,32 @@ export class App {
     );
   }
 
+  /**
+   * With a Rerun sink running, sends the selection (its first 64) whenever it changed, so that the
+   * selected UAVs keep their own entities when the fleet is logged as one batch. Sent once per
+   * change, whatever the answer (a token refused is not asked for: this is view state).
+   */
+  syncRerunSelection() {
+    if (!this.rerunActive || this.rerunSending) return;
+    const ids = [...this.selection].slice(0, 64);
+    const key = ids.join("\n");
+    if (key === this.rerunSent) return;
+    this.rerunSending = true;
+    this.api
+      .rerunSelection(ids)
+      .catch(() => {})
+      .finally(() => {
+        this.rerunSent = key;
+        this.rerunSending = false;
+      });
+  }
+
   async pollMetrics() {
     try {
       const m = await this.api.metrics();
       $("p50").textContent = (m.tick.p50_us / 1000).toFixed(2);
       $("p99").textContent = (m.tick.p99_us / 1000).toFixed(2);
+      this.rerunActive = Boolean(m.rerun && m.rerun.active);
     } catch {
       // The connection state shows in the header already.
     }

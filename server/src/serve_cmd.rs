@@ -190,7 +190,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
         if server.state().token.is_some() { "need the bearer token" } else { "open (no token)" }
     );
     // Rerun is optional: a failure to start it is reported and the server runs without it.
-    let sink = match rerun_sink::start(rerun, server.state()) {
+    let sink = match rerun_sink::start(rerun, server.state(), args.rerun_batch_above) {
         Ok(sink) => {
             say!("  rerun      {rerun}");
             sink

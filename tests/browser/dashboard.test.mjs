@@ -175,6 +175,24 @@ test("a Crazyflie whose link fails shows the link's error in its details", async
   });
 });
 
+test("with Rerun logging a batched fleet, the dashboard's selection becomes Rerun's", async () => {
+  const rrd = join(ARTIFACTS, "selection.rrd");
+  await withDashboard("rerun-selection", ["--rerun", `save=${rrd}`, "--rerun-batch-above", "2"], async (page, { url }) => {
+    await until("the Rerun sink to report (GET /api/metrics)", async () => {
+      const m = await api(url, "GET", "/api/metrics");
+      return m.rerun.active && m.rerun.batched;
+    });
+    await selectHovering(page, url, "uav2");
+    const sent = await until("uav2 in Rerun's selection (GET /api/rerun/selection)", async () => {
+      const s = await api(url, "GET", "/api/rerun/selection");
+      return s.ids.length === 1 && s.ids[0] === "uav2" && s;
+    });
+    assert.deepEqual(sent.ids, ["uav2"]);
+    await page.keyboard.press("Escape");
+    await until("an empty selection sent to Rerun", async () => (await api(url, "GET", "/api/rerun/selection")).ids.length === 0);
+  });
+});
+
 test("add a UAV by clicking, give it a policy, remove it", async () => {
   await withDashboard("add", [], async (page, { url }) => {
     await page.click("#mode-add");

@@ -36,6 +36,7 @@ pub fn router() -> Router<AppState> {
         .route("/api/state", routing::get(get_state))
         .route("/api/metrics", routing::get(get_metrics))
         .route("/api/audit", routing::get(super::audit::list))
+        .route("/api/rerun/selection", routing::get(get_rerun_selection).put(put_rerun_selection))
 }
 
 /// A loop that has not finished a tick for this long is reported stalled.
@@ -286,6 +287,47 @@ async fn get_state(State(app): State<AppState>) -> Response {
     ([(header::CONTENT_TYPE, "application/json")], text).into_response()
 }
 
+/// `PUT /api/rerun/selection` body.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SelectionBody {
+    ids: Vec<String>,
+}
+
+async fn get_rerun_selection(State(app): State<AppState>) -> Json<Value> {
+    let ids = app.rerun_selection.borrow().clone();
+    Json(json!({"ids": &*ids}))
+}
+
+/// Which UAVs keep their own Rerun entities when the fleet is logged as one batch. View state, like
+/// the dashboard's selection: applied at once, not saved (a restart starts with none).
+async fn put_rerun_selection(
+    State(app): State<AppState>,
+    ApiJson(body): ApiJson<SelectionBody>,
+) -> Result<Json<Value>, ApiError> {
+    use super::rerun_sink::MAX_SELECTED;
+    if body.ids.len() > MAX_SELECTED {
+        return Err(ApiError::invalid("ids", format!("at most {MAX_SELECTED} UAVs, got {}", body.ids.len())));
+    }
+    let mut ids: Vec<String> = Vec::with_capacity(body.ids.len());
+    for id in body.ids {
+        if !ids.contains(&id) {
+            ids.push(id);
+        }
+    }
+    // One pass over the fleet, whatever its size.
+    let mut unseen: std::collections::HashSet<&str> = ids.iter().map(String::as_str).collect();
+    for u in &app.snapshots.borrow().uavs {
+        unseen.remove(u.id.as_str());
+    }
+    if let Some(id) = ids.iter().find(|id| unseen.contains(id.as_str())) {
+        return Err(ApiError::invalid("ids", format!("no UAV `{id}`")));
+    }
+    let ids: std::sync::Arc<[String]> = ids.into();
+    app.rerun_selection.send_replace(ids.clone());
+    Ok(Json(json!({"ids": &*ids})))
+}
+
 /// Links with an error listed by id in `GET /api/metrics` (`links.errors`).
 pub const LISTED_LINK_ERRORS: usize = 16;
 
@@ -317,6 +359,7 @@ async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
     });
     doc["storage"] = serde_json::to_value(app.storage.report()).unwrap_or(Value::Null);
     doc["mocap"] = app.mocap.report();
+    doc["rerun"] = app.rerun.report();
     // The first links with an error, by UAV (the count of all is `links.with_error`).
     let snapshot = app.snapshots.borrow().clone();
     let errors: Vec<Value> = snapshot

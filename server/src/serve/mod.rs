@@ -17,6 +17,7 @@ pub mod listener;
 pub mod mocap;
 pub mod openapi;
 pub mod persist;
+pub mod rerun_fleet;
 mod rerun_log;
 pub mod rerun_sink;
 pub mod snapshot;
@@ -258,6 +259,8 @@ impl Server {
             body_budget: state::body_budget(),
             validation: Arc::new(tokio::sync::Semaphore::new(1)),
             mocap: Arc::default(),
+            rerun: Arc::default(),
+            rerun_selection: Arc::new(watch::channel(Arc::from(Vec::new())).0),
         };
         Ok(Self {
             app,

@@ -1,7 +1,10 @@
 //! What the Rerun sink logs for each snapshot (entities and series listed in `rerun_sink`), and
 //! what it remembers between snapshots: the road version, each UAV's trail, the sink's counters.
+//! Above `batch_above` UAVs the fleet is one batch (`rerun_fleet`) and only the selected UAVs get
+//! their own entities.
 
 use super::engine::RoadView;
+use super::rerun_fleet::FleetLog;
 use super::rerun_sink::{SinkStats, TICK_TIMELINE, TIME_TIMELINE, TRAIL_EVERY_TICKS, TRAIL_POINTS};
 use super::snapshot::{ReservationSnapshot, Snapshot, UavSnapshot, UavStatus};
 use super::stats::LoopMetrics;
@@ -9,7 +12,7 @@ use rerun::{
     Arrows2D, Clear, Color, EntityPath, EntityPathPart, LineStrip2D, LineStrips2D, Points2D, Radius,
     RecordingStream, RecordingStreamResult, Scalars, Transform3D,
 };
-use std::collections::{HashMap, VecDeque};
+use std::collections::{HashMap, HashSet, VecDeque};
 
 /// Entity paths and trail of one UAV.
 struct UavLog {
@@ -52,6 +55,9 @@ impl UavLog {
 /// What the sink remembers between snapshots.
 #[derive(Default)]
 pub(super) struct Logger {
+    /// Above this many UAVs the fleet is logged as one batch.
+    batch_above: usize,
+    fleet: FleetLog,
     road_version: Option<u64>,
     last_tick: Option<u64>,
     /// Reservations were logged and must be cleared when the road has none any more.
@@ -60,11 +66,13 @@ pub(super) struct Logger {
     pub(super) stats: SinkStats,
 }
 
-fn xy(v: [f64; 2]) -> [f32; 2] {
+/// A position or vector as Rerun takes it.
+pub(super) fn xy(v: [f64; 2]) -> [f32; 2] {
     [v[0] as f32, v[1] as f32]
 }
 
-fn color(status: UavStatus) -> Color {
+/// A UAV's colour by status (as in the dashboard's legend).
+pub(super) fn color(status: UavStatus) -> Color {
     match status {
         UavStatus::Flying => Color::from_rgb(60, 200, 90),
         UavStatus::Arrived => Color::from_rgb(70, 140, 255),
@@ -99,18 +107,30 @@ fn reservation_label(r: &ReservationSnapshot) -> String {
 }
 
 impl Logger {
+    /// A logger that batches fleets of more than `batch_above` UAVs.
+    pub(super) fn new(batch_above: usize) -> Self {
+        Self { batch_above, ..Self::default() }
+    }
+
+    /// True when `snapshot` is logged as one batch.
+    pub(super) fn batched(&self, snapshot: &Snapshot) -> bool {
+        snapshot.uavs.len() > self.batch_above
+    }
+
     /// Logs the road again with the next snapshot (a new viewer has not seen it).
     pub(super) fn forget_road(&mut self) {
         self.road_version = None;
     }
 
-    /// Logs one snapshot (and the road when it changed) on the tick timeline.
+    /// Logs one snapshot (and the road when it changed) on the tick timeline; in a batched fleet
+    /// only the UAVs in `selection` get their own entities.
     pub(super) fn log(
         &mut self,
         rec: &RecordingStream,
         snapshot: &Snapshot,
         road: &RoadView,
         metrics: &LoopMetrics,
+        selection: &HashSet<String>,
     ) {
         if self.last_tick == Some(snapshot.tick) {
             return; // The first snapshot after a (re)connection may be one already logged.
@@ -119,7 +139,7 @@ impl Logger {
             self.stats.skipped += snapshot.tick.saturating_sub(last + 1);
         }
         self.last_tick = Some(snapshot.tick);
-        match self.log_snapshot(rec, snapshot, road, metrics) {
+        match self.log_snapshot(rec, snapshot, road, metrics, selection) {
             Ok(()) => self.stats.logged += 1,
             Err(e) => {
                 if self.stats.errors == 0 {
@@ -136,6 +156,7 @@ impl Logger {
         snapshot: &Snapshot,
         road: &RoadView,
         metrics: &LoopMetrics,
+        selection: &HashSet<String>,
     ) -> RecordingStreamResult<()> {
         rec.set_time_sequence(TICK_TIMELINE, i64::try_from(snapshot.tick).unwrap_or(i64::MAX));
         rec.set_duration_secs(TIME_TIMELINE, snapshot.time);
@@ -151,7 +172,16 @@ impl Logger {
             self.road_version = Some(road.version);
         }
         let radius = (snapshot.d_c / 2.0) as f32;
+        let batched = self.batched(snapshot);
+        if batched {
+            self.fleet.log(rec, snapshot, radius)?;
+        } else {
+            self.fleet.clear(rec)?;
+        }
         for u in &snapshot.uavs {
+            if batched && !selection.contains(&u.id) {
+                continue; // Cleared below if it had its own entities.
+            }
             if !self.uavs.contains_key(&u.id) {
                 self.uavs.insert(u.id.clone(), UavLog::new(&u.id));
             }

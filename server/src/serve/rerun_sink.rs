@@ -10,6 +10,11 @@
 //!   `trail`, `velocity`, `target` and `goal` below it; cleared when the UAV is removed;
 //! - scalar series `barrier/{id}` (smallest barrier value), `slack/{id}`, `margins/collision`,
 //!   `margins/road` (fleet minima, m) and `tick_us/p50`, `tick_us/p99` (fleet loop timing).
+//!
+//! Above `--rerun-batch-above` UAVs (default [`BATCH_ABOVE_UAVS`]) the fleet is `world/fleet` (all
+//! positions, labelled with the ids) and `world/fleet/velocity`, one batch each per tick, and only
+//! the UAVs selected with `PUT /api/rerun/selection` (the dashboard sends its selection) get the
+//! per-UAV entities and series above. What the sink logged and skipped is `rerun` in `/api/metrics`.
 
 use super::engine::RoadView;
 use super::rerun_log::Logger;
@@ -21,8 +26,10 @@ use rerun::external::re_uri::RedapUri;
 use rerun::log::ChunkBatcherConfig;
 use rerun::sink::{FileSink, FileSinkOptions, GrpcSink, GrpcSinkConnectionState, LogSink, SinkFlushError};
 use rerun::{RecordingStream, RecordingStreamBuilder};
+use std::collections::HashSet;
 use std::path::PathBuf;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
 use std::time::{Duration, Instant};
 use tokio::sync::{oneshot, watch};
 
@@ -38,6 +45,46 @@ pub const TRAIL_POINTS: usize = 50;
 pub const TRAIL_EVERY_TICKS: u64 = 4;
 /// Memory the `serve` mode's gRPC server keeps for late viewers before dropping the oldest data.
 pub const SERVE_MEMORY_BYTES: u64 = 512 * 1024 * 1024;
+/// Fleets larger than this are logged as one batch (`--rerun-batch-above`).
+pub const BATCH_ABOVE_UAVS: usize = 100;
+/// Most UAVs `PUT /api/rerun/selection` takes.
+pub const MAX_SELECTED: usize = 64;
+
+/// What the sink has done (`rerun` in `GET /api/metrics`), updated after every snapshot.
+#[derive(Debug, Default)]
+pub struct RerunCounters {
+    /// A sink is running (`--rerun` is not `off` and it started).
+    pub active: AtomicBool,
+    /// The last snapshot was logged as one batch.
+    pub batched: AtomicBool,
+    /// Snapshots logged.
+    pub logged: AtomicU64,
+    /// Snapshots skipped: the sink was behind the loop, or no viewer was connected.
+    pub skipped: AtomicU64,
+    /// Log calls that failed.
+    pub errors: AtomicU64,
+}
+
+impl RerunCounters {
+    fn store(&self, stats: SinkStats, batched: bool) {
+        self.batched.store(batched, Relaxed);
+        self.logged.store(stats.logged, Relaxed);
+        self.skipped.store(stats.skipped, Relaxed);
+        self.errors.store(stats.errors, Relaxed);
+    }
+
+    /// The counters as `GET /api/metrics` shows them.
+    pub fn report(&self) -> serde_json::Value {
+        serde_json::json!({
+            "active": self.active.load(Relaxed),
+            "batched": self.batched.load(Relaxed),
+            "logged": self.logged.load(Relaxed),
+            "skipped": self.skipped.load(Relaxed),
+            "errors": self.errors.load(Relaxed),
+        })
+    }
+}
+
 /// How long [`RerunSink::finish`] waits for the sink to flush before leaving it behind.
 pub const FINISH_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -144,10 +191,11 @@ impl RerunSink {
     }
 }
 
-/// Starts logging `state`'s channels as `mode` says (None for `off`). Errors (a file that cannot be
-/// created, a port in use) are returned; a missing viewer for `connect` is not an error: the sink
-/// warns, keeps retrying and skips snapshots until one listens.
-pub fn start(mode: &RerunMode, state: &AppState) -> anyhow::Result<Option<RerunSink>> {
+/// Starts logging `state`'s channels as `mode` says (None for `off`), batching fleets of more
+/// than `batch_above` UAVs. Errors (a file that cannot be created, a port in use) are returned; a
+/// missing viewer for `connect` is not an error: the sink warns, keeps retrying and skips
+/// snapshots until one listens.
+pub fn start(mode: &RerunMode, state: &AppState, batch_above: usize) -> anyhow::Result<Option<RerunSink>> {
     let output = match mode {
         RerunMode::Off => return Ok(None),
         RerunMode::Connect(url) => {
@@ -155,8 +203,10 @@ pub fn start(mode: &RerunMode, state: &AppState) -> anyhow::Result<Option<RerunS
             Output::Viewer(Viewer::open(url)?)
         }
         RerunMode::Save(path) => {
-            // No footer: its chunk index grows without bound over a long run (`rerun rrd optimize` adds one).
-            let sink = FileSink::with_options(path, FileSinkOptions { write_footer: false })
+            // The footer (an index of every chunk, which `rerun rrd verify` checks) is kept in memory
+            // until the file is closed: it grows with the chunk count, about one per entity per
+            // second here, which batching keeps independent of the fleet's size.
+            let sink = FileSink::with_options(path, FileSinkOptions { write_footer: true })
                 .with_context(|| format!("creating {}", path.display()))?;
             // Rows of one entity are gathered into a chunk for a second, not 200 ms: every chunk carries its
             // own schema, and the demo fleet's file was 3× larger with the default.
@@ -176,11 +226,20 @@ pub fn start(mode: &RerunMode, state: &AppState) -> anyhow::Result<Option<RerunS
             Output::Stream(builder().serve_grpc_opts("127.0.0.1", port, options)?)
         }
     };
-    let channels = (state.snapshots.clone(), state.road.clone(), state.metrics.clone());
+    let channels = Channels {
+        snapshots: state.snapshots.clone(),
+        road: state.road.clone(),
+        metrics: state.metrics.clone(),
+        selection: state.rerun_selection.subscribe(),
+        counters: state.rerun.clone(),
+    };
     let (stop, stopped) = oneshot::channel();
     let (done_tx, done) = std::sync::mpsc::channel();
+    state.rerun.active.store(true, Relaxed);
     std::thread::Builder::new().name("rerun-sink".into()).spawn(move || {
-        let stats = run(output, channels, stopped);
+        let counters = channels.counters.clone();
+        let stats = run(output, channels, Logger::new(batch_above), stopped);
+        counters.active.store(false, Relaxed);
         // `finish` may have given up waiting; the counts are then of no use to anyone.
         let _ = done_tx.send(stats);
     })?;
@@ -191,16 +250,24 @@ fn builder() -> RecordingStreamBuilder {
     RecordingStreamBuilder::new(APPLICATION_ID).recording_name("airroads serve")
 }
 
-type Channels =
-    (watch::Receiver<Arc<Snapshot>>, watch::Receiver<Arc<RoadView>>, watch::Receiver<Arc<LoopMetrics>>);
+/// What the sink thread reads, and where it reports.
+struct Channels {
+    snapshots: watch::Receiver<Arc<Snapshot>>,
+    road: watch::Receiver<Arc<RoadView>>,
+    metrics: watch::Receiver<Arc<LoopMetrics>>,
+    selection: watch::Receiver<Arc<[String]>>,
+    counters: Arc<RerunCounters>,
+}
 
 /// The sink thread: logs every snapshot it gets to until `stopped` fires or the fleet loop ends.
 fn run(
     mut output: Output,
-    (mut snapshots, road, metrics): Channels,
+    channels: Channels,
+    mut logger: Logger,
     mut stopped: oneshot::Receiver<()>,
 ) -> SinkStats {
-    let mut logger = Logger::default();
+    let Channels { mut snapshots, road, metrics, mut selection, counters } = channels;
+    let mut selected: HashSet<String> = selection.borrow_and_update().iter().cloned().collect();
     let runtime = match tokio::runtime::Builder::new_current_thread().build() {
         Ok(r) => r,
         Err(e) => {
@@ -210,16 +277,20 @@ fn run(
     };
     loop {
         let snapshot = snapshots.borrow_and_update().clone();
+        if selection.has_changed().unwrap_or(false) {
+            selected = selection.borrow_and_update().iter().cloned().collect();
+        }
         match output.stream() {
             Some(rec) => {
                 let (road, metrics) = (road.borrow().clone(), metrics.borrow().clone());
-                logger.log(rec, &snapshot, &road, &metrics);
+                logger.log(rec, &snapshot, &road, &metrics, &selected);
             }
             None => {
                 logger.stats.skipped += 1;
                 logger.forget_road();
             }
         }
+        counters.store(logger.stats, logger.batched(&snapshot));
         let next = runtime.block_on(async {
             tokio::select! {
                 biased;

@@ -99,6 +99,10 @@ pub struct AppState {
     pub validation: Arc<Semaphore>,
     /// Motion-capture counters (all zero without `--mocap`).
     pub mocap: Arc<super::mocap::MocapCounters>,
+    /// What the Rerun sink has done.
+    pub rerun: Arc<super::rerun_sink::RerunCounters>,
+    /// The UAVs that keep their own Rerun entities in a batched fleet (`/api/rerun/selection`).
+    pub rerun_selection: Arc<watch::Sender<Arc<[String]>>>,
 }
 
 /// Permits of the body budget.
