@@ -5,6 +5,7 @@
 mod api;
 pub mod audit;
 pub mod auth;
+pub mod binary;
 mod changes;
 pub mod client;
 pub mod command;
@@ -211,7 +212,9 @@ impl Server {
         let (commands, requests) = mpsc::channel(1024);
         let (urgent, urgent_requests) = mpsc::unbounded_channel();
         let first = Snapshot::of(&fleet, 0, 0.0, 0);
-        let first_frame = Frame { tick: 0, text: Utf8Bytes::from(serde_json::to_string(&first)?) };
+        let mut encoder = binary::Encoder::default();
+        let binary = encoder.encode(&first);
+        let first_frame = Frame { tick: 0, text: Utf8Bytes::from(serde_json::to_string(&first)?), binary };
         let (snapshots_tx, snapshots) = watch::channel(Arc::new(first));
         let (metrics_tx, metrics) = watch::channel(Arc::new(LoopMetrics::default()));
         let (road_tx, road) = watch::channel(Arc::new(RoadView::of(fleet.road(), 0)));
@@ -233,7 +236,7 @@ impl Server {
         let stops = factory.stops.clone();
         let engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
         let fleet_loop = engine.spawn(stop.clone())?;
-        tokio::spawn(serialise(snapshots.clone(), frames_tx));
+        tokio::spawn(serialise(snapshots.clone(), frames_tx, encoder));
         let app = AppState {
             commands,
             urgent,
@@ -370,13 +373,19 @@ async fn not_found() -> error::ApiError {
     error::ApiError::new(axum::http::StatusCode::NOT_FOUND, "not_found", "no such route")
 }
 
-/// Serialises every new snapshot once, for all readers of `/api/state` and `/ws`.
-async fn serialise(mut snapshots: watch::Receiver<Arc<Snapshot>>, frames: watch::Sender<Frame>) {
+/// Serialises every new snapshot once, as JSON and in the binary format, for all readers of
+/// `/api/state` and `/ws`.
+async fn serialise(
+    mut snapshots: watch::Receiver<Arc<Snapshot>>,
+    frames: watch::Sender<Frame>,
+    mut encoder: binary::Encoder,
+) {
     while snapshots.changed().await.is_ok() {
         let snapshot = snapshots.borrow_and_update().clone();
         match serde_json::to_string(&*snapshot) {
             Ok(text) => {
-                frames.send_replace(Frame { tick: snapshot.tick, text: Utf8Bytes::from(text) });
+                let binary = encoder.encode(&snapshot);
+                frames.send_replace(Frame { tick: snapshot.tick, text: Utf8Bytes::from(text), binary });
             }
             Err(e) => tracing::error!("snapshot not serialised: {e}"),
         }

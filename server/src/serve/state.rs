@@ -30,6 +30,8 @@ pub struct Frame {
     pub tick: u64,
     /// The `GET /api/state` document.
     pub text: Utf8Bytes,
+    /// The same snapshot in the binary stream's format (`/ws?format=bin`).
+    pub binary: super::binary::BinaryFrame,
 }
 
 /// Counters of the WebSocket stream.

@@ -1,8 +1,11 @@
-//! `GET /ws[?rate=HZ]`: every snapshot as JSON text (the `GET /api/state` document), at most `rate`
-//! frames per second. Each client reads the latest frame from a `watch` channel at its own pace: a
-//! slow client skips frames, a stalled one is dropped after [`SEND_TIMEOUT`]; neither touches the
-//! fleet loop or other clients.
+//! `GET /ws[?rate=HZ][&format=json|bin][&bbox=x0,y0,x1,y1]`: every snapshot as JSON text (the
+//! `GET /api/state` document) or, with `format=bin`, in the binary format of [`super::binary`] (a
+//! roster frame first and whenever it changes, then tick frames, only the UAVs inside `bbox` if
+//! given), at most `rate` frames per second. Each client reads the latest frame from a `watch`
+//! channel at its own pace: a slow client skips frames, a stalled one is dropped after
+//! [`SEND_TIMEOUT`]; neither touches the fleet loop or other clients.
 
+use super::binary::{Bbox, filter_bbox, parse_bbox};
 use super::error::ApiError;
 use super::state::AppState;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
@@ -46,6 +49,27 @@ pub fn frame_interval(rate: Option<f64>) -> Result<Duration, ApiError> {
 pub struct StreamQuery {
     /// Frames per second, 0 < rate ≤ 1000 (default: every snapshot).
     pub rate: Option<f64>,
+    /// `json` (default) or `bin`.
+    pub format: Option<String>,
+    /// Viewport `x0,y0,x1,y1` (m) of a `bin` stream: only the UAVs inside it are sent.
+    pub bbox: Option<String>,
+}
+
+/// What a client receives.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Format {
+    Json,
+    Binary(Option<Bbox>),
+}
+
+fn format_of(query: &StreamQuery) -> Result<Format, ApiError> {
+    let bbox = query.bbox.as_deref().map(parse_bbox).transpose().map_err(|e| ApiError::invalid("bbox", e))?;
+    match (query.format.as_deref(), bbox) {
+        (None | Some("json"), None) => Ok(Format::Json),
+        (None | Some("json"), Some(_)) => Err(ApiError::invalid("bbox", "needs format=bin")),
+        (Some("bin"), bbox) => Ok(Format::Binary(bbox)),
+        (Some(_), _) => Err(ApiError::invalid("format", "must be json or bin")),
+    }
 }
 
 /// Upgrades to a WebSocket that streams snapshots.
@@ -56,6 +80,7 @@ pub async fn handler(
 ) -> Result<Response, ApiError> {
     let Query(query) = query.map_err(|e| ApiError::invalid("rate", e.body_text()))?;
     let min_interval = frame_interval(query.rate)?;
+    let format = format_of(&query)?;
     if app.stream.clients.load(Relaxed) >= app.max_stream_clients {
         app.stream.clients_refused.fetch_add(1, Relaxed);
         return Err(ApiError::new(
@@ -65,16 +90,26 @@ pub async fn handler(
         ));
     }
     let upgrade = upgrade.max_message_size(MAX_CLIENT_MESSAGE_BYTES).max_frame_size(MAX_CLIENT_MESSAGE_BYTES);
-    Ok(upgrade.on_upgrade(move |socket| stream(app, socket, min_interval)))
+    Ok(upgrade.on_upgrade(move |socket| stream(app, socket, min_interval, format)))
 }
 
-async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration) {
+/// Sends `message`, giving up after [`SEND_TIMEOUT`]: Err(true) when the client stalled.
+async fn send(socket: &mut WebSocket, message: Message) -> Result<(), bool> {
+    match tokio::time::timeout(SEND_TIMEOUT, socket.send(message)).await {
+        Ok(Ok(())) => Ok(()),
+        Ok(Err(_)) => Err(false),
+        Err(_) => Err(true),
+    }
+}
+
+async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, format: Format) {
     let counters = app.stream.clone();
     counters.clients.fetch_add(1, Relaxed);
     let mut frames = app.frames.clone();
     frames.mark_changed();
     let mut last_sent: Option<Instant> = None;
     let mut last_tick = 0u64;
+    let mut roster_sent = 0u32;
     loop {
         tokio::select! {
             changed = frames.changed() => {
@@ -92,13 +127,33 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration) {
                     counters.frames_skipped.fetch_add(frame.tick - last_tick - 1, Relaxed);
                 }
                 last_tick = frame.tick;
-                match tokio::time::timeout(SEND_TIMEOUT, socket.send(Message::Text(frame.text))).await {
-                    Ok(Ok(())) => {
+                let sent = match format {
+                    Format::Json => send(&mut socket, Message::Text(frame.text)).await,
+                    Format::Binary(bbox) => {
+                        let b = frame.binary;
+                        let roster = if b.roster_version != roster_sent {
+                            send(&mut socket, Message::Binary(b.roster)).await
+                        } else {
+                            Ok(())
+                        };
+                        roster_sent = b.roster_version;
+                        let body = match bbox {
+                            None => b.body,
+                            Some(bbox) => filter_bbox(&b.body, bbox).into(),
+                        };
+                        match roster {
+                            Ok(()) => send(&mut socket, Message::Binary(body)).await,
+                            stalled => stalled,
+                        }
+                    }
+                };
+                match sent {
+                    Ok(()) => {
                         counters.frames_sent.fetch_add(1, Relaxed);
                         last_sent = Some(Instant::now());
                     }
-                    Ok(Err(_)) => break,
-                    Err(_) => {
+                    Err(false) => break,
+                    Err(true) => {
                         counters.clients_dropped.fetch_add(1, Relaxed);
                         break;
                     }

@@ -1,0 +1,197 @@
+//! The binary stream `GET /ws?format=bin`, version 1 (README "Binary stream"): per tick one
+//! little-endian *tick frame* of fixed-size records, and a *roster frame* (ids, policies, goals,
+//! links as JSON) whenever those change and first to every new client. Encoded once per snapshot
+//! by [`Encoder`], off the fleet loop, and shared by every client; a client with a viewport copies
+//! the records inside it out of the shared frame ([`filter_bbox`]) without decoding anything else.
+
+use super::snapshot::{Snapshot, UavStatus};
+use axum::body::Bytes;
+use serde_json::json;
+
+/// The format's version, the first byte of every message.
+pub const VERSION: u8 = 1;
+/// Second byte of a tick frame.
+pub const KIND_TICK: u8 = 1;
+/// Second byte of a roster frame.
+pub const KIND_ROSTER: u8 = 2;
+/// Bytes of a tick frame's header.
+pub const TICK_HEADER_BYTES: usize = 52;
+/// Bytes of one UAV's record in a tick frame.
+pub const RECORD_BYTES: usize = 40;
+/// Bytes before a roster frame's JSON.
+pub const ROSTER_HEADER_BYTES: usize = 8;
+/// Tick-frame flag: the fleet holds.
+pub const FLAG_PAUSED: u16 = 1;
+/// Tick-frame flag: only the UAVs inside the client's viewport are in the frame.
+pub const FLAG_FILTERED: u16 = 2;
+/// Record flag: within ε of its goal.
+pub const UAV_ARRIVED: u8 = 1;
+/// Record flag: its link is lost.
+pub const UAV_LOST: u8 = 2;
+
+/// The status byte of a record (README's table; the order of [`UavStatus`]).
+pub fn status_code(status: UavStatus) -> u8 {
+    status as u8
+}
+
+/// One snapshot in the binary format.
+#[derive(Debug, Clone, Default)]
+pub struct BinaryFrame {
+    /// Its tick.
+    pub tick: u64,
+    /// The roster the records' indices refer to.
+    pub roster_version: u32,
+    /// The roster frame of that version.
+    pub roster: Bytes,
+    /// The tick frame with every UAV.
+    pub body: Bytes,
+}
+
+/// Encodes snapshots, remembering the roster to tell when it changed.
+#[derive(Debug, Default)]
+pub struct Encoder {
+    roster_version: u32,
+    roster: Bytes,
+    /// (id, policy, goal, link) of the roster, in snapshot order.
+    last: Vec<(String, String, Option<[f64; 2]>, String)>,
+}
+
+fn f32_of(x: Option<f64>) -> f32 {
+    x.map_or(f32::NAN, |x| x as f32)
+}
+
+impl Encoder {
+    /// The binary frame of `snapshot` (a new roster frame only when ids, policies, goals or links
+    /// changed since the previous snapshot).
+    pub fn encode(&mut self, snapshot: &Snapshot) -> BinaryFrame {
+        let uavs = &snapshot.uavs;
+        let same = self.roster_version > 0
+            && self.last.len() == uavs.len()
+            && self.last.iter().zip(uavs).all(|((id, policy, goal, link), u)| {
+                *id == u.id && *policy == u.policy && *goal == u.goal && *link == u.link
+            });
+        if !same {
+            self.roster_version = self.roster_version.wrapping_add(1).max(1);
+            self.last.clear();
+            self.last.extend(uavs.iter().map(|u| (u.id.clone(), u.policy.clone(), u.goal, u.link.clone())));
+            let list: Vec<_> = uavs
+                .iter()
+                .map(|u| json!({"id": u.id, "policy": u.policy, "goal": u.goal, "link": u.link}))
+                .collect();
+            let mut roster = Vec::with_capacity(ROSTER_HEADER_BYTES + 64 * uavs.len());
+            roster.extend_from_slice(&[VERSION, KIND_ROSTER, 0, 0]);
+            roster.extend_from_slice(&self.roster_version.to_le_bytes());
+            // Serialising a Value built from strings and finite numbers cannot fail.
+            serde_json::to_writer(&mut roster, &json!({ "uavs": list })).unwrap_or_default();
+            self.roster = Bytes::from(roster);
+        }
+        let mut body = Vec::with_capacity(TICK_HEADER_BYTES + RECORD_BYTES * uavs.len());
+        let flags = if snapshot.paused { FLAG_PAUSED } else { 0 };
+        let count = u32::try_from(uavs.len()).unwrap_or(u32::MAX);
+        body.extend_from_slice(&[VERSION, KIND_TICK]);
+        body.extend_from_slice(&flags.to_le_bytes());
+        body.extend_from_slice(&self.roster_version.to_le_bytes());
+        body.extend_from_slice(&snapshot.tick.to_le_bytes());
+        body.extend_from_slice(&snapshot.time.to_le_bytes());
+        body.extend_from_slice(&count.to_le_bytes());
+        body.extend_from_slice(&count.to_le_bytes());
+        body.extend_from_slice(&(snapshot.road_version as u32).to_le_bytes());
+        for x in [
+            f32_of(snapshot.min_collision_margin_m),
+            f32_of(snapshot.min_road_margin_m),
+            snapshot.d_c as f32,
+            snapshot.d_s as f32,
+        ] {
+            body.extend_from_slice(&x.to_le_bytes());
+        }
+        for (index, u) in (0u32..).zip(uavs) {
+            body.extend_from_slice(&index.to_le_bytes());
+            for x in [u.p, u.v, u.u, u.target].iter().flatten() {
+                body.extend_from_slice(&(*x as f32).to_le_bytes());
+            }
+            let flags = if u.arrived { UAV_ARRIVED } else { 0 } | if u.lost { UAV_LOST } else { 0 };
+            body.extend_from_slice(&[status_code(u.status), flags, 0, 0]);
+        }
+        BinaryFrame {
+            tick: snapshot.tick,
+            roster_version: self.roster_version,
+            roster: self.roster.clone(),
+            body: Bytes::from(body),
+        }
+    }
+}
+
+/// A viewport `[x0, y0, x1, y1]` (m), x0 ≤ x1 and y0 ≤ y1.
+pub type Bbox = [f32; 4];
+
+/// Parses `bbox=x0,y0,x1,y1`: four finite numbers with x0 ≤ x1 and y0 ≤ y1.
+pub fn parse_bbox(text: &str) -> Result<Bbox, String> {
+    let parts: Vec<&str> = text.split(',').collect();
+    let values: Vec<f32> = parts.iter().filter_map(|p| p.trim().parse::<f32>().ok()).collect();
+    match values[..] {
+        [x0, y0, x1, y1]
+            if parts.len() == 4 && values.iter().all(|v| v.is_finite()) && x0 <= x1 && y0 <= y1 =>
+        {
+            Ok([x0, y0, x1, y1])
+        }
+        _ => Err("must be x0,y0,x1,y1: four finite numbers with x0 ≤ x1 and y0 ≤ y1".into()),
+    }
+}
+
+fn f32_at(bytes: &[u8], at: usize) -> f32 {
+    bytes.get(at..at + 4).and_then(|b| b.try_into().ok()).map_or(f32::NAN, f32::from_le_bytes)
+}
+
+/// The tick frame `body` with only the records whose position lies in `bbox` (header copied, the
+/// count and [`FLAG_FILTERED`] set).
+pub fn filter_bbox(body: &[u8], bbox: Bbox) -> Vec<u8> {
+    let Some((header, records)) = body.split_at_checked(TICK_HEADER_BYTES) else { return body.to_vec() };
+    let mut out = Vec::with_capacity(body.len().min(TICK_HEADER_BYTES + 64 * RECORD_BYTES));
+    out.extend_from_slice(header);
+    let mut count = 0u32;
+    for record in records.chunks_exact(RECORD_BYTES) {
+        let (x, y) = (f32_at(record, 4), f32_at(record, 8));
+        if x >= bbox[0] && x <= bbox[2] && y >= bbox[1] && y <= bbox[3] {
+            out.extend_from_slice(record);
+            count += 1;
+        }
+    }
+    let flags = u16::from_le_bytes([out[2], out[3]]) | FLAG_FILTERED;
+    out[2..4].copy_from_slice(&flags.to_le_bytes());
+    out[28..32].copy_from_slice(&count.to_le_bytes());
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_viewport_is_four_finite_ordered_numbers() {
+        assert_eq!(parse_bbox("-1,-2.5,3,4"), Ok([-1.0, -2.5, 3.0, 4.0]));
+        assert_eq!(parse_bbox(" 0, 0 ,0,0"), Ok([0.0; 4]));
+        for bad in
+            ["", "1,2,3", "1,2,3,4,5", "a,b,c,d", "1,2,0,4", "1,5,2,4", "0,0,NaN,1", "0,0,1e40,1", "0,,1,1"]
+        {
+            assert!(parse_bbox(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn filtering_keeps_the_header_and_the_records_inside() {
+        let mut body = vec![0u8; TICK_HEADER_BYTES];
+        body[..2].copy_from_slice(&[VERSION, KIND_TICK]);
+        for (index, (x, y)) in [(0u32, (0.0f32, 0.0f32)), (1, (5.0, 5.0)), (2, (f32::NAN, 0.0))] {
+            let mut record = vec![0u8; RECORD_BYTES];
+            record[..4].copy_from_slice(&index.to_le_bytes());
+            record[4..8].copy_from_slice(&x.to_le_bytes());
+            record[8..12].copy_from_slice(&y.to_le_bytes());
+            body.extend_from_slice(&record);
+        }
+        let out = filter_bbox(&body, [-1.0, -1.0, 1.0, 1.0]);
+        assert_eq!(out.len(), TICK_HEADER_BYTES + RECORD_BYTES);
+        assert_eq!(u32::from_le_bytes(out[28..32].try_into().unwrap()), 1);
+        assert_eq!(u16::from_le_bytes([out[2], out[3]]), FLAG_FILTERED);
+        assert_eq!(&out[TICK_HEADER_BYTES..TICK_HEADER_BYTES + 4], &0u32.to_le_bytes());
+    }
+}
