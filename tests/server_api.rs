@@ -221,3 +221,49 @@ async fn a_configured_token_guards_changes_but_not_reads() {
     assert_eq!(server.call("GET", "/api/state", None).await.0, 200);
     server.stop().await;
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_uav_list_comes_in_pages_and_by_viewport() {
+    // 25 UAVs on a 40 m road, five rows of five; pages of 10 walk the fleet in order.
+    let uavs: Vec<Value> = (0..25)
+        .map(|k| {
+            let at = [2.0 + 7.0 * f64::from(k % 5), -1.2 + 0.6 * f64::from(k / 5)];
+            json!({"id": format!("u{k:02}"), "start": at, "goal": at})
+        })
+        .collect();
+    let scenario = json!({"name": "pages", "segments": roads::RoadLayout::straight(0.0, 40.0, 4.0, 4).segments, "uavs": uavs});
+    let server = start(config(&scenario)).await;
+    let all = server.get("/api/uavs").await;
+    assert_eq!(all.as_array().unwrap().len(), 25, "without parameters: the whole fleet, as before");
+    let mut walked = Vec::new();
+    let mut after = String::new();
+    loop {
+        let page = server.get(&format!("/api/uavs?limit=10{after}")).await;
+        let page = page.as_array().unwrap();
+        assert!(page.len() <= 10);
+        if page.is_empty() {
+            break;
+        }
+        walked.extend(page.iter().map(|u| u["id"].as_str().unwrap().to_string()));
+        after = format!("&after={}", walked.last().unwrap());
+    }
+    let ids: Vec<String> =
+        all.as_array().unwrap().iter().map(|u| u["id"].as_str().unwrap().to_string()).collect();
+    assert_eq!(walked, ids, "three pages, every UAV once, in fleet order");
+    // The first column (x ≈ 2 m) through a viewport, fleet order kept.
+    let column = server.get("/api/uavs?bbox=0,-3,4,3").await;
+    let column: Vec<&str> = column.as_array().unwrap().iter().map(|u| u["id"].as_str().unwrap()).collect();
+    assert_eq!(column, ["u00", "u05", "u10", "u15", "u20"]);
+    for (query, field) in [
+        ("limit=0", "limit"),
+        ("limit=1001", "limit"),
+        ("limit=-1", "limit"),
+        ("after=nobody", "after"),
+        ("bbox=1,1,0,0", "bbox"),
+        ("bbox=0,0,inf,1", "bbox"),
+    ] {
+        let (status, reply) = server.call("GET", &format!("/api/uavs?{query}"), None).await;
+        assert_eq!((status, reply["error"]["field"].as_str()), (422, Some(field)), "{query}: {reply}");
+    }
+    server.stop().await;
+}

@@ -109,8 +109,53 @@ fn road_of(layout: RoadLayout) -> Result<Road, ApiError> {
     })
 }
 
-async fn list_uavs(State(app): State<AppState>) -> Json<Vec<UavSnapshot>> {
-    Json(app.snapshots.borrow().uavs.clone())
+/// Most UAVs one page of `GET /api/uavs` holds (and its default size once any parameter is given).
+pub const MAX_PAGE: usize = 1000;
+
+/// Query of `GET /api/uavs`: without any, the whole fleet (as before pages existed).
+#[derive(Debug, Deserialize)]
+struct ListQuery {
+    bbox: Option<String>,
+    limit: Option<usize>,
+    after: Option<String>,
+}
+
+/// `GET /api/uavs[?bbox=x0,y0,x1,y1][&limit=N][&after=ID]`: the UAVs in fleet order, those inside
+/// `bbox` only, starting after the UAV `after`, at most `limit` (1–1000, default 1000 when any
+/// parameter is given). The next page starts after the last id of this one.
+async fn list_uavs(
+    State(app): State<AppState>,
+    query: Result<axum::extract::Query<ListQuery>, axum::extract::rejection::QueryRejection>,
+) -> Result<Json<Vec<UavSnapshot>>, ApiError> {
+    let axum::extract::Query(q) = query.map_err(|e| ApiError::invalid("limit", e.body_text()))?;
+    let snapshot = app.snapshots.borrow().clone();
+    if q.bbox.is_none() && q.limit.is_none() && q.after.is_none() {
+        return Ok(Json(snapshot.uavs.clone()));
+    }
+    let limit = q.limit.unwrap_or(MAX_PAGE);
+    if !(1..=MAX_PAGE).contains(&limit) {
+        return Err(ApiError::invalid("limit", format!("must be between 1 and {MAX_PAGE}")));
+    }
+    let bbox = q
+        .bbox
+        .as_deref()
+        .map(super::binary::parse_bbox)
+        .transpose()
+        .map_err(|e| ApiError::invalid("bbox", e))?;
+    let start = match &q.after {
+        None => 0,
+        Some(id) => match snapshot.uavs.iter().position(|u| u.id == *id) {
+            Some(k) => k + 1,
+            None => return Err(ApiError::invalid("after", format!("no UAV `{id}`"))),
+        },
+    };
+    let inside = |u: &&UavSnapshot| {
+        bbox.is_none_or(|[x0, y0, x1, y1]| {
+            let (x, y) = (u.p[0] as f32, u.p[1] as f32);
+            x >= x0 && x <= x1 && y >= y0 && y <= y1
+        })
+    };
+    Ok(Json(snapshot.uavs[start..].iter().filter(inside).take(limit).cloned().collect()))
 }
 
 async fn get_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<Json<UavSnapshot>, ApiError> {
