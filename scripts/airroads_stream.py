@@ -23,7 +23,7 @@ import urllib.parse
 import urllib.request
 
 VERSION = 1
-KIND_TICK, KIND_ROSTER = 1, 2
+KIND_TICK, KIND_ROSTER, KIND_RESERVATIONS = 1, 2, 3
 TICK_HEADER = struct.Struct("<BBHIQdIIIffff")  # 52 bytes
 RECORD = struct.Struct("<I8fBBH")  # 40 bytes
 STATUSES = ["flying", "arrived", "braking", "failed", "stale", "lost", "connecting", "taking_off",
@@ -33,7 +33,8 @@ UAV_ARRIVED, UAV_LOST = 1, 2
 
 
 def decode(message):
-    """One binary message as a dict: {"kind": "roster", "roster_version", "uavs"} or
+    """One binary message as a dict: {"kind": "roster", "roster_version", "uavs"},
+    {"kind": "reservations", "version", "reservations"} or
     {"kind": "tick", "roster_version", "tick", "time", "paused", "filtered", "fleet", "road_version",
     "min_collision_margin_m", "min_road_margin_m", "d_c", "d_s", "uavs": [{"index", "p", "v", "u",
     "target", "status", "arrived", "lost"}]} (margins None when NaN)."""
@@ -43,6 +44,10 @@ def decode(message):
         (roster_version,) = struct.unpack_from("<I", message, 4)
         body = json.loads(message[8:].decode("utf-8"))
         return {"kind": "roster", "roster_version": roster_version, "uavs": body["uavs"]}
+    if message[1] == KIND_RESERVATIONS:
+        (version,) = struct.unpack_from("<I", message, 4)
+        body = json.loads(message[8:].decode("utf-8"))
+        return {"kind": "reservations", "version": version, "reservations": body["reservations"]}
     if message[1] != KIND_TICK:
         raise ValueError(f"unknown frame kind {message[1]}")
     (_, _, flags, roster_version, tick, time, fleet, count, road_version,
@@ -150,6 +155,9 @@ def check(http):
         if frame["kind"] == "roster":
             roster = frame
             continue
+        if frame["kind"] == "reservations":
+            assert isinstance(frame["reservations"], list)
+            continue
         assert frame["roster_version"] == roster["roster_version"], "a tick of an unknown roster"
         assert last is None or frame["tick"] > last, "ticks go back"
         last = frame["tick"]
@@ -184,6 +192,8 @@ def main(argv):
     for k, frame in enumerate(Stream(argv[0])):
         if frame["kind"] == "roster":
             print(f"roster {frame['roster_version']}: {len(frame['uavs'])} UAVs")
+        elif frame["kind"] == "reservations":
+            print(f"reservations {frame['version']}: {len(frame['reservations'])} single-file sections")
         else:
             print(f"tick {frame['tick']} t={frame['time']:.2f} s: {len(frame['uavs'])} of {frame['fleet']} UAVs")
         if k + 1 >= frames:

@@ -62,6 +62,7 @@ struct Tick {
 enum Frame {
     Roster(u32, Value),
     Tick(Tick),
+    Reservations(u32, Value),
 }
 
 fn u32_at(b: &[u8], at: usize) -> u32 {
@@ -80,6 +81,7 @@ fn decode(b: &[u8]) -> Frame {
     assert_eq!(b[0], 1, "format version");
     match b[1] {
         2 => Frame::Roster(u32_at(b, 4), serde_json::from_slice(&b[8..]).expect("the roster is JSON")),
+        3 => Frame::Reservations(u32_at(b, 4), serde_json::from_slice(&b[8..]).expect("JSON reservations")),
         1 => {
             let count = u32_at(b, 28) as usize;
             assert_eq!(b.len(), 52 + 40 * count, "header and {count} records");
@@ -124,10 +126,16 @@ async fn next(socket: &mut Socket) -> Message {
         .expect("a valid frame")
 }
 
+/// The next roster or tick frame (reservations frames are checked apart).
 async fn next_binary(socket: &mut Socket) -> Frame {
-    match next(socket).await {
-        Message::Binary(b) => decode(&b),
-        other => panic!("a binary message, got {other:?}"),
+    loop {
+        match next(socket).await {
+            Message::Binary(b) => match decode(&b) {
+                Frame::Reservations(..) => continue,
+                frame => return frame,
+            },
+            other => panic!("a binary message, got {other:?}"),
+        }
     }
 }
 
@@ -195,6 +203,7 @@ async fn the_binary_stream_carries_what_the_json_stream_carries() {
                 assert_eq!(t.roster_version, v);
                 break;
             }
+            Frame::Reservations(..) => unreachable!("next_binary skips them"),
         }
     }
     server.stop().await;
@@ -245,5 +254,37 @@ async fn bad_stream_parameters_are_refused_with_the_field_named() {
             "{query}: {body}"
         );
     }
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn single_file_sections_come_as_a_reservations_frame_when_they_change() {
+    let server = start(config(&small())).await;
+    let scenario =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/narrow16.json")).unwrap();
+    let (status, reply) = server.call("POST", "/api/scenario", Some(&scenario)).await;
+    assert_eq!(status, 200, "{reply}");
+    let mut bin = connect(server.addr, "?format=bin").await;
+    let (mut versions, mut ticks) = (Vec::new(), 0);
+    while ticks < 60 {
+        let Message::Binary(b) = next(&mut bin).await else { continue };
+        match decode(&b) {
+            Frame::Reservations(version, body) => {
+                let state = server.get("/api/state").await;
+                let sections = body["reservations"].as_array().unwrap();
+                assert_eq!(sections.len(), state["reservations"].as_array().unwrap().len(), "{body}");
+                assert!(
+                    sections.iter().all(|z| z["path"].as_array().is_some_and(|p| p.len() >= 2)),
+                    "{body}"
+                );
+                versions.push(version);
+            }
+            Frame::Tick(_) => ticks += 1,
+            Frame::Roster(..) => {}
+        }
+    }
+    // First to the new client, then only when a section's state changed (not every tick).
+    assert!(!versions.is_empty() && versions.len() < 60, "{versions:?}");
+    assert!(versions.windows(2).all(|w| w[0] < w[1]), "{versions:?}");
     server.stop().await;
 }

@@ -71,6 +71,7 @@ export class Api {
   road() { return this.request("GET", "/api/road"); }
   geometry() { return this.request("GET", "/api/road/geometry"); }
   policies() { return this.request("GET", "/api/policies"); }
+  uav(id) { return this.request("GET", `/api/uavs/${encodeURIComponent(id)}`); }
   /** The UAVs Rerun logs one by one in a batched fleet (view state: never asks for a token). */
   rerunSelection(ids) { return this.request("PUT", "/api/rerun/selection", { ids }, false); }
   putRoad(layout) { return this.request("PUT", "/api/road", layout); }

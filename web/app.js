@@ -31,6 +31,8 @@ export class App {
     this.trails = new Trails();
     this.plot = new MarginPlot($("plot"));
     this.selection = new Set();
+    /** id → `GET /api/uavs/{id}` of the selected UAVs shown in the details (fields the stream lacks). */
+    this.details = new Map();
     /** The selection last sent to Rerun (ids joined by newlines), and whether Rerun is logging. */
     this.rerunSent = "";
     this.rerunActive = false;
@@ -57,6 +59,7 @@ export class App {
     this.setMode("select");
     this.pollMetrics();
     setInterval(() => this.pollMetrics(), 1000);
+    setInterval(() => this.refreshDetails(), 500);
     requestAnimationFrame((t) => this.frame(t));
   }
 
@@ -99,7 +102,7 @@ export class App {
     s.push([now, snap.tick]);
     while (s.length > 2 && s[0][0] < now - 2000) s.shift();
     this.updateHeader(snap);
-    showDetails($("details"), snap, this.selection);
+    showDetails($("details"), snap, this.selection, this.details);
     this.syncRerunSelection();
     this.dirty = true;
   }
@@ -140,6 +143,20 @@ export class App {
           return row;
         }),
     );
+  }
+
+  /** Fetches what the stream does not carry for the UAVs in the details panel (at most 4). */
+  async refreshDetails() {
+    const ids = [...this.selection].slice(0, 4);
+    for (const id of this.details.keys()) if (!this.selection.has(id)) this.details.delete(id);
+    if (!ids.length || this.detailsFetching) return;
+    this.detailsFetching = true;
+    try {
+      const answers = await Promise.all(ids.map((id) => this.api.uav(id).catch(() => null)));
+      answers.forEach((u, k) => u && this.details.set(ids[k], u));
+    } finally {
+      this.detailsFetching = false;
+    }
   }
 
   /**

@@ -15,13 +15,13 @@ function card(u) {
   const speed = Math.hypot(u.v[0], u.v[1]);
   const rows = [
     ["status", u.status.replace("_", " ")],
-    ["reason", u.wait_reason ? `${u.wait_reason}: ${REASONS[u.wait_reason] || ""}` : null],
+    ["reason", u.status === "waiting" && u.wait_reason ? `${u.wait_reason}: ${REASONS[u.wait_reason] || ""}` : null],
     ["policy", u.policy],
     ["position", `${fmt(u.p[0])}, ${fmt(u.p[1])} m`],
     ["speed", `${fmt(speed)} m/s`],
     ["goal", u.goal ? `${fmt(u.goal[0])}, ${fmt(u.goal[1])} m` : "none (hovers)"],
     ["margins", `road ${fmt(u.road_margin_m, 3)} m, collision ${fmt(u.collision_margin_m, 3)} m`],
-    ["link", `${u.link} (${u.phase})`],
+    ["link", u.phase ? `${u.link} (${u.phase})` : u.link],
     ["link error", u.link_error ?? null],
   ];
   const el = document.createElement("section");
@@ -42,8 +42,12 @@ function card(u) {
   return el;
 }
 
-/** Shows the first selected UAVs of `snap` in `panel` (hidden without a selection). */
-export function showDetails(panel, snap, selection) {
+/**
+ * Shows the first selected UAVs of `snap` in `panel` (hidden without a selection). The stream carries
+ * position, speed, status and the roster; `extra` (id → `GET /api/uavs/{id}`) adds what only the REST
+ * answer has (the traffic rule's reason, margins, the link's phase and error), refreshed by the app.
+ */
+export function showDetails(panel, snap, selection, extra = new Map()) {
   if (!selection.size) {
     if (!panel.hidden) panel.replaceChildren();
     panel.hidden = true;
@@ -52,7 +56,7 @@ export function showDetails(panel, snap, selection) {
   const cards = [];
   for (const u of snap.uavs) {
     if (!selection.has(u.id)) continue;
-    cards.push(card(u));
+    cards.push(card({ ...extra.get(u.id), ...u }));
     if (cards.length === MAX_CARDS) break;
   }
   if (selection.size > cards.length && cards.length === MAX_CARDS) {

@@ -1,26 +1,42 @@
-// The /ws snapshot stream: keeps only the latest frame's text (parsed lazily, once per animation
-// frame), reconnects with backoff, and reports the connection state.
+// The /ws snapshot stream in the binary format (`?format=bin`, decoded by binary.js): keeps the
+// roster and reservations as they change and only the latest tick frame (decoded lazily, once per
+// animation frame), reconnects with backoff, and reports the connection state.
+
+import { KIND_RESERVATIONS, KIND_ROSTER, KIND_TICK, decodeJson, decodeTick, kindOf } from "./binary.js";
 
 export class Stream {
   /** @param {(connected: boolean) => void} onState */
   constructor(onState) {
     this.onState = onState;
-    this.latestText = null;
-    this.frames = 0; // frames received
+    this.latest = null;
+    this.roster = [];
+    this.rosterVersion = 0;
+    this.reservations = [];
+    this.frames = 0; // tick frames received
     this.delay = 250;
     this.connect();
   }
 
   connect() {
     const scheme = location.protocol === "https:" ? "wss" : "ws";
-    const ws = new WebSocket(`${scheme}://${location.host}/ws`);
+    const ws = new WebSocket(`${scheme}://${location.host}/ws?format=bin`);
+    ws.binaryType = "arraybuffer";
     ws.onopen = () => {
       this.delay = 250;
       this.onState(true);
     };
     ws.onmessage = (ev) => {
-      this.latestText = ev.data;
-      this.frames++;
+      if (!(ev.data instanceof ArrayBuffer)) return;
+      const kind = kindOf(ev.data);
+      if (kind === KIND_TICK) {
+        this.latest = ev.data;
+        this.frames++;
+      } else if (kind === KIND_ROSTER) {
+        const { version, body } = decodeJson(ev.data);
+        [this.roster, this.rosterVersion] = [body.uavs, version];
+      } else if (kind === KIND_RESERVATIONS) {
+        this.reservations = decodeJson(ev.data).body.reservations;
+      }
     };
     ws.onclose = () => {
       this.onState(false);
@@ -30,11 +46,13 @@ export class Stream {
     this.ws = ws;
   }
 
-  /** The newest snapshot received since the last call, parsed, or null. */
+  /** The newest snapshot received since the last call, decoded, or null. */
   take() {
-    const text = this.latestText;
-    if (text === null) return null;
-    this.latestText = null;
-    return JSON.parse(text);
+    const buffer = this.latest;
+    if (buffer === null) return null;
+    this.latest = null;
+    // A tick of an older roster (one arrived in between): the next tick will match.
+    if (new DataView(buffer).getUint32(4, true) !== this.rosterVersion) return null;
+    return decodeTick(buffer, this.roster, this.reservations);
   }
 }

@@ -1,9 +1,10 @@
-// Frame-time benchmark of the dashboard with 1,000 UAVs (scripts/browser-tests --bench).
-// Phase "live": a real `airroads serve --scenario` with 1,000 UAVs on a long wide road, streamed over
-// /ws at whatever rate the server sustains (the server shares the machine with the browser). Phase
-// "replay": the same page fed 1,000-UAV snapshots recorded from that server at exactly 20 Hz (a
-// stand-in WebSocket installed before the page loads; the server stopped, its answers replayed), so
-// the browser's cost at 20 Hz is measured even when the server cannot tick 1,000 UAVs at 20 Hz here.
+// Frame-time benchmark of the dashboard with 1,000 UAVs, or BENCH_UAVS (scripts/browser-tests --bench).
+// Phase "live": a real `airroads serve --scenario` with N UAVs on a long wide road, streamed over
+// /ws?format=bin at whatever rate the server sustains (the server shares the machine with the
+// browser). Phase "replay": the same page fed 40 consecutive binary frames recorded from that
+// server, in a loop at exactly 20 Hz (a stand-in WebSocket installed before the page loads; the
+// server stopped, its answers replayed), so the browser's cost at 20 Hz is measured even when the
+// server cannot tick N UAVs at 20 Hz here.
 // Prints median and p99 of the requestAnimationFrame interval and of the draw call, plus the
 // server's tick time from GET /api/metrics.
 
@@ -14,21 +15,27 @@ import { api, launchBrowser, openDashboard, screenshot, startServer, until } fro
 
 const WEB = join(import.meta.dirname, "..", "..", "web");
 const SECONDS = Number(process.env.BENCH_SECONDS || 10);
-const N = 1000;
+const N = Number(process.env.BENCH_UAVS || 1000);
 
-/** 10 segments of 20 m x 24 m; UAVs on a 50 x 20 grid 0.6 m apart, each flying 160 m down the road. */
+/**
+ * 1,000 UAVs: 10 segments of 20 m x 24 m, UAVs on a 50 x 20 grid 0.6 m apart, each flying 160 m
+ * down the road. More: 100 columns and a road as wide and long as the grid needs.
+ */
 function scenario() {
+  const cols = N <= 1000 ? 50 : 100, rows = Math.ceil(N / cols);
+  const half = Math.max(12, (rows * 0.6) / 2 + 3);
+  const pieces = Math.max(10, Math.ceil((2 + cols * 0.6 + 165) / 20));
   const segments = [];
-  for (let i = 0; i < 10; i++) {
+  for (let i = 0; i < pieces; i++) {
     const x0 = 20 * i, x1 = 20 * (i + 1);
-    segments.push([[x1, -12], [x0, -12], [x1, 12], [x0, 12]]);
+    segments.push([[x1, -half], [x0, -half], [x1, half], [x0, half]]);
   }
   const uavs = [];
   for (let k = 0; k < N; k++) {
-    const x = 2 + 0.6 * (k % 50), y = -5.7 + 0.6 * Math.floor(k / 50);
+    const x = 2 + 0.6 * (k % cols), y = -0.3 * (rows - 1) + 0.6 * Math.floor(k / cols);
     uavs.push({ id: `u${k}`, start: [x, y], goal: [x + 160, y] });
   }
-  return { name: "bench1000", params: { t_max: 3600 }, segments, uavs };
+  return { name: `bench${N}`, params: { t_max: 3600 }, segments, uavs };
 }
 
 const quantile = (xs, q) => {
@@ -75,16 +82,51 @@ function report(name, r) {
   );
 }
 
-/** A stand-in for WebSocket that plays `frames` (snapshot texts) in a loop at 20 Hz. */
-function replaySocket(frames) {
+/**
+ * A stand-in for WebSocket that sends `first` (the roster and reservations frames) and then plays
+ * `ticks` in a loop at 20 Hz; frames arrive as base64 and are sent as ArrayBuffers.
+ */
+function replaySocket({ first, ticks }) {
+  const buffer = (b64) => Uint8Array.from(atob(b64), (c) => c.charCodeAt(0)).buffer;
+  const [head, frames] = [first.map(buffer), ticks.map(buffer)];
   window.WebSocket = class {
     constructor() {
       let k = 0;
-      setTimeout(() => this.onopen && this.onopen(), 0);
+      setTimeout(() => {
+        this.onopen && this.onopen();
+        for (const data of head) this.onmessage && this.onmessage({ data });
+      }, 0);
       setInterval(() => this.onmessage && this.onmessage({ data: frames[k++ % frames.length] }), 50);
     }
     close() {}
   };
+}
+
+/** 40 consecutive tick frames of `url`'s binary stream and the frames before them, as base64. */
+function recordStream(url) {
+  return new Promise((resolve) => {
+    const ws = new WebSocket(`${url.replace("http", "ws")}/ws?format=bin`);
+    ws.binaryType = "arraybuffer";
+    const first = [], ticks = [];
+    const b64 = (data) => {
+      const bytes = new Uint8Array(data);
+      let s = "";
+      for (let i = 0; i < bytes.length; i += 0x8000) s += String.fromCharCode(...bytes.subarray(i, i + 0x8000));
+      return btoa(s);
+    };
+    ws.onmessage = (ev) => {
+      const kind = new Uint8Array(ev.data)[1];
+      if (kind !== 1) {
+        if (!ticks.length) first.push(b64(ev.data));
+        return;
+      }
+      ticks.push(b64(ev.data));
+      if (ticks.length === 40) {
+        ws.close();
+        resolve({ first, ticks });
+      }
+    };
+  });
 }
 
 const dir = mkdtempSync(join(tmpdir(), "airroads-bench-"));
@@ -93,29 +135,17 @@ writeFileSync(file, JSON.stringify(scenario()));
 const server = await startServer(["--scenario", file, "--max-uavs", String(N)]);
 const browser = await launchBrowser();
 try {
-  console.log(`dashboard frame benchmark: ${N} UAVs, ${SECONDS} s per phase, Chromium headless (software rendering)`);
+  console.log(`dashboard frame benchmark: ${N} UAVs, ${SECONDS} s per phase, Chromium headless (software rendering), binary stream`);
   const page = await openDashboard(browser, server.url);
-  await until("1,000 UAVs in the page", () => page.evaluate((n) => window.__airroads.snapshot.uavs.length === n, N));
+  await until(`${N} UAVs in the page`, () => page.evaluate((n) => window.__airroads.snapshot?.uavs.length === n, N), 120000);
   await new Promise((r) => setTimeout(r, 2000)); // warm-up (JIT, caches), not an assertion
   await api(server.url, "GET", "/api/metrics"); // reset nothing; the metrics window is the last minute
   const live = await measure(page);
   const metrics = await api(server.url, "GET", "/api/metrics");
   await screenshot(page, "bench-live");
+  // Record 40 consecutive frames of the real stream (as the server sent them), to replay at 20 Hz.
+  const frames = await page.evaluate(recordStream, server.url);
   await page.close();
-
-  // Record 2 s of the real stream (40 snapshots, as sent by the server), then replay them at 20 Hz.
-  const frames = [];
-  const state = await api(server.url, "GET", "/api/state");
-  for (let k = 0; k < 40; k++) {
-    const s = structuredClone(state);
-    for (const u of s.uavs) {
-      u.p[0] += u.v[0] * 0.05 * k + 0.02 * k;
-      u.p[1] += u.v[1] * 0.05 * k;
-    }
-    s.tick += k;
-    s.time += 0.05 * k;
-    frames.push(JSON.stringify(s));
-  }
   // The replay runs without the server (stopped, so that its 1,000-UAV loop does not compete for the
   // CPU): the page's files come from web/ and its REST reads from the answers recorded here.
   const recorded = {};

@@ -1,6 +1,7 @@
 //! The binary stream `GET /ws?format=bin`, version 1 (README "Binary stream"): per tick one
-//! little-endian *tick frame* of fixed-size records, and a *roster frame* (ids, policies, goals,
-//! links as JSON) whenever those change and first to every new client. Encoded once per snapshot
+//! little-endian *tick frame* of fixed-size records, a *roster frame* (ids, policies, goals, links
+//! as JSON) whenever those change and first to every new client, and a *reservations frame* (the
+//! single-file sections, JSON) likewise. Encoded once per snapshot
 //! by [`Encoder`], off the fleet loop, and shared by every client; a client with a viewport copies
 //! the records inside it out of the shared frame ([`filter_bbox`]) without decoding anything else.
 
@@ -14,6 +15,8 @@ pub const VERSION: u8 = 1;
 pub const KIND_TICK: u8 = 1;
 /// Second byte of a roster frame.
 pub const KIND_ROSTER: u8 = 2;
+/// Second byte of a reservations frame.
+pub const KIND_RESERVATIONS: u8 = 3;
 /// Bytes of a tick frame's header.
 pub const TICK_HEADER_BYTES: usize = 52;
 /// Bytes of one UAV's record in a tick frame.
@@ -45,6 +48,10 @@ pub struct BinaryFrame {
     pub roster: Bytes,
     /// The tick frame with every UAV.
     pub body: Bytes,
+    /// Changes whenever the reservations frame does.
+    pub reservations_version: u32,
+    /// The reservations frame: `{"reservations": [...]}` as in the JSON snapshot.
+    pub reservations: Bytes,
 }
 
 /// Encodes snapshots, remembering the roster to tell when it changed.
@@ -54,6 +61,8 @@ pub struct Encoder {
     roster: Bytes,
     /// (id, policy, goal, link) of the roster, in snapshot order.
     last: Vec<(String, String, Option<[f64; 2]>, String)>,
+    reservations_version: u32,
+    reservations: Bytes,
 }
 
 fn f32_of(x: Option<f64>) -> f32 {
@@ -112,11 +121,24 @@ impl Encoder {
             let flags = if u.arrived { UAV_ARRIVED } else { 0 } | if u.lost { UAV_LOST } else { 0 };
             body.extend_from_slice(&[status_code(u.status), flags, 0, 0]);
         }
+        let mut reservations = Vec::with_capacity(ROSTER_HEADER_BYTES + 256);
+        reservations.extend_from_slice(&[VERSION, KIND_RESERVATIONS, 0, 0, 0, 0, 0, 0]);
+        reservations.extend_from_slice(br#"{"reservations":"#);
+        // Plain data (strings, counts, finite points): serialising cannot fail.
+        serde_json::to_writer(&mut reservations, &snapshot.reservations).unwrap_or_default();
+        reservations.push(b'}');
+        if self.reservations_version == 0 || reservations[8..] != self.reservations[8..] {
+            self.reservations_version = self.reservations_version.wrapping_add(1).max(1);
+            reservations[4..8].copy_from_slice(&self.reservations_version.to_le_bytes());
+            self.reservations = Bytes::from(reservations);
+        }
         BinaryFrame {
             tick: snapshot.tick,
             roster_version: self.roster_version,
             roster: self.roster.clone(),
             body: Bytes::from(body),
+            reservations_version: self.reservations_version,
+            reservations: self.reservations.clone(),
         }
     }
 }

@@ -27,6 +27,7 @@ const ASSETS: &[Asset] = &[
     asset!("app.js", JS),
     asset!("api.js", JS),
     asset!("stream.js", JS),
+    asset!("binary.js", JS),
     asset!("camera.js", JS),
     asset!("geometry.js", JS),
     asset!("editor.js", JS),

@@ -109,7 +109,7 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
     frames.mark_changed();
     let mut last_sent: Option<Instant> = None;
     let mut last_tick = 0u64;
-    let mut roster_sent = 0u32;
+    let (mut roster_sent, mut reservations_sent) = (0u32, 0u32);
     loop {
         tokio::select! {
             changed = frames.changed() => {
@@ -137,6 +137,13 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
                             Ok(())
                         };
                         roster_sent = b.roster_version;
+                        let roster = match roster {
+                            Ok(()) if b.reservations_version != reservations_sent => {
+                                reservations_sent = b.reservations_version;
+                                send(&mut socket, Message::Binary(b.reservations)).await
+                            }
+                            other => other,
+                        };
                         let body = match bbox {
                             None => b.body,
                             Some(bbox) => filter_bbox(&b.body, bbox).into(),
