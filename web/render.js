@@ -21,6 +21,10 @@ export const STATUS_COLOURS = {
 /** Single-file sections: grey while free, green while admitting from their start, blue from their end. */
 const RESERVATION_COLOURS = { free: "rgba(120,120,120,0.35)", start: "rgba(46,157,79,0.45)", end: "rgba(47,111,214,0.45)" };
 const LABEL_LIMIT = 250; // more UAVs on screen than this: labels only for the selected ones
+// More UAVs on screen than this: trails, velocity arrows, temporary targets and goals only for the
+// selected ones (at 10,000 UAVs the trails alone were 400,000 path segments per redraw, and the
+// software rasteriser took longer than a frame for the arrows).
+const DETAIL_LIMIT = 2000;
 
 function polygon(ctx, cam, pts) {
   pts.forEach((p, i) => {
@@ -184,12 +188,13 @@ export function drawFleet(ctx, cam, snapshot, trails, selection) {
     if (x > -pad && y > -pad && x < w + pad && y < h + pad) visible.push([u, x, y]);
   }
   const r = Math.max(3, (snapshot.d_c / 2) * cam.scale);
+  const decorated = visible.length <= DETAIL_LIMIT ? visible : visible.filter(([u]) => selection.has(u.id));
 
   ctx.lineWidth = 1;
   ctx.strokeStyle = "rgba(90,100,120,0.35)";
   ctx.beginPath();
   const s = cam.scale, ox = w / 2 - cam.cx * s, oy = h / 2 + cam.cy * s;
-  for (const [u] of visible)
+  for (const [u] of decorated)
     trails.forEach(u.id, (tx, ty, first) => {
       if (first) ctx.moveTo(tx * s + ox, oy - ty * s);
       else ctx.lineTo(tx * s + ox, oy - ty * s);
@@ -199,7 +204,7 @@ export function drawFleet(ctx, cam, snapshot, trails, selection) {
   // Temporary targets (dot, thin line from the UAV) and goals (cross).
   ctx.strokeStyle = "rgba(122,63,209,0.35)";
   ctx.beginPath();
-  for (const [u, x, y] of visible) {
+  for (const [u, x, y] of decorated) {
     const [tx, ty] = cam.toScreen(u.target[0], u.target[1]);
     ctx.moveTo(x, y);
     ctx.lineTo(tx, ty);
@@ -207,7 +212,7 @@ export function drawFleet(ctx, cam, snapshot, trails, selection) {
   ctx.stroke();
   ctx.fillStyle = "rgba(122,63,209,0.7)";
   ctx.beginPath();
-  for (const [u] of visible) {
+  for (const [u] of decorated) {
     const [tx, ty] = cam.toScreen(u.target[0], u.target[1]);
     ctx.rect(tx - 1.5, ty - 1.5, 3, 3);
   }
@@ -215,7 +220,7 @@ export function drawFleet(ctx, cam, snapshot, trails, selection) {
   ctx.strokeStyle = "#7a3fd1";
   ctx.lineWidth = 1.5;
   ctx.beginPath();
-  for (const [u] of visible) {
+  for (const [u] of decorated) {
     if (!u.goal) continue;
     const [gx, gy] = cam.toScreen(u.goal[0], u.goal[1]);
     ctx.moveTo(gx - 4, gy - 4);
@@ -229,7 +234,7 @@ export function drawFleet(ctx, cam, snapshot, trails, selection) {
   ctx.strokeStyle = "#1d2733";
   ctx.lineWidth = 1.2;
   ctx.beginPath();
-  for (const [u, x, y] of visible) {
+  for (const [u, x, y] of decorated) {
     const dx = u.v[0] * 0.5 * cam.scale, dy = -u.v[1] * 0.5 * cam.scale;
     const len = Math.hypot(dx, dy);
     if (len < 2) continue;
@@ -243,11 +248,18 @@ export function drawFleet(ctx, cam, snapshot, trails, selection) {
   ctx.stroke();
 
   const small = r <= 3.5; // a few pixels: squares, much cheaper to fill than arcs
+  const byStatus = new Map();
+  for (const v of visible) {
+    const list = byStatus.get(v[0].status);
+    if (list) list.push(v);
+    else byStatus.set(v[0].status, [v]);
+  }
   for (const [status, colour] of Object.entries(STATUS_COLOURS)) {
+    const list = byStatus.get(status);
+    if (!list) continue;
     ctx.fillStyle = colour;
     ctx.beginPath();
-    for (const [u, x, y] of visible) {
-      if (u.status !== status) continue;
+    for (const [, x, y] of list) {
       if (small) ctx.rect(x - r, y - r, 2 * r, 2 * r);
       else {
         ctx.moveTo(x + r, y);

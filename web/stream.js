@@ -13,6 +13,9 @@ export class Stream {
     this.rosterVersion = 0;
     this.reservations = [];
     this.frames = 0; // tick frames received
+    /** Two pools of UAV objects, used in turn: the snapshot before the latest stays intact. */
+    this.pools = [[], []];
+    this.turn = 0;
     this.delay = 250;
     this.connect();
   }
@@ -53,6 +56,7 @@ export class Stream {
     this.latest = null;
     // A tick of an older roster (one arrived in between): the next tick will match.
     if (new DataView(buffer).getUint32(4, true) !== this.rosterVersion) return null;
-    return decodeTick(buffer, this.roster, this.reservations);
+    this.turn ^= 1;
+    return decodeTick(buffer, this.roster, this.reservations, this.pools[this.turn]);
   }
 }

@@ -4,18 +4,20 @@
 // browser). Phase "replay": the same page fed 40 consecutive binary frames recorded from that
 // server, in a loop at exactly 20 Hz (a stand-in WebSocket installed before the page loads; the
 // server stopped, its answers replayed), so the browser's cost at 20 Hz is measured even when the
-// server cannot tick N UAVs at 20 Hz here.
+// server cannot tick N UAVs at 20 Hz here. BENCH_SCENARIO flies a scenario file of your own instead.
 // Prints median and p99 of the requestAnimationFrame interval and of the draw call, plus the
 // server's tick time from GET /api/metrics.
 
-import { mkdtempSync, writeFileSync } from "node:fs";
+import { mkdtempSync, readFileSync, writeFileSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { join } from "node:path";
 import { api, launchBrowser, openDashboard, screenshot, startServer, until } from "./harness.mjs";
 
 const WEB = join(import.meta.dirname, "..", "..", "web");
 const SECONDS = Number(process.env.BENCH_SECONDS || 10);
-const N = Number(process.env.BENCH_UAVS || 1000);
+// BENCH_SCENARIO: a scenario file to fly instead (e.g. `airroads bench scale --write-scenarios`).
+const GIVEN = process.env.BENCH_SCENARIO ? JSON.parse(readFileSync(process.env.BENCH_SCENARIO, "utf8")) : null;
+const N = GIVEN ? GIVEN.uavs.length : Number(process.env.BENCH_UAVS || 1000);
 
 /**
  * 1,000 UAVs: 10 segments of 20 m x 24 m, UAVs on a 50 x 20 grid 0.6 m apart, each flying 160 m
@@ -131,7 +133,7 @@ function recordStream(url) {
 
 const dir = mkdtempSync(join(tmpdir(), "airroads-bench-"));
 const file = join(dir, "bench1000.json");
-writeFileSync(file, JSON.stringify(scenario()));
+writeFileSync(file, JSON.stringify(GIVEN || scenario()));
 const server = await startServer(["--scenario", file, "--max-uavs", String(N)]);
 const browser = await launchBrowser();
 try {
