@@ -21,6 +21,7 @@ pub mod persist;
 pub mod rerun_fleet;
 mod rerun_log;
 pub mod rerun_sink;
+mod rerun_viewer;
 pub mod snapshot;
 pub mod state;
 pub mod stats;
