@@ -5,7 +5,8 @@
     python3 scripts/airroads_stream.py ws://127.0.0.1:8080/ws?format=bin [--frames 20]
     python3 scripts/airroads_stream.py --check http://127.0.0.1:8080
 
-Without --check it prints one line per tick frame. --check connects to a running server, reads a
+Without --check it prints one line per message with its size in bytes (also for the JSON stream,
+`/ws` without format=bin). --check connects to a running server, reads a
 roster and 20 tick frames (whole fleet, then a viewport) and checks them against `GET /api/state`;
 it exits 1 with the reason on the first mismatch (CI runs it, see scripts/stream-check).
 
@@ -189,15 +190,20 @@ def main(argv):
         print(__doc__, file=sys.stderr)
         return 2
     frames = int(argv[2]) if len(argv) == 3 and argv[1] == "--frames" else 20
-    for k, frame in enumerate(Stream(argv[0])):
+    stream = Stream(argv[0])
+    for _ in range(frames):
+        message = stream.message()
+        if isinstance(message, str):  # the JSON stream (`/ws` without format=bin)
+            print(f"json snapshot: {len(message.encode())} bytes")
+            continue
+        frame, size = decode(message), len(message)
         if frame["kind"] == "roster":
-            print(f"roster {frame['roster_version']}: {len(frame['uavs'])} UAVs")
+            print(f"roster {frame['roster_version']}: {len(frame['uavs'])} UAVs, {size} bytes")
         elif frame["kind"] == "reservations":
-            print(f"reservations {frame['version']}: {len(frame['reservations'])} single-file sections")
+            print(f"reservations {frame['version']}: {len(frame['reservations'])} single-file sections, {size} bytes")
         else:
-            print(f"tick {frame['tick']} t={frame['time']:.2f} s: {len(frame['uavs'])} of {frame['fleet']} UAVs")
-        if k + 1 >= frames:
-            return 0
+            print(f"tick {frame['tick']} t={frame['time']:.2f} s: {len(frame['uavs'])} of {frame['fleet']} UAVs, {size} bytes")
+    stream.close()
     return 0
 
 

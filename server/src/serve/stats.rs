@@ -152,9 +152,13 @@ impl TickStats {
             m.qp.failures += u64::from(l.failed);
             m.policy_fallbacks += u64::from(l.policy_fallback);
             m.stale_states += u64::from(u.stale_ticks > 0);
-            m.links.crazyflies += u64::from(u.link.describe() != links::SIM_LINK);
-            m.links.with_error += u64::from(u.link.error().is_some());
             m.links.unconfirmed_commands += u.link.unconfirmed_commands();
+        }
+        // The snapshot already read each link's description and error this tick (an error is a
+        // string behind the session's lock: read it once per tick, not twice).
+        for u in &snapshot.uavs {
+            m.links.crazyflies += u64::from(u.link != links::SIM_LINK);
+            m.links.with_error += u64::from(u.link_error.is_some());
         }
         m.min_collision_margin_m = min_opt(m.min_collision_margin_m, snapshot.min_collision_margin_m);
         m.min_road_margin_m = min_opt(m.min_road_margin_m, snapshot.min_road_margin_m);

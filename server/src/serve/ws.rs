@@ -5,7 +5,7 @@
 //! channel at its own pace: a slow client skips frames, a stalled one is dropped after
 //! [`SEND_TIMEOUT`]; neither touches the fleet loop or other clients.
 
-use super::binary::{Bbox, filter_bbox, parse_bbox};
+use super::binary::{Bbox, BinaryFrame, filter_bbox, parse_bbox};
 use super::error::ApiError;
 use super::state::AppState;
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
@@ -102,6 +102,29 @@ async fn send(socket: &mut WebSocket, message: Message) -> Result<(), bool> {
     }
 }
 
+/// Sends the roster and reservations frames of `b` whose versions the client has not `seen`, then
+/// its tick frame (only the records inside `bbox`, if given).
+async fn send_binary(
+    socket: &mut WebSocket,
+    b: BinaryFrame,
+    bbox: Option<Bbox>,
+    seen: &mut (u32, u32),
+) -> Result<(), bool> {
+    if b.roster_version != seen.0 {
+        send(socket, Message::Binary(b.roster)).await?;
+        seen.0 = b.roster_version;
+    }
+    if b.reservations_version != seen.1 {
+        send(socket, Message::Binary(b.reservations)).await?;
+        seen.1 = b.reservations_version;
+    }
+    let body = match bbox {
+        None => b.body,
+        Some(bbox) => filter_bbox(&b.body, bbox).into(),
+    };
+    send(socket, Message::Binary(body)).await
+}
+
 async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, format: Format) {
     let counters = app.stream.clone();
     counters.clients.fetch_add(1, Relaxed);
@@ -109,7 +132,8 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
     frames.mark_changed();
     let mut last_sent: Option<Instant> = None;
     let mut last_tick = 0u64;
-    let (mut roster_sent, mut reservations_sent) = (0u32, 0u32);
+    // The roster and reservations versions this client has.
+    let mut seen = (0u32, 0u32);
     loop {
         tokio::select! {
             changed = frames.changed() => {
@@ -129,30 +153,7 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
                 last_tick = frame.tick;
                 let sent = match format {
                     Format::Json => send(&mut socket, Message::Text(frame.text)).await,
-                    Format::Binary(bbox) => {
-                        let b = frame.binary;
-                        let roster = if b.roster_version != roster_sent {
-                            send(&mut socket, Message::Binary(b.roster)).await
-                        } else {
-                            Ok(())
-                        };
-                        roster_sent = b.roster_version;
-                        let roster = match roster {
-                            Ok(()) if b.reservations_version != reservations_sent => {
-                                reservations_sent = b.reservations_version;
-                                send(&mut socket, Message::Binary(b.reservations)).await
-                            }
-                            other => other,
-                        };
-                        let body = match bbox {
-                            None => b.body,
-                            Some(bbox) => filter_bbox(&b.body, bbox).into(),
-                        };
-                        match roster {
-                            Ok(()) => send(&mut socket, Message::Binary(body)).await,
-                            stalled => stalled,
-                        }
-                    }
+                    Format::Binary(bbox) => send_binary(&mut socket, frame.binary, bbox, &mut seen).await,
                 };
                 match sent {
                     Ok(()) => {
