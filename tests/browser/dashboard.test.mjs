@@ -3,10 +3,12 @@
 
 import { after, before, test } from "node:test";
 import assert from "node:assert/strict";
-import { readFileSync } from "node:fs";
+import { execFileSync } from "node:child_process";
+import { mkdtempSync, readFileSync } from "node:fs";
+import { tmpdir } from "node:os";
 import { createServer } from "node:http";
 import { join } from "node:path";
-import { ARTIFACTS, api, clickWorld, launchBrowser, openDashboard, screenshot, startServer, until } from "./harness.mjs";
+import { ARTIFACTS, BIN, api, clickWorld, launchBrowser, openDashboard, pagePoint, screenshot, startServer, until } from "./harness.mjs";
 
 const STRAIGHT = join(import.meta.dirname, "fixtures", "straight.json");
 const NARROW = join(import.meta.dirname, "..", "..", "scenarios", "narrow16.json");
@@ -123,6 +125,73 @@ test("select a UAV by clicking it, click a goal on the road, and it arrives", as
     );
     assert.ok(near(arrived.p, set.goal, 0.15), `uav1 at ${arrived.p}, goal ${set.goal}`);
     await screenshot(page, "goal-arrived");
+  });
+});
+
+test("10,000 UAVs loaded over REST are drawn from the binary stream; one is selected and sent to a goal", async () => {
+  // The trunk scenario of `airroads bench scale`: 10,000 UAVs along a 12 km two-way road.
+  const dir = mkdtempSync(join(tmpdir(), "airroads-trunk-"));
+  execFileSync(BIN, ["bench", "scale", "--uavs", "10000", "--ticks", "1", "--write-scenarios", dir], { stdio: "ignore" });
+  const scenario = JSON.parse(readFileSync(join(dir, "trunk10000.json"), "utf8"));
+  assert.equal(scenario.uavs.length, 10000);
+  await withDashboard("ten-thousand", ["--max-uavs", "10000"], async (page, { url }) => {
+    await api(url, "POST", "/api/scenario", scenario);
+    const drawn = await until("the page to hold 10,000 UAVs from the binary stream and the new road", () =>
+      page.evaluate(() => {
+        const w = window.__airroads;
+        const ok = w.snapshot.uavs.length === 10000 && w.app.stream.rosterVersion > 0 && w.geometry.version === w.snapshot.road_version;
+        return ok && w.perf.drawMs.length;
+      }), 120000, 250);
+    await until("the canvas to be drawn again with them", () => page.evaluate((n) => window.__airroads.perf.drawMs.length > n, drawn));
+    await page.click("#fit");
+    await screenshot(page, "ten-thousand");
+
+    // Hold the fleet, zoom in on a UAV in the middle of the road with the wheel, and click it.
+    const id = scenario.uavs[5000].id;
+    await api(url, "POST", "/api/fleet/pause");
+    const where = () => page.evaluate((id) => {
+      const s = window.__airroads.snapshot;
+      const u = s.uavs.find((u) => u.id === id);
+      return s.paused && Math.hypot(...u.v) < 0.02 && u.p;
+    }, id);
+    let p = await until(`${id} to hover`, where, 60000, 250);
+    const scale = () => page.evaluate(() => window.__airroads.app.camera.scale);
+    for (let k = 0; k < 20 && (await scale()) < 25; k++) {
+      const [px, py] = await pagePoint(page, p[0], p[1]);
+      await page.mouse.move(px, py);
+      await page.mouse.wheel(0, -300);
+      await until("the wheel to zoom", async () => (await scale()) > 0);
+    }
+    assert.ok((await scale()) >= 25, "zoomed in to 25 pixels per metre or more");
+    p = await where();
+    await clickWorld(page, p[0], p[1]);
+    assert.deepEqual(await page.evaluate(() => window.__airroads.selection), [id]);
+
+    // A goal on the centre line, in view, 2-8 m from it and at least 1 m from every UAV.
+    const goal = await page.evaluate(([p]) => {
+      const { app, snapshot } = window.__airroads;
+      const seen = (q) => {
+        const [x, y] = app.camera.toScreen(q[0], q[1]);
+        return x > 100 && y > 100 && x < app.canvas.clientWidth - 100 && y < app.canvas.clientHeight - 100;
+      };
+      const free = (q) => snapshot.uavs.every((u) => Math.hypot(u.p[0] - q[0], u.p[1] - q[1]) >= 1);
+      const far = (q) => Math.hypot(q[0] - p[0], q[1] - p[1]);
+      return app.geometry.centerline.find((q) => far(q) >= 2 && far(q) <= 8 && seen(q) && free(q)) || null;
+    }, [p]);
+    assert.ok(goal, "a free point on the centre line near the UAV");
+    await clickWorld(page, goal[0], goal[1]);
+    const set = await until(`the goal of ${id} to be set (GET /api/uavs/${id})`, async () => {
+      const u = await api(url, "GET", `/api/uavs/${id}`);
+      return u.goal && near(u.goal, goal, 0.1) && u;
+    });
+    assert.ok(!set.arrived);
+    await api(url, "POST", "/api/fleet/resume");
+    const arrived = await until(`${id} to arrive (GET /api/uavs/${id})`, async () => {
+      const u = await api(url, "GET", `/api/uavs/${id}`);
+      return u.arrived && u;
+    }, 180000, 500);
+    assert.ok(near(arrived.p, set.goal, 0.15), `${id} at ${arrived.p}, goal ${set.goal}`);
+    await screenshot(page, "ten-thousand-arrived");
   });
 });
 

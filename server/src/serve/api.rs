@@ -3,8 +3,8 @@
 
 use super::command::{Command, Outcome};
 use super::error::{ApiError, ApiJson, NoBody};
-use super::snapshot::UavSnapshot;
-use super::state::AppState;
+use super::snapshot::{Snapshot, UavSnapshot};
+use super::state::{AppState, Frame};
 use axum::extract::{Path, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -144,7 +144,7 @@ async fn list_uavs(
         .map_err(|e| ApiError::invalid("bbox", e))?;
     let start = match &q.after {
         None => 0,
-        Some(id) => match snapshot.uavs.iter().position(|u| u.id == *id) {
+        Some(id) => match position_of(&app, &snapshot, id) {
             Some(k) => k + 1,
             None => return Err(ApiError::invalid("after", format!("no UAV `{id}`"))),
         },
@@ -160,7 +160,22 @@ async fn list_uavs(
 
 async fn get_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<Json<UavSnapshot>, ApiError> {
     let snapshot = app.snapshots.borrow().clone();
-    snapshot.uavs.iter().find(|u| u.id == id).cloned().map(Json).ok_or_else(|| ApiError::unknown_uav(&id))
+    let found = position_of(&app, &snapshot, &id).and_then(|k| snapshot.uavs.get(k));
+    found.cloned().map(Json).ok_or_else(|| ApiError::unknown_uav(&id))
+}
+
+/// Where UAV `id` is in `snapshot`: from the roster index of the latest frame, without a scan of the
+/// fleet; only while the serialiser is still a tick behind and the roster changed does it scan.
+fn position_of(app: &AppState, snapshot: &Snapshot, id: &str) -> Option<usize> {
+    let frame = app.frames.borrow();
+    let indexed = frame.binary.index.get(id).copied();
+    if frame.tick == snapshot.tick {
+        return indexed;
+    }
+    match indexed {
+        Some(k) if snapshot.uavs.get(k).is_some_and(|u| u.id == id) => Some(k),
+        _ => snapshot.uavs.iter().position(|u| u.id == id),
+    }
 }
 
 /// `POST /api/uavs` body.
@@ -324,12 +339,8 @@ async fn get_state(State(app): State<AppState>) -> Response {
     let frame = app.frames.borrow().clone();
     let snapshot = app.snapshots.borrow().clone();
     // The serialiser may still be on the previous tick: an answered change must show at once.
-    let text = if frame.tick == snapshot.tick {
-        frame.text.as_str().to_owned()
-    } else {
-        serde_json::to_string(&*snapshot).unwrap_or_else(|_| frame.text.as_str().to_owned())
-    };
-    ([(header::CONTENT_TYPE, "application/json")], text).into_response()
+    let frame = if frame.tick == snapshot.tick { frame } else { Frame::new(snapshot, frame.binary) };
+    ([(header::CONTENT_TYPE, "application/json")], axum::body::Bytes::from(frame.json())).into_response()
 }
 
 /// `PUT /api/rerun/selection` body.

@@ -8,6 +8,8 @@
 use super::snapshot::{Snapshot, UavStatus};
 use axum::body::Bytes;
 use serde_json::json;
+use std::collections::HashMap;
+use std::sync::Arc;
 
 /// The format's version, the first byte of every message.
 pub const VERSION: u8 = 1;
@@ -46,6 +48,8 @@ pub struct BinaryFrame {
     pub roster_version: u32,
     /// The roster frame of that version.
     pub roster: Bytes,
+    /// Each id of that roster with its index (`GET /api/uavs/{id}` without a scan of the fleet).
+    pub index: Arc<HashMap<String, usize>>,
     /// The tick frame with every UAV.
     pub body: Bytes,
     /// Changes whenever the reservations frame does.
@@ -59,6 +63,7 @@ pub struct BinaryFrame {
 pub struct Encoder {
     roster_version: u32,
     roster: Bytes,
+    index: Arc<HashMap<String, usize>>,
     /// (id, policy, goal, link) of the roster, in snapshot order.
     last: Vec<(String, String, Option<[f64; 2]>, String)>,
     reservations_version: u32,
@@ -93,6 +98,7 @@ impl Encoder {
             // Serialising a Value built from strings and finite numbers cannot fail.
             serde_json::to_writer(&mut roster, &json!({ "uavs": list })).unwrap_or_default();
             self.roster = Bytes::from(roster);
+            self.index = Arc::new(uavs.iter().enumerate().map(|(k, u)| (u.id.clone(), k)).collect());
         }
         let mut body = Vec::with_capacity(TICK_HEADER_BYTES + RECORD_BYTES * uavs.len());
         let flags = if snapshot.paused { FLAG_PAUSED } else { 0 };
@@ -136,6 +142,7 @@ impl Encoder {
             tick: snapshot.tick,
             roster_version: self.roster_version,
             roster: self.roster.clone(),
+            index: self.index.clone(),
             body: Bytes::from(body),
             reservations_version: self.reservations_version,
             reservations: self.reservations.clone(),

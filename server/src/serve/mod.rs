@@ -31,7 +31,6 @@ pub mod ws;
 
 use anyhow::Context as _;
 use axum::Router;
-use axum::extract::ws::Utf8Bytes;
 use engine::{Engine, LoopChannels, LoopClock, RoadView};
 use fleet::{Fleet, FleetConfig, ValidScenario};
 use linking::{LinkFactory, MocapRoutes};
@@ -215,8 +214,9 @@ impl Server {
         let first = Snapshot::of(&fleet, 0, 0.0, 0);
         let mut encoder = binary::Encoder::default();
         let binary = encoder.encode(&first);
-        let first_frame = Frame { tick: 0, text: Utf8Bytes::from(serde_json::to_string(&first)?), binary };
-        let (snapshots_tx, snapshots) = watch::channel(Arc::new(first));
+        let first = Arc::new(first);
+        let first_frame = Frame::new(first.clone(), binary);
+        let (snapshots_tx, snapshots) = watch::channel(first);
         let (metrics_tx, metrics) = watch::channel(Arc::new(LoopMetrics::default()));
         let (road_tx, road) = watch::channel(Arc::new(RoadView::of(fleet.road(), 0)));
         let (frames_tx, frames) = watch::channel(first_frame);
@@ -237,7 +237,8 @@ impl Server {
         let stops = factory.stops.clone();
         let engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
         let fleet_loop = engine.spawn(stop.clone())?;
-        tokio::spawn(serialise(snapshots.clone(), frames_tx, encoder));
+        let stream = Arc::new(StreamCounters::default());
+        tokio::spawn(serialise(snapshots.clone(), frames_tx, encoder, stream.clone()));
         let app = AppState {
             commands,
             urgent,
@@ -258,7 +259,7 @@ impl Server {
             max_uavs,
             link_rules,
             max_stream_clients,
-            stream: Arc::new(StreamCounters::default()),
+            stream,
             connections: Arc::default(),
             body_budget: state::body_budget(),
             validation: Arc::new(tokio::sync::Semaphore::new(1)),
@@ -374,22 +375,23 @@ async fn not_found() -> error::ApiError {
     error::ApiError::new(axum::http::StatusCode::NOT_FOUND, "not_found", "no such route")
 }
 
-/// Serialises every new snapshot once, as JSON and in the binary format, for all readers of
-/// `/api/state` and `/ws`.
+/// Serialises every new snapshot once in the binary format, and as JSON while JSON stream clients
+/// are connected, for all readers of `/api/state` and `/ws` (`GET /api/state` makes the JSON of a
+/// frame nobody streams on demand, once).
 async fn serialise(
     mut snapshots: watch::Receiver<Arc<Snapshot>>,
     frames: watch::Sender<Frame>,
     mut encoder: binary::Encoder,
+    stream: Arc<StreamCounters>,
 ) {
     while snapshots.changed().await.is_ok() {
         let snapshot = snapshots.borrow_and_update().clone();
-        match serde_json::to_string(&*snapshot) {
-            Ok(text) => {
-                let binary = encoder.encode(&snapshot);
-                frames.send_replace(Frame { tick: snapshot.tick, text: Utf8Bytes::from(text), binary });
-            }
-            Err(e) => tracing::error!("snapshot not serialised: {e}"),
+        let binary = encoder.encode(&snapshot);
+        let frame = Frame::new(snapshot, binary);
+        if stream.json_clients.load(Ordering::Relaxed) > 0 {
+            frame.json();
         }
+        frames.send_replace(frame);
     }
 }
 

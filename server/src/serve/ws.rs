@@ -128,6 +128,10 @@ async fn send_binary(
 async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, format: Format) {
     let counters = app.stream.clone();
     counters.clients.fetch_add(1, Relaxed);
+    let json = matches!(format, Format::Json);
+    if json {
+        counters.json_clients.fetch_add(1, Relaxed);
+    }
     let mut frames = app.frames.clone();
     frames.mark_changed();
     let mut last_sent: Option<Instant> = None;
@@ -144,15 +148,12 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
                     continue;
                 }
                 let frame = frames.borrow_and_update().clone();
-                if frame.text.as_str().is_empty() {
-                    continue;
-                }
                 if last_tick > 0 && frame.tick > last_tick + 1 && min_interval.is_zero() {
                     counters.frames_skipped.fetch_add(frame.tick - last_tick - 1, Relaxed);
                 }
                 last_tick = frame.tick;
                 let sent = match format {
-                    Format::Json => send(&mut socket, Message::Text(frame.text)).await,
+                    Format::Json => send(&mut socket, Message::Text(frame.json())).await,
                     Format::Binary(bbox) => send_binary(&mut socket, frame.binary, bbox, &mut seen).await,
                 };
                 match sent {
@@ -175,6 +176,9 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
         }
     }
     counters.clients.fetch_sub(1, Relaxed);
+    if json {
+        counters.json_clients.fetch_sub(1, Relaxed);
+    }
 }
 
 #[cfg(test)]
