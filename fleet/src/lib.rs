@@ -35,7 +35,7 @@ pub use condition::Condition;
 pub use edit::EditError;
 pub use fleet::{CollisionShare, Fleet, FleetConfig, PARALLEL_FROM_UAVS, StageTimes, Uav, UavTick};
 pub use histogram::DurationHistogram;
-pub use margins::{collision_margin, road_margin};
+pub use margins::{collision_margin, road_margin, road_margin_in};
 pub use metrics::{MetricsRecorder, QpMetrics, RunMetrics, Stall};
 pub use ragged::Ragged;
 pub use run::{RunOptions, RunOutcome, TAKEOFF_TIMEOUT_S, TRAJECTORY_HEADER, run_scenario, run_scenario_on};

@@ -19,6 +19,16 @@ pub fn road_margin(road: &Road, s: &UavState, delta: f64) -> f64 {
     road_margin_at(road, None, s, delta, road.boundary_distance(&s.p))
 }
 
+/// [`road_margin`] for a UAV tracked in segment `hint`, if any: the segment's list of nearby walls
+/// instead of the road's tree where it answers (the same value, a fraction of the cost).
+pub fn road_margin_in(road: &Road, hint: Option<usize>, s: &UavState, delta: f64) -> f64 {
+    let boundary = match hint {
+        Some(segment) => road.boundary_distance_in(segment, &s.p),
+        None => road.boundary_distance(&s.p),
+    };
+    road_margin_at(road, hint, s, delta, boundary)
+}
+
 /// [`road_margin`] given the UAV's [`Road::boundary_distance`] `boundary` (the metrics need both)
 /// and perhaps the segment it is tracked in (a hint that saves a tree query; same result).
 pub fn road_margin_at(road: &Road, hint: Option<usize>, s: &UavState, delta: f64, boundary: f64) -> f64 {
@@ -103,6 +113,7 @@ mod tests {
                 prop_assert_eq!(road.boundary_distance_in(hint, &p).to_bits(), boundary.to_bits());
                 let hinted = road_margin_at(&road, Some(hint), &state, 5.0, boundary);
                 prop_assert_eq!(hinted.to_bits(), want.to_bits(), "hint {} at {:?}", hint, p);
+                prop_assert_eq!(road_margin_in(&road, Some(hint), &state, 5.0).to_bits(), want.to_bits());
             }
         }
     }

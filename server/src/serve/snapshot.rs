@@ -1,9 +1,10 @@
 //! The immutable snapshot the fleet loop publishes after every tick (`GET /api/state`, `/ws`, Rerun).
 
-use fleet::{Condition, Fleet, Uav, collision_margin, road_margin};
+use fleet::{Condition, Fleet, Uav, collision_margin, road_margin_in};
 use links::LinkPhase;
+use rayon::prelude::*;
 use serde::Serialize;
-use uav::Vec2;
+use uav::{UavState, Vec2};
 
 /// What one UAV is doing, as the dashboard colours it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -182,19 +183,32 @@ impl Snapshot {
         let road = fleet.road();
         let lists = fleet.neighbour_lists();
         let all = fleet.uavs();
+        // The margins of each UAV on its own, from plain copies of the states (in parallel for
+        // large fleets: a UAV's link is not shared between threads).
+        let states: Vec<(UavState, bool, Option<usize>)> =
+            all.iter().map(|u| (u.state, u.condition.in_the_air(), u.nav.tracker.current)).collect();
+        let margins_of = |k: usize| {
+            let (state, in_the_air, hint) = states[k];
+            // UAVs on the ground (landed, stopped, not yet up) are not in each other's airspace.
+            let collision = lists.get(k).filter(|_| in_the_air).and_then(|list| {
+                list.iter()
+                    .filter_map(|&d| states.get(d))
+                    .filter(|d| d.1)
+                    .map(|d| collision_margin(&state, &d.0, 2.0 * p.delta))
+                    .min_by(f64::total_cmp)
+            });
+            (collision, road_margin_in(road, hint, &state, p.delta))
+        };
+        let margins: Vec<(Option<f64>, f64)> = if all.len() >= fleet::PARALLEL_FROM_UAVS {
+            (0..all.len()).into_par_iter().map(margins_of).collect()
+        } else {
+            (0..all.len()).map(margins_of).collect()
+        };
         let uavs: Vec<UavSnapshot> = all
             .iter()
-            .enumerate()
-            .map(|(k, u)| {
+            .zip(margins)
+            .map(|(u, (collision, road_margin))| {
                 let l = &u.last;
-                // UAVs on the ground (landed, stopped, not yet up) are not in each other's airspace.
-                let collision = lists.get(k).filter(|_| u.condition.in_the_air()).and_then(|list| {
-                    list.iter()
-                        .filter_map(|&d| all.get(d))
-                        .filter(|d| d.condition.in_the_air())
-                        .map(|d| collision_margin(&u.state, &d.state, 2.0 * p.delta))
-                        .min_by(f64::total_cmp)
-                });
                 UavSnapshot {
                     id: u.id.clone(),
                     policy: u.policy.clone(),
@@ -215,7 +229,7 @@ impl Snapshot {
                     slack: l.max_slack,
                     min_barrier: l.min_barrier.is_finite().then_some(l.min_barrier),
                     collision_margin_m: collision,
-                    road_margin_m: road_margin(road, &u.state, p.delta),
+                    road_margin_m: road_margin,
                 }
             })
             .collect();
