@@ -195,6 +195,38 @@ test("10,000 UAVs loaded over REST are drawn from the binary stream; one is sele
     // Arrived UAVs step D_c aside for neighbours that pass (README "Traffic rules").
     assert.ok(near(arrived.p, set.goal, 0.1 + 0.3), `${id} at ${arrived.p}, goal ${set.goal}`);
     await screenshot(page, "ten-thousand-arrived");
+
+    // The road editor at that size: drag a joint vertex of the UAV's segment 0.5 m outwards (the road
+    // widens, safe for every UAV) and apply; the server checks the new road against all 10,000.
+    await page.click("#mode-edit");
+    await page.waitForFunction((n) => window.__airroads.editor.segments.length === n, scenario.segments.length);
+    // The joint vertex nearest the middle of the view.
+    const [from, to] = await page.evaluate(() => {
+      const { app, editor } = window.__airroads;
+      const { cx, cy } = app.camera;
+      const joints = editor.segments.slice(0, -1).map(([p1, , p3]) => [p1, p3]);
+      const [p1, p3] = joints.reduce((a, b) => (Math.hypot(b[0][0] - cx, b[0][1] - cy) < Math.hypot(a[0][0] - cx, a[0][1] - cy) ? b : a));
+      const out = [p1[0] - p3[0], p1[1] - p3[1]];
+      const n = Math.hypot(...out);
+      return [p1, [p1[0] + (0.5 * out[0]) / n, p1[1] + (0.5 * out[1]) / n]];
+    });
+    const version = (await api(url, "GET", "/api/state")).road_version;
+    const [sx, sy] = await pagePoint(page, from[0], from[1]);
+    const [tx, ty] = await pagePoint(page, to[0], to[1]);
+    const box = await page.locator("#view").boundingBox();
+    assert.ok(sx > box.x && sy > box.y && sx < box.x + box.width && sy < box.y + box.height, "the vertex is in view");
+    await page.mouse.move(sx, sy);
+    await page.mouse.down();
+    await page.mouse.move(tx, ty, { steps: 5 });
+    await page.mouse.up();
+    await page.click("#apply");
+    await page.locator("#message", { hasText: "road applied" }).waitFor({ timeout: 60000 });
+    const road = await api(url, "GET", "/api/road");
+    assert.ok(road.segments.some((q) => near(q[0], to, 0.05)), `the moved vertex ${to} is in the applied road`);
+    const count = await until("the new road version in the page", () =>
+      page.evaluate((v) => { const s = window.__airroads.snapshot; return s.road_version > v && s.uavs.length; }, version));
+    assert.equal(count, 10000);
+    await screenshot(page, "ten-thousand-road-applied");
   });
 });
 
