@@ -7,11 +7,12 @@
 
 use super::binary::{Bbox, BinaryFrame, filter_bbox, parse_bbox};
 use super::error::ApiError;
-use super::state::AppState;
+use super::state::{AppState, StreamCounters};
 use axum::extract::ws::{Message, WebSocket, WebSocketUpgrade};
 use axum::extract::{Query, State};
 use axum::response::Response;
 use serde::Deserialize;
+use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, Instant};
 
@@ -81,17 +82,17 @@ pub async fn handler(
     let Query(query) = query.map_err(|e| ApiError::invalid("rate", e.body_text()))?;
     let min_interval = frame_interval(query.rate)?;
     let format = format_of(&query)?;
-    if app.stream.clients.load(Relaxed) >= app.max_stream_clients {
+    let Some(slot) = Slot::take(&app.stream, app.max_stream_clients) else {
         app.stream.clients_refused.fetch_add(1, Relaxed);
         return Err(ApiError::new(
             axum::http::StatusCode::SERVICE_UNAVAILABLE,
             "too_many_clients",
             format!("at most {} stream clients", app.max_stream_clients),
         ));
-    }
+    };
     let upgrade = upgrade.max_message_size(MAX_CLIENT_MESSAGE_BYTES).max_frame_size(MAX_CLIENT_MESSAGE_BYTES);
     Ok(upgrade.on_upgrade(move |socket| async move {
-        let sending = stream(app, socket, min_interval, format);
+        let sending = stream(app, socket, min_interval, format, slot);
         match streams() {
             Some(runtime) => drop(runtime.spawn(sending)),
             None => sending.await,
@@ -131,6 +132,24 @@ async fn send_binary(
     send(socket, Message::Binary(body)).await
 }
 
+/// A stream client's place among [`AppState::max_stream_clients`]: taken at the handshake (check and
+/// count in one step, so concurrent handshakes cannot exceed the cap), given back when dropped, also
+/// when the upgrade never completes.
+struct Slot(Arc<StreamCounters>);
+
+impl Slot {
+    fn take(counters: &Arc<StreamCounters>, max: usize) -> Option<Slot> {
+        let counted = counters.clients.fetch_update(Relaxed, Relaxed, |n| (n < max).then_some(n + 1));
+        counted.ok().map(|_| Slot(counters.clone()))
+    }
+}
+
+impl Drop for Slot {
+    fn drop(&mut self) {
+        self.0.clients.fetch_sub(1, Relaxed);
+    }
+}
+
 /// Nice value of the stream runtime's threads.
 pub const STREAM_NICE: i32 = 5;
 
@@ -160,9 +179,8 @@ fn streams() -> Option<&'static tokio::runtime::Handle> {
         .map(|runtime| runtime.handle())
 }
 
-async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, format: Format) {
+async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, format: Format, slot: Slot) {
     let counters = app.stream.clone();
-    counters.clients.fetch_add(1, Relaxed);
     let json = matches!(format, Format::Json);
     if json {
         counters.json_clients.fetch_add(1, Relaxed);
@@ -210,10 +228,10 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
             },
         }
     }
-    counters.clients.fetch_sub(1, Relaxed);
     if json {
         counters.json_clients.fetch_sub(1, Relaxed);
     }
+    drop(slot);
 }
 
 #[cfg(test)]
