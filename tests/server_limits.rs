@@ -133,6 +133,39 @@ async fn stream_clients_are_capped_and_may_not_send_large_messages() {
     server.stop().await;
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn concurrent_handshakes_cannot_exceed_the_stream_client_cap() {
+    let server = start_with(&small(), |c| c.max_stream_clients = 4).await;
+    let url = format!("ws://{}/ws?format=bin", server.addr);
+    // Twelve handshakes at once: exactly four get a stream, the others the API's 503.
+    let attempts = (0..12).map(|_| tokio_tungstenite::connect_async(url.clone()));
+    let results = futures_util::future::join_all(attempts).await;
+    let (mut open, mut refused) = (Vec::new(), 0);
+    for r in results {
+        match r {
+            Ok((socket, _)) => open.push(socket),
+            Err(tokio_tungstenite::tungstenite::Error::Http(response)) if response.status() == 503 => {
+                refused += 1
+            }
+            Err(e) => panic!("unexpected handshake failure: {e}"),
+        }
+    }
+    assert_eq!((open.len(), refused), (4, 8));
+    // Their places come back when they leave.
+    drop(open);
+    let again = tokio::time::timeout(Duration::from_secs(5), async {
+        loop {
+            if let Ok((socket, _)) = tokio_tungstenite::connect_async(url.clone()).await {
+                return socket;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    })
+    .await;
+    assert!(again.is_ok(), "no place came back after four clients left");
+    server.stop().await;
+}
+
 /// A scenario of `count` UAVs on a grid, 0.6 m apart, on a straight road 1 km long and 40 m wide;
 /// with `bad_last`, the last UAV starts outside the road.
 fn crowd(count: usize, bad_last: bool) -> serde_json::Value {
