@@ -13,7 +13,7 @@ use axum::extract::{Query, State};
 use axum::response::Response;
 use serde::Deserialize;
 use std::sync::Arc;
-use std::sync::atomic::Ordering::Relaxed;
+use std::sync::atomic::{AtomicUsize, Ordering::Relaxed};
 use std::time::{Duration, Instant};
 
 /// A client whose socket does not take a frame within this time is dropped.
@@ -82,7 +82,7 @@ pub async fn handler(
     let Query(query) = query.map_err(|e| ApiError::invalid("rate", e.body_text()))?;
     let min_interval = frame_interval(query.rate)?;
     let format = format_of(&query)?;
-    let Some(slot) = Slot::take(&app.stream, app.max_stream_clients) else {
+    let Some(place) = Held::place(&app.stream, app.max_stream_clients) else {
         app.stream.clients_refused.fetch_add(1, Relaxed);
         return Err(ApiError::new(
             axum::http::StatusCode::SERVICE_UNAVAILABLE,
@@ -92,7 +92,7 @@ pub async fn handler(
     };
     let upgrade = upgrade.max_message_size(MAX_CLIENT_MESSAGE_BYTES).max_frame_size(MAX_CLIENT_MESSAGE_BYTES);
     Ok(upgrade.on_upgrade(move |socket| async move {
-        let sending = stream(app, socket, min_interval, format, slot);
+        let sending = stream(app, socket, min_interval, format, place);
         match streams() {
             Some(runtime) => drop(runtime.spawn(sending)),
             None => sending.await,
@@ -132,21 +132,31 @@ async fn send_binary(
     send(socket, Message::Binary(body)).await
 }
 
-/// A stream client's place among [`AppState::max_stream_clients`]: taken at the handshake (check and
-/// count in one step, so concurrent handshakes cannot exceed the cap), given back when dropped, also
-/// when the upgrade never completes.
-struct Slot(Arc<StreamCounters>);
+/// One count held in [`StreamCounters`] while a client streams, given back when dropped (when the
+/// stream ends, panics, or the upgrade never completes).
+struct Held {
+    counters: Arc<StreamCounters>,
+    count: fn(&StreamCounters) -> &AtomicUsize,
+}
 
-impl Slot {
-    fn take(counters: &Arc<StreamCounters>, max: usize) -> Option<Slot> {
+impl Held {
+    /// A client's place among [`AppState::max_stream_clients`], taken at the handshake: checked and
+    /// counted in one step, so concurrent handshakes cannot exceed the cap.
+    fn place(counters: &Arc<StreamCounters>, max: usize) -> Option<Held> {
         let counted = counters.clients.fetch_update(Relaxed, Relaxed, |n| (n < max).then_some(n + 1));
-        counted.ok().map(|_| Slot(counters.clone()))
+        counted.ok().map(|_| Held { counters: counters.clone(), count: |c| &c.clients })
+    }
+
+    /// A JSON client, counted while it streams (the serialiser makes each frame's JSON meanwhile).
+    fn json_reader(counters: &Arc<StreamCounters>) -> Held {
+        counters.json_clients.fetch_add(1, Relaxed);
+        Held { counters: counters.clone(), count: |c| &c.json_clients }
     }
 }
 
-impl Drop for Slot {
+impl Drop for Held {
     fn drop(&mut self) {
-        self.0.clients.fetch_sub(1, Relaxed);
+        (self.count)(&self.counters).fetch_sub(1, Relaxed);
     }
 }
 
@@ -179,12 +189,9 @@ fn streams() -> Option<&'static tokio::runtime::Handle> {
         .map(|runtime| runtime.handle())
 }
 
-async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, format: Format, slot: Slot) {
+async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, format: Format, place: Held) {
     let counters = app.stream.clone();
-    let json = matches!(format, Format::Json);
-    if json {
-        counters.json_clients.fetch_add(1, Relaxed);
-    }
+    let json_reader = matches!(format, Format::Json).then(|| Held::json_reader(&counters));
     let mut frames = app.frames.clone();
     frames.mark_changed();
     let mut last_sent: Option<Instant> = None;
@@ -228,10 +235,7 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
             },
         }
     }
-    if json {
-        counters.json_clients.fetch_sub(1, Relaxed);
-    }
-    drop(slot);
+    drop((json_reader, place));
 }
 
 #[cfg(test)]
