@@ -265,5 +265,18 @@ async fn the_uav_list_comes_in_pages_and_by_viewport() {
         let (status, reply) = server.call("GET", &format!("/api/uavs?{query}"), None).await;
         assert_eq!((status, reply["error"]["field"].as_str()), (422, Some(field)), "{query}: {reply}");
     }
+    // Lookups by id follow the roster: every UAV after one removed in the middle moves up a place.
+    let (status, _) = server.call("DELETE", "/api/uavs/u07", None).await;
+    assert_eq!(status, 204);
+    let (status, _) = server.call("GET", "/api/uavs/u07", None).await;
+    assert_eq!(status, 404, "a removed UAV is gone at once");
+    for id in ["u00", "u06", "u08", "u24"] {
+        assert_eq!(server.get(&format!("/api/uavs/{id}")).await["id"], id);
+    }
+    let (status, _) =
+        server.call("PUT", "/api/uavs/u08/goal", Some(&json!({"goal": [30.0, 0.0]}).to_string())).await;
+    assert_eq!(status, 200);
+    assert_eq!(server.get("/api/uavs/u08").await["goal"], json!([30.0, 0.0]));
+    assert_eq!(server.get("/api/uavs?limit=1&after=u06").await[0]["id"], "u08");
     server.stop().await;
 }

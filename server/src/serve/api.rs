@@ -4,7 +4,7 @@
 use super::command::{Command, Outcome};
 use super::error::{ApiError, ApiJson, NoBody};
 use super::snapshot::{Snapshot, UavSnapshot};
-use super::state::{AppState, Frame};
+use super::state::{AppState, json_of};
 use axum::extract::{Path, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
@@ -169,7 +169,7 @@ async fn get_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<
 fn position_of(app: &AppState, snapshot: &Snapshot, id: &str) -> Option<usize> {
     let frame = app.frames.borrow();
     let indexed = frame.binary.index.get(id).copied();
-    if frame.tick == snapshot.tick {
+    if frame.tick() == snapshot.tick {
         return indexed;
     }
     match indexed {
@@ -339,8 +339,8 @@ async fn get_state(State(app): State<AppState>) -> Response {
     let frame = app.frames.borrow().clone();
     let snapshot = app.snapshots.borrow().clone();
     // The serialiser may still be on the previous tick: an answered change must show at once.
-    let frame = if frame.tick == snapshot.tick { frame } else { Frame::new(snapshot, frame.binary) };
-    ([(header::CONTENT_TYPE, "application/json")], axum::body::Bytes::from(frame.json())).into_response()
+    let text = if frame.tick() == snapshot.tick { frame.json() } else { json_of(&snapshot) };
+    ([(header::CONTENT_TYPE, "application/json")], axum::body::Bytes::from(text)).into_response()
 }
 
 /// `PUT /api/rerun/selection` body.

@@ -42,8 +42,6 @@ pub fn status_code(status: UavStatus) -> u8 {
 /// One snapshot in the binary format.
 #[derive(Debug, Clone, Default)]
 pub struct BinaryFrame {
-    /// Its tick.
-    pub tick: u64,
     /// The roster the records' indices refer to.
     pub roster_version: u32,
     /// The roster frame of that version.
@@ -85,6 +83,12 @@ impl Encoder {
                 *id == u.id && *policy == u.policy && *goal == u.goal && *link == u.link
             });
         if !same {
+            // The index depends on the ids alone (a new goal or policy keeps it).
+            let ids_changed =
+                self.last.len() != uavs.len() || self.last.iter().zip(uavs).any(|(l, u)| l.0 != u.id);
+            if ids_changed {
+                self.index = Arc::new(uavs.iter().enumerate().map(|(k, u)| (u.id.clone(), k)).collect());
+            }
             self.roster_version = self.roster_version.wrapping_add(1).max(1);
             self.last.clear();
             self.last.extend(uavs.iter().map(|u| (u.id.clone(), u.policy.clone(), u.goal, u.link.clone())));
@@ -98,7 +102,6 @@ impl Encoder {
             // Serialising a Value built from strings and finite numbers cannot fail.
             serde_json::to_writer(&mut roster, &json!({ "uavs": list })).unwrap_or_default();
             self.roster = Bytes::from(roster);
-            self.index = Arc::new(uavs.iter().enumerate().map(|(k, u)| (u.id.clone(), k)).collect());
         }
         let mut body = Vec::with_capacity(TICK_HEADER_BYTES + RECORD_BYTES * uavs.len());
         let flags = if snapshot.paused { FLAG_PAUSED } else { 0 };
@@ -139,7 +142,6 @@ impl Encoder {
             self.reservations = Bytes::from(reservations);
         }
         BinaryFrame {
-            tick: snapshot.tick,
             roster_version: self.roster_version,
             roster: self.roster.clone(),
             index: self.index.clone(),

@@ -28,8 +28,6 @@ pub const DURABLE_TIMEOUT: Duration = Duration::from_secs(30);
 /// frame; binary clients alone never pay for it).
 #[derive(Debug, Clone)]
 pub struct Frame {
-    /// Its tick.
-    pub tick: u64,
     /// The snapshot itself.
     pub snapshot: Arc<Snapshot>,
     /// Its JSON text, made by the first reader that needs it and shared by every clone.
@@ -41,20 +39,28 @@ pub struct Frame {
 impl Frame {
     /// The frame of `snapshot`, its binary encoding given and its JSON not made yet.
     pub fn new(snapshot: Arc<Snapshot>, binary: super::binary::BinaryFrame) -> Self {
-        Frame { tick: snapshot.tick, snapshot, json: Arc::default(), binary }
+        Frame { snapshot, json: Arc::default(), binary }
+    }
+
+    /// Its tick.
+    pub fn tick(&self) -> u64 {
+        self.snapshot.tick
     }
 
     /// The `GET /api/state` document (and the `/ws` JSON message), serialised on first use.
     pub fn json(&self) -> Utf8Bytes {
-        self.json
-            .get_or_init(|| match serde_json::to_string(&*self.snapshot) {
-                Ok(text) => Utf8Bytes::from(text),
-                Err(e) => {
-                    tracing::error!("snapshot not serialised: {e}");
-                    Utf8Bytes::from_static("{\"error\":\"snapshot not serialised\"}")
-                }
-            })
-            .clone()
+        self.json.get_or_init(|| json_of(&self.snapshot)).clone()
+    }
+}
+
+/// The JSON text of `snapshot` (`GET /api/state`).
+pub fn json_of(snapshot: &Snapshot) -> Utf8Bytes {
+    match serde_json::to_string(snapshot) {
+        Ok(text) => Utf8Bytes::from(text),
+        Err(e) => {
+            tracing::error!("snapshot not serialised: {e}");
+            Utf8Bytes::from_static("{\"error\":\"snapshot not serialised\"}")
+        }
     }
 }
 

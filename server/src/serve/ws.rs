@@ -208,10 +208,10 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
                     continue;
                 }
                 let frame = frames.borrow_and_update().clone();
-                if last_tick > 0 && frame.tick > last_tick + 1 && min_interval.is_zero() {
-                    counters.frames_skipped.fetch_add(frame.tick - last_tick - 1, Relaxed);
+                if last_tick > 0 && frame.tick() > last_tick + 1 && min_interval.is_zero() {
+                    counters.frames_skipped.fetch_add(frame.tick() - last_tick - 1, Relaxed);
                 }
-                last_tick = frame.tick;
+                last_tick = frame.tick();
                 let sent = match format {
                     Format::Json => send(&mut socket, Message::Text(frame.json())).await,
                     Format::Binary(bbox) => send_binary(&mut socket, frame.binary, bbox, &mut seen).await,
