@@ -14,6 +14,7 @@
 //! instead of at least 271 arrivals in `mixed`.)
 
 use crate::fleet::{Fleet, parallel};
+use crate::repair::Repair;
 use crate::rows::RowBuilder;
 use rayon::prelude::*;
 use safety::{Row, RowKind, SafetyFilter};
@@ -125,6 +126,8 @@ pub(crate) struct FilterStage {
     inputs: Vec<Vec2>,
     /// The filter's result of each UAV, by position in the order.
     results: Vec<Filtered>,
+    /// The repair pass after the levels ([`crate::repair`]).
+    repair: Repair,
 }
 
 impl std::fmt::Debug for FilterStage {
@@ -215,11 +218,29 @@ impl FilterStage {
                 }
             }
         }
+        // The sequential share's repair pass (`split` has no inputs of others to repair against).
+        self.repair.repaired.clear();
+        if sequential {
+            let slacked = self.results.iter().zip(&self.order.order).filter(|(o, _)| o.max_slack > 0.0);
+            let uavs = &fleet.uavs;
+            self.repair.run(
+                slacked.map(|(_, &k)| k),
+                rows,
+                |k| uavs[k].last.u_ref,
+                &mut self.inputs,
+                &p,
+                &mut self.workers[0].filter,
+            );
+        }
         for (o, &k) in self.results.iter().zip(&self.order.order) {
             let last = &mut fleet.uavs[k].last;
             (last.u, last.rows, last.active_rows, last.max_slack) = (o.u, o.rows, o.active_rows, o.max_slack);
             (last.solved, last.failed, last.solve_us, last.min_barrier) =
                 (o.solved, o.failed, o.solve_us, o.min_barrier);
+        }
+        for r in &self.repair.repaired {
+            let last = &mut fleet.uavs[r.k].last;
+            (last.u, last.max_slack, last.active_rows) = (r.u, r.max_slack, r.active_rows);
         }
     }
 }

@@ -19,6 +19,7 @@ pub mod paths;
 mod pipeline;
 pub mod progress;
 mod ragged;
+mod repair;
 mod rows;
 mod run;
 mod scenario;

@@ -11,9 +11,12 @@ use policies::PolicyRegistry;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// Cases (of seeds 1..=N, `pd`) in which every UAV arrived when last measured (`airroads stress
-/// --family F --scenarios N --seed 1 --policy pd`); a change may raise these, never lower them.
+/// --family F --scenarios N --seed 1 --policy pd`); a change may raise these, never lower them. The
+/// one exception so far: `bends` went from 99 to 98 with the repair pass (docs/safety.md §10.6), which
+/// removed every collision-margin violation of the families; seeds 22 and 85 now arrive at 62.7 s and
+/// 64.1 s of their 60 s (BENCHMARKS.md "Traffic rules").
 const MIXED_ARRIVED: usize = 290;
-const BENDS_ARRIVED: usize = 99;
+const BENDS_ARRIVED: usize = 98;
 const BOTTLENECK_ARRIVED: usize = 100;
 const HAIRPIN_ARRIVED: usize = 100;
 const HEADON_ARRIVED: usize = 40;
@@ -108,4 +111,38 @@ fn head_on_groups_are_safe_and_arrive() {
 #[test]
 fn crowds_flying_through_each_other_are_safe_and_arrive() {
     check(Family::Crowd, 40, CROWD_ARRIVED, true);
+}
+
+/// The dense blocks whose pair rows could not be met by the UAV filtered second (boxed in ahead,
+/// its QP took slack, a pair closed to 1–4 cm inside D_c) until the repair pass let the UAV filtered
+/// first brake for both (docs/safety.md §10.6): (family, seed, policy), from `airroads stress` with
+/// seeds 1 and 1001.
+const DENSE_BLOCKS: [(Family, u64, &str); 5] = [
+    (Family::HeadOn, 68, "rl"),
+    (Family::HeadOn, 128, "rl"),
+    (Family::Crowd, 259, "rl"),
+    (Family::HeadOn, 1019, "rl"),
+    (Family::HeadOn, 1105, "pd"),
+];
+
+#[test]
+fn dense_blocks_keep_their_distance() {
+    for (family, seed, policy) in DENSE_BLOCKS {
+        let valid = family.scenario(seed).validate().unwrap();
+        let options = RunOptions {
+            config: FleetConfig::default(),
+            policy: policy.into(),
+            trajectory: None,
+            paths: false,
+        };
+        let policies = PolicyRegistry::standard(valid.params.delta).expect("the shipped models load");
+        let m = run_scenario(&valid, options, policies).unwrap().metrics;
+        assert!(
+            m.safe,
+            "{} seed {seed} ({policy}): collision margin {:?} m, road margin {} m",
+            family.name(),
+            m.min_collision_margin_m,
+            m.min_road_margin_m
+        );
+    }
 }
