@@ -70,19 +70,41 @@ pub fn point_row(p: Vec2, v: Vec2, vertex: Vec2, delta: f64, d_s: f64, zeta: f64
     collision_row(p - vertex, v, delta, 0.0, d_s, zeta, kind)
 }
 
-/// Gain κ (1/s) of the linear class-K term that [`vertex_row`] adds to ζb³.
-pub const VERTEX_GAIN: f64 = 4.0;
-/// b₀ (m/s): below this barrier value a vertex's row is the paper's again.
-pub const VERTEX_FLOOR: f64 = 0.5;
+/// Gain κ (1/s) of the linear class-K term that [`vertex_row`] and [`pair_row`] add to ζb³.
+pub const CLASS_K_GAIN: f64 = 4.0;
+/// b₀ (m/s): below this barrier value a vertex's row and a pair row are the paper's again.
+pub const CLASS_K_FLOOR: f64 = 0.5;
+
+/// The linear class-K term κ·max(b − b₀, 0) added to ζb³ (docs/safety.md §10.5, §10.7).
+fn linear_class_k(b: f64) -> f64 {
+    CLASS_K_GAIN * (b - CLASS_K_FLOOR).max(0.0)
+}
+
+/// Pair row of cooperating UAVs k and d (docs/safety.md §10.7): the [`collision_row`] with the
+/// class-K function ζb³ + κ·max(b − b₀, 0) instead of ζb³, shared like the rest of the row
+/// (δ_k/δΣ of it). It still keeps b_kd ≥ 0 and is the paper's row below b₀; above b₀ it no longer
+/// keeps a UAV from braking (or a pair from closing in) while their braking margin is large.
+pub fn pair_row(
+    p_kd: Vec2,
+    v_kd: Vec2,
+    delta_k: f64,
+    delta_d: f64,
+    d_c: f64,
+    zeta: f64,
+    kind: RowKind,
+) -> Row {
+    let row = collision_row(p_kd, v_kd, delta_k, delta_d, d_c, zeta, kind);
+    Row { c: row.c + delta_k / (delta_k + delta_d) * linear_class_k(row.b), ..row }
+}
 
 /// End-point barrier of a road vertex V (docs/safety.md §10.5): the row of [`point_row`] with the
-/// class-K function ζb³ + κ·max(b − b₀, 0) (κ = [`VERTEX_GAIN`], b₀ = [`VERTEX_FLOOR`]) instead of
+/// class-K function ζb³ + κ·max(b − b₀, 0) (κ = [`CLASS_K_GAIN`], b₀ = [`CLASS_K_FLOOR`]) instead of
 /// ζb³. It still keeps b ≥ 0 and is the paper's row below b₀; above b₀ it no longer throttles a UAV
 /// flying past V (along a wall that V ends, or through the mouth of a narrowing) to a crawl while
 /// its braking margin to V is large.
 pub fn vertex_row(p: Vec2, v: Vec2, vertex: Vec2, delta: f64, d_s: f64, zeta: f64, kind: RowKind) -> Row {
     let row = point_row(p, v, vertex, delta, d_s, zeta, kind);
-    Row { c: row.c + VERTEX_GAIN * (row.b - VERTEX_FLOOR).max(0.0), ..row }
+    Row { c: row.c + linear_class_k(row.b), ..row }
 }
 
 /// Signed line barrier (docs/safety.md §3, E5): with s = n̂_inᵀ(p − a) and ṡ = n̂_inᵀv,

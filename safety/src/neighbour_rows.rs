@@ -1,5 +1,6 @@
 //! Rows against neighbours (docs/safety.md §1, §2, §5): the collision row b_kd of each cooperating
-//! neighbour within the activation radius, shared δ_k/(δ_k+δ_d), and the row of UAV k alone against
+//! neighbour within the activation radius, shared δ_k/(δ_k+δ_d), with the class-K function
+//! ζb³ + κ·max(b − b₀, 0) of docs/safety.md §10.7 (`barrier::pair_row`), and the row of UAV k alone against
 //! a neighbour that does not run the filter, beside the road rows of `road_rows`.
 //!
 //! A UAV d taking off or landing holds its place: a static obstacle, the collision barrier with
@@ -14,7 +15,7 @@
 //! also pays for the disk's growth ρ̇ = δτ and ρ̈ = δ while t < T_hold. After the horizon the disk
 //! freezes (the motors are off). The lost UAV itself brakes and no longer runs the filter.
 
-use crate::barrier::{Row, RowKind, collision_row};
+use crate::barrier::{Row, RowKind, collision_row, pair_row};
 use crate::road_rows::activation_radius;
 use uav::{Params, UavState, Vec2};
 
@@ -99,7 +100,7 @@ pub fn neighbour_rows(
             Neighbour::Cooperating(other) => {
                 let (p_kd, v_kd) = (me.p - other.p, me.v - other.v);
                 if p_kd.norm() <= activation_radius(p.d_c, v_kd.norm(), delta_sum) {
-                    out.push(collision_row(p_kd, v_kd, p.delta, p.delta, d_c, p.zeta, RowKind::Collision(d)));
+                    out.push(pair_row(p_kd, v_kd, p.delta, p.delta, d_c, p.zeta, RowKind::Collision(d)));
                 }
             }
             Neighbour::Obstacle(disk) => out.push(obstacle_row(me, &disk, d_c, p, RowKind::Collision(d))),
