@@ -242,7 +242,7 @@ fn stress_reports_time_to_arrival_and_saves_unfinished_cases_with_save_failing()
         "--scenarios",
         "4",
         "--seed",
-        "211",
+        "45",
         "--policy",
         "pd",
         "--save-failing",

@@ -97,6 +97,8 @@ pub struct TrafficRules {
     entering: Vec<(usize, usize, f64, usize)>,
     /// Scratch: the UAVs not admitted as (zone, entry, −progress, UAV), to queue them up.
     queue: Vec<(usize, usize, f64, usize)>,
+    /// Scratch: per zone and entry, the queue order (−progress) of the foremost UAV waiting there.
+    front: Vec<f64>,
     /// The speed limit along the road (rebuilt with the sections when the road changes).
     speeds: SpeedProfile,
     /// Scratch: where the UAVs are along the road by direction (`crate::following`).
@@ -159,6 +161,19 @@ impl TrafficRules {
         self.zones.begin();
         self.requests.clear();
         let approach = 2.0 * nav.r_s + HOLD_M;
+        let gap = FOLLOW_GAP_IN_DC * nav.d_c;
+        // The foremost UAV waiting at each entry (without its grant).
+        self.front.clear();
+        self.front.resize(2 * self.sections.len(), f64::INFINITY);
+        for u in uavs.iter() {
+            let Some(pos) = u.traffic.route else { continue };
+            if let Some((zone, entry)) =
+                next_section(&self.sections, &pos, approach).filter(|&w| u.traffic.grant != Some(w))
+            {
+                let front = &mut self.front[2 * zone + entry];
+                *front = front.min(-pos.direction() * pos.s);
+            }
+        }
         for (k, u) in uavs.iter_mut().enumerate() {
             let position = u.traffic.route;
             let wanted = position.and_then(|p| next_section(&self.sections, &p, approach));
@@ -168,11 +183,16 @@ impl TrafficRules {
                 // Clear of its entry (the next may follow, lined up behind it) once a follow gap past
                 // its hold point.
                 let z = self.sections[zone];
-                let gap = FOLLOW_GAP_IN_DC * nav.d_c;
                 let entering =
                     if entry == 0 { pos.s < z.hold_before + gap } else { pos.s > z.hold_after - gap };
-                self.zones.held(zone, entry, entering);
-                continue;
+                // A UAV on its way in with a waiting UAV more than D_c ahead of it (they swapped
+                // places before it got there) gives its grant back: the grant goes to the head of the
+                // queue, the one it would otherwise follow for good while that one waits.
+                let overtaken = entering && self.front[2 * zone + entry] < -pos.direction() * pos.s - nav.d_c;
+                if !overtaken {
+                    self.zones.held(zone, entry, entering);
+                    continue;
+                }
             }
             u.traffic.grant = None;
             let Some((zone, entry)) = wanted else {

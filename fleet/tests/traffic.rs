@@ -89,3 +89,16 @@ fn a_single_file_section_passes_both_directions_in_turn() {
         assert!(with.max_stall_s < without.max_stall_s, "{policy}: {with:#?} {without:#?}");
     }
 }
+
+#[test]
+fn an_admitted_uav_overtaken_in_the_queue_hands_its_grant_to_the_head() {
+    // `bottleneck` seeds 34 and 197 with `rl`: a UAV admitted to the section was overtaken by others
+    // of its entry before it reached the hold point; they waited in their queue places in front of
+    // it, it followed them, and the zone (one UAV entering at a time) never admitted anyone else:
+    // nobody arrived in 120 s.
+    for seed in [34, 197] {
+        let s = fleet::families::Family::Bottleneck.scenario(seed).validate().unwrap();
+        let m = fly(&s, NavMode::Traffic, "rl");
+        assert!(m.safe && m.all_arrived, "seed {seed}: {m:#?}");
+    }
+}
