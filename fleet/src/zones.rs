@@ -2,7 +2,8 @@
 //! not use at the same time: today a single-file section (entries: its two ends), later a junction
 //! or a merge (entries: its arms). The ground station sees every UAV, so it admits UAVs from one
 //! entry at a time: the zone opens to the entry whose first UAV has waited longest, admits from it
-//! while others wait less than [`MAX_WAIT_S`] or until [`MAX_BATCH`] went in while others wait, and
+//! until another entry has waited [`MAX_WAIT_S`] during this phase or [`MAX_BATCH`] went in while
+//! others wait, and
 //! once everyone admitted has left, opens to the longest waiting of the other entries (round robin:
 //! with equal waits, the entry that just had its phase would otherwise win every tie, and a side
 //! whose UAVs waited as long as a crowd on the other side never got in), or to the same entry when
@@ -16,7 +17,8 @@
 /// of 30 each way could not swap ends in time: `headon` 278 -> 283 of 300 with `pd`, BENCHMARKS.md).
 pub const MAX_BATCH: u32 = 20;
 
-/// Longest wait (s) at one entry before the zone stops admitting from the others.
+/// Longest wait (s) at one entry, counted from the start of the current phase, before the zone
+/// stops admitting from the others.
 pub const MAX_WAIT_S: f64 = 60.0;
 
 /// The state of one zone.
@@ -36,6 +38,8 @@ struct Zone {
     entering: u32,
     /// The entry of the last phase that ended: the next phase prefers the others.
     last_open: Option<usize>,
+    /// When the current phase opened (s).
+    opened_at: f64,
 }
 
 /// A UAV that asks to enter a zone from one of its entries.
@@ -120,6 +124,7 @@ impl Reservations {
             } else if z.open.is_none() {
                 // Grants held without a phase (a UAV that started inside): their entry is open.
                 z.open = z.held_entry;
+                z.opened_at = now;
             }
         }
         let mut start = 0;
@@ -139,9 +144,19 @@ impl Reservations {
         let first = requests.iter().min_by(|a, b| {
             again(a).cmp(&again(b)).then(a.since.total_cmp(&b.since)).then(a.rank.cmp(&b.rank))
         });
+        if z.open.is_none() {
+            z.opened_at = now;
+        }
         let open = *z.open.get_or_insert(first.map_or(requests[0].entry, |r| r.entry));
-        let oldest_other =
-            requests.iter().filter(|r| r.entry != open).map(|r| now - r.since).max_by(f64::total_cmp);
+        // The other entries' wait counts from the start of this phase: a wait that began before it
+        // (while the phase before ran) would close every later phase after one UAV once both
+        // entries had waited MAX_WAIT_S, and the zone would pass one UAV per crossing time (`headon`
+        // seed 89 with `rl`: 16 s per UAV, 4 of 36 still waiting at t_max).
+        let oldest_other = requests
+            .iter()
+            .filter(|r| r.entry != open)
+            .map(|r| now - r.since.max(z.opened_at))
+            .max_by(f64::total_cmp);
         // A phase admits at least one UAV: closing a fresh one would hand the zone to nobody when
         // both sides have waited MAX_WAIT_S (each would close the other's phase at once).
         if z.admitted > 0
@@ -189,6 +204,16 @@ mod tests {
 
     /// Simulates a zone that each admitted UAV leaves `stay` ticks after its grant.
     fn simulate(arrivals: &[(usize, usize)], stay: usize, ticks: usize) -> (Vec<Option<usize>>, usize) {
+        simulate_clearing(arrivals, 1, stay, ticks)
+    }
+
+    /// [`simulate`] with admitted UAVs clear of their entry `clear` ticks after their grant.
+    fn simulate_clearing(
+        arrivals: &[(usize, usize)],
+        clear: usize,
+        stay: usize,
+        ticks: usize,
+    ) -> (Vec<Option<usize>>, usize) {
         let mut zone = Reservations::new(1);
         let mut granted_at: Vec<Option<usize>> = vec![None; arrivals.len()];
         let mut max_concurrent_entries = 0;
@@ -197,8 +222,7 @@ mod tests {
             let mut entries = std::collections::BTreeSet::new();
             for (who, g) in granted_at.iter().enumerate() {
                 if let Some(g) = g.filter(|g| t < g + stay) {
-                    // Clear of the entry one tick after the grant.
-                    zone.held(0, arrivals[who].1, t == g);
+                    zone.held(0, arrivals[who].1, t < g + clear);
                     entries.insert(arrivals[who].1);
                 }
             }
@@ -260,5 +284,24 @@ mod tests {
         let before = granted[..n].iter().flatten().filter(|&&g| g < first_from_1).count();
         assert!(before <= MAX_BATCH as usize, "{before} went first");
         assert!(granted.iter().all(Option::is_some), "{granted:?}");
+    }
+
+    #[test]
+    fn crowds_that_both_waited_long_still_go_in_batches() {
+        // MAX_BATCH UAVs waiting at each entry since t = 0, each clear of its entry 8 ticks after its
+        // grant and through after 70 (longer than MAX_WAIT_S): every phase after the first used to
+        // close after one UAV (the other side's wait counted from t = 0), one UAV per crossing. Now
+        // each phase admits for MAX_WAIT_S of its own: all cross in a few phases.
+        let n = MAX_BATCH as usize;
+        let arrivals: Vec<(usize, usize)> = (0..2 * n).map(|k| (0, k / n)).collect();
+        let (granted, entries) = simulate_clearing(&arrivals, 8, 70, 2000);
+        assert_eq!(entries, 1, "two entries held grants at once");
+        assert!(granted.iter().all(Option::is_some), "{granted:?}");
+        // Phases: runs of grants from one entry in the order of granting.
+        let mut order: Vec<(usize, usize)> =
+            granted.iter().enumerate().map(|(w, g)| (g.unwrap(), arrivals[w].1)).collect();
+        order.sort_unstable();
+        let phases = 1 + order.windows(2).filter(|w| w[0].1 != w[1].1).count();
+        assert!(phases <= 6, "{phases} phases for {} UAVs: {order:?}", 2 * n);
     }
 }
