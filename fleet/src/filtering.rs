@@ -240,7 +240,7 @@ impl FilterStage {
         }
         for r in &self.repair.repaired {
             let last = &mut fleet.uavs[r.k].last;
-            (last.u, last.max_slack, last.active_rows) = (r.u, r.max_slack, r.active_rows);
+            (last.u, last.max_slack, last.active_rows) = (self.inputs[r.k], r.max_slack, r.active_rows);
         }
     }
 }

@@ -40,14 +40,12 @@ fn urgent(rows: &[Row], u: Vec2) -> bool {
     rows.iter().any(|r| r.b < URGENT_B && r.a.dot(&u) - r.c > MET)
 }
 
-/// What the pass changed for one UAV.
+/// What the pass changed for one UAV (its new input is in the pass's `inputs`).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Repaired {
     /// The UAV's index.
     pub k: usize,
-    /// Its new input.
-    pub u: Vec2,
-    /// The largest slack of its repairing QP.
+    /// The largest slack of its last repairing QP.
     pub max_slack: f64,
     /// Rows binding at the new input.
     pub active_rows: usize,
@@ -61,9 +59,10 @@ pub(crate) struct Repair {
     next: Vec<usize>,
     /// Whether a UAV is listed in `visit` (while building it) or `next` (during a round).
     listed: Vec<bool>,
+    /// Each UAV's entry in `repaired`, if it has one.
+    slot: Vec<Option<usize>>,
     rows: Vec<Row>,
-    /// What the last pass changed, in the order it changed it (a UAV changed twice is listed twice;
-    /// its later entry stands).
+    /// What the last pass changed, one entry per UAV changed (its last change).
     pub repaired: Vec<Repaired>,
 }
 
@@ -97,6 +96,8 @@ impl Repair {
         self.repaired.reserve(n);
         self.listed.clear();
         self.listed.resize(n, false);
+        self.slot.clear();
+        self.slot.resize(n, None);
         for k in slacked {
             list_once(&mut self.visit, &mut self.listed, k);
             for d in partners(k) {
@@ -127,21 +128,19 @@ impl Repair {
                     continue;
                 }
                 inputs[k] = outcome.u;
-                let (max_slack, active_rows) = (outcome.max_slack, outcome.active_rows);
-                if self.repaired.len() < n {
-                    self.repaired.push(Repaired { k, u: outcome.u, max_slack, active_rows });
-                } else if let Some(r) = self.repaired.iter_mut().rev().find(|r| r.k == k) {
-                    // More changes than UAVs (a UAV changed in several rounds): update in place.
-                    *r = Repaired { k, u: outcome.u, max_slack, active_rows };
+                let repaired = Repaired { k, max_slack: outcome.max_slack, active_rows: outcome.active_rows };
+                match self.slot[k] {
+                    Some(i) => self.repaired[i] = repaired,
+                    None => {
+                        self.slot[k] = Some(self.repaired.len());
+                        self.repaired.push(repaired);
+                    }
                 }
                 for d in partners(k) {
                     list_once(&mut self.next, &mut self.listed, d);
                 }
             }
             std::mem::swap(&mut self.visit, &mut self.next);
-        }
-        for &k in &self.visit {
-            self.listed[k] = false;
         }
     }
 }

@@ -97,7 +97,9 @@ pub struct TrafficRules {
     entering: Vec<(usize, usize, f64, usize)>,
     /// Scratch: the UAVs not admitted as (zone, entry, −progress, UAV), to queue them up.
     queue: Vec<(usize, usize, f64, usize)>,
-    /// Scratch: per zone and entry, the queue order (−progress) of the foremost UAV waiting there.
+    /// Scratch: the section (zone, entry) each UAV must cross next, if it is near one.
+    wanted: Vec<Option<(usize, usize)>>,
+    /// Scratch: per zone and entry, the queue order of the foremost UAV waiting there.
     front: Vec<f64>,
     /// The speed limit along the road (rebuilt with the sections when the road changes).
     speeds: SpeedProfile,
@@ -162,21 +164,23 @@ impl TrafficRules {
         self.requests.clear();
         let approach = 2.0 * nav.r_s + HOLD_M;
         let gap = FOLLOW_GAP_IN_DC * nav.d_c;
+        self.wanted.clear();
+        self.wanted.extend(
+            uavs.iter().map(|u| u.traffic.route.and_then(|p| next_section(&self.sections, &p, approach))),
+        );
         // The foremost UAV waiting at each entry (without its grant).
         self.front.clear();
         self.front.resize(2 * self.sections.len(), f64::INFINITY);
-        for u in uavs.iter() {
-            let Some(pos) = u.traffic.route else { continue };
-            if let Some((zone, entry)) =
-                next_section(&self.sections, &pos, approach).filter(|&w| u.traffic.grant != Some(w))
+        for (u, &wanted) in uavs.iter().zip(&self.wanted) {
+            if let (Some((zone, entry)), Some(pos)) = (wanted, u.traffic.route)
+                && u.traffic.grant != wanted
             {
                 let front = &mut self.front[2 * zone + entry];
-                *front = front.min(-pos.direction() * pos.s);
+                *front = front.min(queue_order(&pos));
             }
         }
         for (k, u) in uavs.iter_mut().enumerate() {
-            let position = u.traffic.route;
-            let wanted = position.and_then(|p| next_section(&self.sections, &p, approach));
+            let (position, wanted) = (u.traffic.route, self.wanted[k]);
             if let Some((zone, entry)) = wanted.filter(|_| u.traffic.grant == wanted)
                 && let Some(pos) = position
             {
@@ -188,7 +192,7 @@ impl TrafficRules {
                 // A UAV on its way in with a waiting UAV more than D_c ahead of it (they swapped
                 // places before it got there) gives its grant back: the grant goes to the head of the
                 // queue, the one it would otherwise follow for good while that one waits.
-                let overtaken = entering && self.front[2 * zone + entry] < -pos.direction() * pos.s - nav.d_c;
+                let overtaken = entering && self.front[2 * zone + entry] < queue_order(&pos) - nav.d_c;
                 if !overtaken {
                     self.zones.held(zone, entry, entering);
                     continue;
@@ -203,8 +207,7 @@ impl TrafficRules {
             let z = self.sections[zone];
             let past_hold =
                 position.is_some_and(|p| if entry == 0 { p.s > z.hold_before } else { p.s < z.hold_after });
-            // The queue of an entry is by how far along its route each UAV is (they wait in a column).
-            let order = position.map_or(f64::INFINITY, |p| -p.direction() * p.s);
+            let order = position.map_or(f64::INFINITY, |p| queue_order(&p));
             let inside = position.is_some_and(|p| (z.start..=z.end).contains(&p.s));
             self.requests.push(Request { zone, entry, since, order, rank: k, who: k, past_hold, inside });
         }
@@ -323,6 +326,12 @@ impl TrafficRules {
             }
         }
     }
+}
+
+/// A UAV's place in the queue of an entry, lower first: how far along its route it is (UAVs wait in
+/// a column, the foremost at the head).
+fn queue_order(pos: &RoutePosition) -> f64 {
+    -pos.direction() * pos.s
 }
 
 /// `x` moved across the road, if needed, so that it keeps D_s plus a margin from both sides (at the
