@@ -5,16 +5,18 @@ use crate::commands;
 use crate::crtp::{
     self, PORT_CONSOLE, PORT_LINK, PORT_LOG, PORT_MEMORY, PORT_PARAM, PORT_PLATFORM, PORT_SUPERVISOR, Packet,
 };
-use crate::dynamics::{G, Gains};
+use crate::dynamics::Gains;
 use crate::flight::{Flight, FlightMode};
 use crate::log::{Log, LogVar};
+use crate::logvars::Sources;
 use crate::param::Params;
-use crate::planner::PlanState;
+use crate::services;
+/// The supervisor's bits, also reachable here (`firmware::supervisor::IS_ARMED`).
+pub use crate::supervisor;
+use crate::supervisor::{Conditions, Supervisor};
 
-/// CRTP protocol version reported on the platform port (crazyflie-lib 0.8 accepts 12..=13).
-pub const PROTOCOL_VERSION: u8 = 12;
-/// Device type name reported on the platform port.
-pub const DEVICE_TYPE: &str = "Crazyflie 2.1";
+/// The versions reported on the platform port, also reachable here.
+pub use crate::services::{DEVICE_TYPE, PROTOCOL_VERSION};
 
 /// Firmware settings that do not change while running.
 #[derive(Debug, Clone)]
@@ -29,6 +31,9 @@ pub struct FirmwareSettings {
     pub version: String,
     /// Without any packet for this long the link counts as lost and log blocks are reset (s).
     pub link_timeout: f64,
+    /// Arms itself (the Crazyflie 2.1 default); `false` waits for an arming request, like a
+    /// firmware built with `CONFIG_MOTORS_REQUIRE_ARMING`.
+    pub auto_arm: bool,
 }
 
 /// The firmware state.
@@ -41,6 +46,8 @@ pub struct Firmware {
     pub params: Params,
     /// Flight control and dynamics.
     pub flight: Flight,
+    /// The supervisor (arming, flying, locked).
+    pub supervisor: Supervisor,
     steps: u64,
     t: f64,
     last_rx: Option<f64>,
@@ -50,7 +57,17 @@ impl Firmware {
     /// Booted at time 0, on the ground at the initial position.
     pub fn new(settings: FirmwareSettings) -> Self {
         let flight = Flight::new(settings.initial_position, settings.gains);
-        Self { settings, log: Log::new(), params: Params::new(), flight, steps: 0, t: 0.0, last_rx: None }
+        let supervisor = Supervisor::new(settings.auto_arm);
+        let (log, params) = (Log::new(), Params::new());
+        Self { settings, log, params, flight, supervisor, steps: 0, t: 0.0, last_rx: None }
+    }
+
+    /// A reboot: clears an emergency-stop lock, setpoints, log blocks and the supervisor; the
+    /// Crazyflie stays where it is.
+    pub fn reboot(&mut self) {
+        self.flight.reboot();
+        self.log.reset();
+        self.supervisor = Supervisor::new(self.settings.auto_arm);
     }
 
     /// Simulation time (s since boot), a whole number of steps.
@@ -65,19 +82,36 @@ impl Firmware {
     /// Integrate up to time `t` (s) in fixed steps; returns the log data that became due.
     pub fn advance_to(&mut self, t: f64) -> Vec<Packet> {
         let dt = self.settings.step;
+        // The supervisor runs every `PERIOD` on the step grid.
+        let supervisor_steps = ((supervisor::PERIOD / dt).round() as u64).max(1);
         let mut out = Vec::new();
         while (self.steps + 1) as f64 * dt <= t + 1e-12 {
             self.steps += 1;
             self.t = self.steps as f64 * dt;
             let hl = self.hl_enabled();
-            self.flight.step(self.t, dt, hl);
+            self.flight.step(self.t, dt, hl, self.supervisor.motors_allowed());
+            self.sync_lock();
+            if self.steps.is_multiple_of(supervisor_steps) {
+                let locked = self.flight.mode == FlightMode::Locked;
+                let conditions =
+                    Conditions { is_flying: self.flight.is_flying(self.t), emergency_stop: locked };
+                self.supervisor.update(self.t, conditions);
+                if self.supervisor.is_stopped() {
+                    self.flight.lock();
+                }
+            }
             if self.last_rx.is_some_and(|r| self.t - r > self.settings.link_timeout) {
                 // The firmware resets logging when the radio link goes quiet.
                 self.last_rx = None;
                 self.log.reset();
             }
-            let (flight, now) = (&self.flight, self.t);
-            out.extend(self.log.due(now * 1000.0, |v| sample(flight, hl, now, v)));
+            let now = self.t;
+            let sources = Sources {
+                flight: &self.flight,
+                supervisor: &self.supervisor,
+                hl_bits: self.flight.hl_bits(now, hl),
+            };
+            out.extend(self.log.due(now * 1000.0, |v| sources.sample(v)));
         }
         out
     }
@@ -102,6 +136,7 @@ impl Firmware {
         if let Some(cmd) = commands::decode(pk) {
             let hl = self.hl_enabled();
             self.flight.command(cmd, t, hl);
+            self.sync_lock();
             return Vec::new();
         }
         let answer = match pk.port {
@@ -114,16 +149,22 @@ impl Firmware {
                 }
                 answer
             }
-            PORT_MEMORY => memory(pk),
-            PORT_SUPERVISOR if pk.channel == 0 && pk.data.first() == Some(&0x0c) => {
-                let mut d = vec![0x0c];
-                d.extend_from_slice(&self.supervisor_bits().to_le_bytes());
-                Some(Packet::new(PORT_SUPERVISOR, 0, d))
+            PORT_MEMORY => services::memory(pk),
+            PORT_SUPERVISOR => {
+                let bits = self.supervisor_bits();
+                self.supervisor.handle(pk, bits)
             }
-            PORT_LINK => link(pk),
+            PORT_LINK => services::link(pk),
             _ => None,
         };
         answer.into_iter().collect()
+    }
+
+    /// An emergency stop locked the flight: the supervisor locks in the same step.
+    fn sync_lock(&mut self) {
+        if self.flight.mode == FlightMode::Locked && !self.supervisor.is_stopped() {
+            self.supervisor.lock();
+        }
     }
 
     fn param_written(&mut self, id: usize) {
@@ -136,137 +177,31 @@ impl Firmware {
         }
     }
 
-    fn platform(&self, pk: &Packet) -> Option<Packet> {
-        if pk.channel != 1 {
-            return None;
+    /// Platform port: commands (channel 0, arming among them) and versions (channel 1).
+    fn platform(&mut self, pk: &Packet) -> Option<Packet> {
+        match pk.channel {
+            0 => self.supervisor.platform_command(pk),
+            1 => services::version(pk, &self.settings.version),
+            _ => None,
         }
-        let cmd = crtp::u8_at(&pk.data, 0)?;
-        let mut d = vec![cmd];
-        match cmd {
-            0 => d.push(PROTOCOL_VERSION),
-            1 => d.extend_from_slice(self.settings.version.as_bytes()),
-            2 => d.extend_from_slice(DEVICE_TYPE.as_bytes()),
-            _ => return None,
+    }
+
+    fn sources(&self) -> Sources<'_> {
+        Sources {
+            flight: &self.flight,
+            supervisor: &self.supervisor,
+            hl_bits: self.flight.hl_bits(self.t, self.hl_enabled()),
         }
-        d.truncate(crtp::MAX_PAYLOAD);
-        Some(Packet::new(PORT_PLATFORM, 1, d))
     }
 
     /// Supervisor bitfield (see crazyflie-lib's `SupervisorInfo`).
     pub fn supervisor_bits(&self) -> u16 {
-        supervisor_bits(&self.flight, self.hl_enabled(), self.t)
+        self.sources().supervisor_bits()
     }
 
     /// The current value of a log variable.
     pub fn sample(&self, var: LogVar) -> f64 {
-        sample(&self.flight, self.hl_enabled(), self.t, var)
-    }
-}
-
-/// Bits of `supervisor.info`, as the firmware's `supervisor.c` (`updateLogData`) sets them (the
-/// relay reads them through crazyflie-lib's `SupervisorInfo`; a test checks they agree).
-pub mod supervisor {
-    /// Bit 0: can be armed (state "pre-flight checks passed").
-    pub const CAN_BE_ARMED: u16 = 1 << 0;
-    /// Bit 1: armed.
-    pub const IS_ARMED: u16 = 1 << 1;
-    /// Bit 2: arms itself (built without `CONFIG_MOTORS_REQUIRE_ARMING`, the default).
-    pub const AUTO_ARM: u16 = 1 << 2;
-    /// Bit 3: the motors are allowed to run.
-    pub const CAN_FLY: u16 = 1 << 3;
-    /// Bit 4: flying (state "flying" or "warning, level out").
-    pub const IS_FLYING: u16 = 1 << 4;
-    /// Bit 5: tumbled.
-    pub const IS_TUMBLED: u16 = 1 << 5;
-    /// Bit 6: locked by an emergency stop until a reboot.
-    pub const IS_LOCKED: u16 = 1 << 6;
-    /// Bit 7: crashed.
-    pub const IS_CRASHED: u16 = 1 << 7;
-    /// Bit 8: the high-level commander is flying or landing.
-    pub const HL_ACTIVE: u16 = 1 << 8;
-    /// Bit 9: the high-level trajectory has finished.
-    pub const HL_FINISHED: u16 = 1 << 9;
-    /// Bit 10: the high-level commander is disabled (low-level setpoints took over).
-    pub const HL_DISABLED: u16 = 1 << 10;
-}
-
-/// The supervisor bitfield of `f` at time `t`. The simulated Crazyflie auto-arms, never tumbles
-/// or crashes. Its supervisor states: ready to fly (armed, can fly) on the ground; flying while
-/// the motors ran within the last 2 s ([`Flight::is_flying`]); locked after an emergency stop
-/// (only auto-arm and locked: disarmed, motors not allowed, not flying). "Can be armed" is the
-/// pre-flight-checks-passed state, which an auto-arming firmware leaves in the same supervisor
-/// cycle, so it is never reported.
-fn supervisor_bits(f: &Flight, hl_enabled: bool, t: f64) -> u16 {
-    use supervisor::*;
-    let locked = f.mode == FlightMode::Locked;
-    let plan = f.plan_state();
-    let bits = [
-        (IS_ARMED, !locked),
-        (AUTO_ARM, true),
-        (CAN_FLY, !locked),
-        (IS_FLYING, f.is_flying(t)),
-        (IS_LOCKED, locked),
-        (HL_ACTIVE, matches!(plan, PlanState::Flying | PlanState::Landing)),
-        (HL_FINISHED, f.hl_finished(t)),
-        (HL_DISABLED, plan == PlanState::Disabled || !hl_enabled),
-    ];
-    bits.iter().filter(|(_, on)| *on).fold(0, |acc, (bit, _)| acc | bit)
-}
-
-fn sample(f: &Flight, hl_enabled: bool, t: f64, var: LogVar) -> f64 {
-    let b = &f.body;
-    let ext = |k: usize| f.external.map_or(0.0, |p| f64::from(p[k]));
-    let flag = |x: bool| if x { 1.0 } else { 0.0 };
-    match var {
-        LogVar::X => b.p[0],
-        LogVar::Y => b.p[1],
-        LogVar::Z => b.p[2],
-        LogVar::Vx => b.v[0],
-        LogVar::Vy => b.v[1],
-        LogVar::Vz => b.v[2],
-        LogVar::Ax => b.a[0],
-        LogVar::Ay => b.a[1],
-        LogVar::Az => b.a[2],
-        LogVar::Roll | LogVar::Yaw => 0.0,
-        // Small-angle tilt that produces the horizontal acceleration.
-        LogVar::Pitch => (b.a[0] / G).atan().to_degrees(),
-        LogVar::Vbat => (4.15 - 0.004 * f.motor_time).max(3.0),
-        LogVar::PmState => 0.0,
-        LogVar::SupervisorInfo => f64::from(supervisor_bits(f, hl_enabled, t)),
-        LogVar::CanFly => flag(f.mode != FlightMode::Locked),
-        LogVar::IsFlying => flag(f.is_flying(t)),
-        LogVar::IsTumbled => 0.0,
-        LogVar::ExtX => ext(0),
-        LogVar::ExtY => ext(1),
-        LogVar::ExtZ => ext(2),
-        LogVar::Thrust if f.motors_on => (36000.0 * (1.0 + b.a[2] / G)).clamp(0.0, 65535.0),
-        LogVar::Thrust => 0.0,
-    }
-}
-
-/// Memory port: the simulator has no memories.
-fn memory(pk: &Packet) -> Option<Packet> {
-    match (pk.channel, crtp::u8_at(&pk.data, 0)?) {
-        // CMD_INFO_VER, CMD_INFO_NBR.
-        (0, 0) => Some(Packet::new(PORT_MEMORY, 0, vec![0, 1])),
-        (0, 1) => Some(Packet::new(PORT_MEMORY, 0, vec![1, 0])),
-        _ => None,
-    }
-}
-
-/// Link port: echo (0), source (1), sink (2); null packets (3) are answered with an empty
-/// channel-3 packet (`0xF3`), the UDP stand-in for the radio's empty acknowledgement (cflib's UDP
-/// scan relies on an answer).
-fn link(pk: &Packet) -> Option<Packet> {
-    match pk.channel {
-        0 => Some(Packet::new(PORT_LINK, 0, pk.data.clone())),
-        1 => {
-            let mut d = b"Bitcraze Crazyflie".to_vec();
-            d.resize(crtp::MAX_PAYLOAD, 0);
-            Some(Packet::new(PORT_LINK, 1, d))
-        }
-        3 => Some(Packet::new(PORT_LINK, 3, Vec::new())),
-        _ => None,
+        self.sources().sample(var)
     }
 }
 
@@ -275,28 +210,32 @@ mod tests {
     use super::*;
     use crate::crtp::{PORT_HL_COMMANDER, PORT_SETPOINT_GENERIC};
 
-    fn fw() -> Firmware {
+    fn fw_arming(auto_arm: bool) -> Firmware {
         Firmware::new(FirmwareSettings {
             initial_position: [1.0, 2.0, 0.0],
             gains: Gains { kp: 2.0, kv: 8.0, max_accel: 4.0, max_speed: 5.0 },
             step: 0.002,
             version: "test".into(),
             link_timeout: 1.0,
+            auto_arm,
         })
+    }
+
+    fn fw() -> Firmware {
+        fw_arming(true)
     }
 
     #[test]
     fn answers_platform_memory_link_supervisor() {
         let mut f = fw();
         let ask = |f: &mut Firmware, port, ch, d: &[u8]| f.handle(&Packet::new(port, ch, d.to_vec()));
-        assert_eq!(ask(&mut f, 13, 1, &[0])[0].data, vec![0, PROTOCOL_VERSION]);
         assert_eq!(ask(&mut f, 13, 1, &[1])[0].data, b"\x01test".to_vec());
         assert_eq!(ask(&mut f, 4, 0, &[1])[0].data, vec![1, 0]);
-        assert_eq!(ask(&mut f, 15, 0, &[1, 2])[0].data, vec![1, 2]);
-        assert!(ask(&mut f, 15, 2, &[1, 2]).is_empty());
         assert_eq!(ask(&mut f, 15, 3, &[])[0].to_datagram(), vec![0xf3]);
         let sup = ask(&mut f, 9, 0, &[0x0c]);
-        assert_eq!(sup[0].data.len(), 3);
+        assert_eq!(sup[0].data, [vec![0x8c], f.supervisor_bits().to_le_bytes().to_vec()].concat());
+        assert_eq!(ask(&mut f, 9, 1, &[1, 1])[0].data, vec![0x81, 1, 1], "auto-armed: already armed");
+        assert_eq!(ask(&mut f, 13, 0, &[0, 1])[0].data, vec![0, 1], "platform commands are echoed");
         assert!(ask(&mut f, 13, 1, &[]).is_empty());
         assert!(ask(&mut f, 11, 0, &[1, 2, 3]).is_empty());
     }
@@ -328,26 +267,6 @@ mod tests {
             d.extend_from_slice(&x.to_le_bytes());
         }
         Packet::new(PORT_SETPOINT_GENERIC, 0, d)
-    }
-
-    #[test]
-    fn every_supervisor_bit_means_what_crazyflie_lib_reads() {
-        use supervisor::*;
-        let lib = crazyflie_lib::subsystems::supervisor::SupervisorInfo::from_bits;
-        let one = |bit: u16, read: fn(&crazyflie_lib::subsystems::supervisor::SupervisorInfo) -> bool| {
-            assert!(read(&lib(bit)) && !read(&lib(!bit & 0x07ff)), "bit {bit:#06x}");
-        };
-        one(CAN_BE_ARMED, |i| i.can_be_armed());
-        one(IS_ARMED, |i| i.is_armed());
-        one(AUTO_ARM, |i| i.is_auto_armed());
-        one(CAN_FLY, |i| i.can_fly());
-        one(IS_FLYING, |i| i.is_flying());
-        one(IS_TUMBLED, |i| i.is_tumbled());
-        one(IS_LOCKED, |i| i.is_locked());
-        one(IS_CRASHED, |i| i.is_crashed());
-        one(HL_ACTIVE, |i| i.hl_control_active());
-        one(HL_FINISHED, |i| i.hl_traj_finished());
-        one(HL_DISABLED, |i| i.hl_control_disabled());
     }
 
     #[test]
@@ -404,8 +323,44 @@ mod tests {
         assert!(!f.flight.motors_on && f.sample(LogVar::Z) == 0.0);
         // The supervisor port answers with the same bitfield as the log.
         let answer = f.handle(&Packet::new(PORT_SUPERVISOR, 0, vec![0x0c]));
-        assert_eq!(answer[0].data, [vec![0x0c], stopped.to_le_bytes().to_vec()].concat());
+        assert_eq!(answer[0].data, [vec![0x8c], stopped.to_le_bytes().to_vec()].concat());
         assert_eq!(f.sample(LogVar::SupervisorInfo), f64::from(stopped));
+    }
+
+    #[test]
+    fn arming_gates_the_motors_and_disarming_in_flight_locks() {
+        use supervisor::*;
+        let mut f = fw_arming(false);
+        let arm = |f: &mut Firmware, on: u8| f.handle(&Packet::new(PORT_SUPERVISOR, 1, vec![1, on]));
+        assert_eq!(f.supervisor_bits(), CAN_BE_ARMED);
+        // Not armed: the take-off is planned but the motors stay off.
+        f.handle(&hl(7, 1.0, 1.0));
+        f.advance_to(1.5);
+        assert!(!f.flight.motors_on && f.sample(LogVar::Z) == 0.0 && f.sample(LogVar::CanFly) == 0.0);
+        assert_eq!(f.supervisor_bits() & (IS_ARMED | CAN_FLY | IS_FLYING), 0);
+        // The legacy platform request arms too; its answer is [cmd, success].
+        let answer = f.handle(&Packet::new(PORT_PLATFORM, 0, vec![1, 1]));
+        assert_eq!((answer[0].port, answer[0].channel, answer[0].data.clone()), (13, 0, vec![1, 1]));
+        assert_eq!(arm(&mut f, 0)[0].data, vec![0x81, 1, 0], "disarmed");
+        assert_eq!(arm(&mut f, 1)[0].data, vec![0x81, 1, 1], "armed");
+        f.advance_to(1.6);
+        assert_eq!(f.supervisor_bits() & (CAN_BE_ARMED | IS_ARMED | CAN_FLY), IS_ARMED | CAN_FLY);
+        // The planned take-off ended while disarmed: armed, it climbs to the planned height.
+        f.advance_to(4.0);
+        assert!(f.flight.motors_on && (f.sample(LogVar::Z) - 1.0).abs() < 0.02);
+        assert_eq!(f.supervisor_bits() & IS_FLYING, IS_FLYING);
+        assert_eq!(arm(&mut f, 1)[0].data, vec![0x81, 1, 1], "arming when armed succeeds in flight");
+        // Disarmed in flight: the firmware cuts the motors ("exception, free fall") and locks.
+        assert_eq!(arm(&mut f, 0)[0].data, vec![0x81, 1, 0]);
+        f.advance_to(4.1);
+        assert!(!f.flight.motors_on && f.flight.mode == FlightMode::Locked);
+        assert_eq!(f.supervisor_bits() & !HL_DISABLED, IS_LOCKED);
+        assert_eq!(arm(&mut f, 1)[0].data, vec![0x81, 0, 0], "no arming while locked");
+        f.advance_to(5.0);
+        assert_eq!(f.sample(LogVar::Z), 0.0);
+        // A reboot waits for arming again.
+        f.reboot();
+        assert_eq!(f.supervisor_bits() & !HL_DISABLED, CAN_BE_ARMED);
     }
 
     #[test]

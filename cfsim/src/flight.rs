@@ -108,10 +108,23 @@ impl Flight {
         matches!(self.planner.state(), PlanState::Flying | PlanState::Landing) && self.planner.finished(t)
     }
 
+    /// The high-level commander's supervisor bits at time `t` (active, finished, disabled), as the
+    /// firmware's `updateLogData` sets them.
+    pub fn hl_bits(&self, t: f64, hl_enabled: bool) -> u16 {
+        use crate::supervisor::{HL_ACTIVE, HL_DISABLED, HL_FINISHED};
+        let plan = self.planner.state();
+        let bits = [
+            (HL_ACTIVE, matches!(plan, PlanState::Flying | PlanState::Landing)),
+            (HL_FINISHED, self.hl_finished(t)),
+            (HL_DISABLED, plan == PlanState::Disabled || !hl_enabled),
+        ];
+        bits.iter().filter(|(_, on)| *on).fold(0, |acc, (bit, _)| acc | bit)
+    }
+
     /// Apply a decoded command at time `t`.
     pub fn command(&mut self, cmd: Command, t: f64, hl_enabled: bool) {
         match cmd {
-            Command::EmergencyStop => self.emergency_stop(),
+            Command::EmergencyStop => self.lock(),
             Command::EmergencyStopWatchdog => self.estop_deadline = Some(t + ESTOP_WATCHDOG),
             Command::ExternalPosition(p) => {
                 self.external = Some(p);
@@ -160,7 +173,9 @@ impl Flight {
         }
     }
 
-    fn emergency_stop(&mut self) {
+    /// Emergency stop (or the supervisor's lock): motors off, setpoints dropped, every command but
+    /// the external position ignored until [`Flight::reboot`].
+    pub fn lock(&mut self) {
         self.mode = FlightMode::Locked;
         self.ll = None;
         self.planner.stop();
@@ -168,12 +183,13 @@ impl Flight {
         self.motors_on = false;
     }
 
-    /// Advance by `dt` seconds to time `t`.
-    pub fn step(&mut self, t: f64, dt: f64, hl_enabled: bool) {
+    /// Advance by `dt` seconds to time `t`. Without `motors_allowed` (the supervisor's verdict,
+    /// e.g. not armed) the setpoints are followed as usual but the motors stay off.
+    pub fn step(&mut self, t: f64, dt: f64, hl_enabled: bool, motors_allowed: bool) {
         if self.estop_deadline.is_some_and(|d| t > d) {
-            self.emergency_stop();
+            self.lock();
         }
-        let refs = self.select(t, hl_enabled);
+        let refs = self.select(t, hl_enabled).filter(|_| motors_allowed);
         match refs {
             Some(refs) => {
                 self.motors_on = true;
@@ -264,7 +280,7 @@ mod tests {
         let n = (secs / DT).round() as usize;
         for _ in 0..n {
             *t += DT;
-            f.step(*t, DT, true);
+            f.step(*t, DT, true, true);
         }
     }
 
@@ -344,11 +360,11 @@ mod tests {
         let mut f = Flight::new([0.0; 3], GAINS);
         let att = Setpoint::Attitude { roll: 0.0, pitch: 0.0, thrust: 0.8, legacy: true };
         f.command(Command::Setpoint(att), 0.0, true);
-        f.step(0.002, DT, true);
+        f.step(0.002, DT, true, true);
         assert!(!f.motors_on);
         f.command(Command::Setpoint(Setpoint::Stop), 0.002, true);
         f.command(Command::Setpoint(att), 0.004, true);
-        f.step(0.006, DT, true);
+        f.step(0.006, DT, true, true);
         assert!(f.motors_on);
     }
 }

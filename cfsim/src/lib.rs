@@ -3,9 +3,10 @@
 //!
 //! [`SimCrazyflie::spawn`] binds a UDP socket and runs the simulated firmware on the current
 //! tokio runtime: platform versions, log and param TOCs (v2) with log blocks streaming at their
-//! period, memory (no memories), link echo, supervisor state, the low-level and high-level
-//! commanders with the firmware's setpoint watchdog, external position and emergency stop. The
-//! vehicle is a point mass behind a position/velocity controller with bounded acceleration.
+//! period, memory (no memories), link echo, the supervisor (state bitfield, arming, auto-arming or
+//! not), the low-level and high-level commanders with the firmware's setpoint watchdog, external
+//! position and emergency stop. The vehicle is a point mass behind a position/velocity controller
+//! with bounded acceleration.
 //! [`SimHandle`] exposes the ground truth and switches link faults ([`Faults`]) at run time.
 //!
 //! ```no_run
@@ -23,9 +24,12 @@ pub mod faults;
 pub mod firmware;
 pub mod flight;
 pub mod log;
+pub mod logvars;
 pub mod param;
 pub mod planner;
 pub mod server;
+pub mod services;
+pub mod supervisor;
 pub mod toc;
 
 pub use faults::Faults;

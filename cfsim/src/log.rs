@@ -2,17 +2,9 @@
 //! following the firmware's `log.c`.
 
 use crate::crtp::{self, PORT_LOG, Packet};
+pub use crate::logvars::LogVar;
+use crate::logvars::{FLOAT, FP16, VARIABLES, type_len};
 use crate::toc::{Toc, TocEntry};
-
-/// Log type codes (low nibble of the type byte).
-const UINT8: u8 = 1;
-const UINT16: u8 = 2;
-const UINT32: u8 = 3;
-const INT8: u8 = 4;
-const INT16: u8 = 5;
-const INT32: u8 = 6;
-const FLOAT: u8 = 7;
-const FP16: u8 = 8;
 
 const CONTROL_DELETE_BLOCK: u8 = 2;
 const CONTROL_START_BLOCK: u8 = 3;
@@ -33,90 +25,6 @@ const EEXIST: u8 = 17;
 const LOG_MAX_LEN: usize = 26;
 const LOG_MAX_BLOCKS: usize = 16;
 const LOG_MAX_OPS: usize = 128;
-
-/// A loggable quantity of the simulated Crazyflie.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum LogVar {
-    /// Estimated position x (m).
-    X,
-    /// Estimated position y (m).
-    Y,
-    /// Estimated position z (m).
-    Z,
-    /// Estimated velocity x (m/s).
-    Vx,
-    /// Estimated velocity y (m/s).
-    Vy,
-    /// Estimated velocity z (m/s).
-    Vz,
-    /// Estimated acceleration x (m/s²).
-    Ax,
-    /// Estimated acceleration y (m/s²).
-    Ay,
-    /// Estimated acceleration z (m/s²).
-    Az,
-    /// Roll (deg).
-    Roll,
-    /// Pitch (deg).
-    Pitch,
-    /// Yaw (deg).
-    Yaw,
-    /// Battery voltage (V).
-    Vbat,
-    /// Power state (0 = on battery).
-    PmState,
-    /// Supervisor state bitfield.
-    SupervisorInfo,
-    /// 1 if the system can fly.
-    CanFly,
-    /// 1 while flying.
-    IsFlying,
-    /// 1 if tumbled.
-    IsTumbled,
-    /// Last external position x (m).
-    ExtX,
-    /// Last external position y (m).
-    ExtY,
-    /// Last external position z (m).
-    ExtZ,
-    /// Collective thrust command (PWM units, 0..65535).
-    Thrust,
-}
-
-/// The log TOC: (group, name, type, quantity). Ids are the positions.
-const VARIABLES: &[(&str, &str, u8, LogVar)] = &[
-    ("stateEstimate", "x", FLOAT, LogVar::X),
-    ("stateEstimate", "y", FLOAT, LogVar::Y),
-    ("stateEstimate", "z", FLOAT, LogVar::Z),
-    ("stateEstimate", "vx", FLOAT, LogVar::Vx),
-    ("stateEstimate", "vy", FLOAT, LogVar::Vy),
-    ("stateEstimate", "vz", FLOAT, LogVar::Vz),
-    ("stateEstimate", "ax", FLOAT, LogVar::Ax),
-    ("stateEstimate", "ay", FLOAT, LogVar::Ay),
-    ("stateEstimate", "az", FLOAT, LogVar::Az),
-    ("stateEstimate", "roll", FLOAT, LogVar::Roll),
-    ("stateEstimate", "pitch", FLOAT, LogVar::Pitch),
-    ("stateEstimate", "yaw", FLOAT, LogVar::Yaw),
-    ("pm", "vbat", FLOAT, LogVar::Vbat),
-    ("pm", "state", INT8, LogVar::PmState),
-    ("supervisor", "info", UINT16, LogVar::SupervisorInfo),
-    ("sys", "canfly", UINT8, LogVar::CanFly),
-    ("sys", "isFlying", UINT8, LogVar::IsFlying),
-    ("sys", "isTumbled", UINT8, LogVar::IsTumbled),
-    ("ext_pos", "X", FLOAT, LogVar::ExtX),
-    ("ext_pos", "Y", FLOAT, LogVar::ExtY),
-    ("ext_pos", "Z", FLOAT, LogVar::ExtZ),
-    ("stabilizer", "thrust", FLOAT, LogVar::Thrust),
-];
-
-fn type_len(t: u8) -> Option<usize> {
-    match t {
-        UINT8 | INT8 => Some(1),
-        UINT16 | INT16 | FP16 => Some(2),
-        UINT32 | INT32 | FLOAT => Some(4),
-        _ => None,
-    }
-}
 
 #[derive(Debug, Clone, Copy)]
 struct Op {
@@ -354,6 +262,7 @@ fn f32_to_f16(v: f32) -> u16 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::logvars::{INT8, INT16, UINT16};
 
     fn control(log: &mut Log, data: &[u8]) -> Vec<u8> {
         log.handle(&Packet::new(PORT_LOG, 1, data.to_vec()), 0.0).expect("answer").data

@@ -20,6 +20,8 @@ usage: cfsim [options]
       --loss P           packet loss probability in each direction (default 0)
       --latency-ms MS    added latency in each direction (default 0)
       --seed S           PRNG seed for packet loss (default: fixed)
+      --require-arming   wait for an arming request before the motors may run
+                         (default: arm automatically, like a Crazyflie 2.1)
   -h, --help             this help";
 
 /// Command-line errors.
@@ -97,6 +99,7 @@ fn parse_args(mut it: impl Iterator<Item = String>) -> Result<Option<Args>, CliE
                 args.config.faults = Faults { latency_up: d, latency_down: d, ..args.config.faults };
             }
             "--seed" => args.config.seed = parse_value(&flag, it.next())?,
+            "--require-arming" => args.config.require_arming = true,
             _ => return Err(CliError::Unknown(flag)),
         }
     }
@@ -176,6 +179,8 @@ mod tests {
         assert_eq!(a.count, 2);
         assert_eq!(a.positions, Some(vec![[1.0, 2.0, 0.0], [3.0, 4.0, 0.5]]));
         assert_eq!(a.config.faults.loss_down, 0.1);
+        assert!(!a.config.require_arming);
+        assert!(parse(&["--require-arming"]).ok().flatten().expect("valid").config.require_arming);
         assert!(matches!(parse(&["--help"]), Ok(None)));
         assert!(matches!(parse(&["-n", "2", "--positions", "1,2"]), Err(CliError::Positions { .. })));
         assert!(matches!(parse(&["--count"]), Err(CliError::Missing(_))));

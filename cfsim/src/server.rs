@@ -53,6 +53,9 @@ pub struct SimConfig {
     pub firmware_version: String,
     /// Without any datagram for this long the firmware considers the link lost (resets logging).
     pub link_timeout: Duration,
+    /// Wait for an arming request before the motors may run (a firmware built with
+    /// `CONFIG_MOTORS_REQUIRE_ARMING`); by default it arms itself, like a Crazyflie 2.1.
+    pub require_arming: bool,
 }
 
 impl Default for SimConfig {
@@ -69,6 +72,7 @@ impl Default for SimConfig {
             faults: Faults::NONE,
             firmware_version: "2025.12 (cfsim)".to_owned(),
             link_timeout: Duration::from_secs(1),
+            require_arming: false,
         }
     }
 }
@@ -166,6 +170,7 @@ impl SimCrazyflie {
             step,
             version: config.firmware_version.clone(),
             link_timeout: config.link_timeout.as_secs_f64(),
+            auto_arm: !config.require_arming,
         };
         let shared = Arc::new(Shared {
             fw: Mutex::new(Firmware::new(settings)),
@@ -265,12 +270,15 @@ impl SimHandle {
         *lock(&self.shared.client)
     }
 
-    /// Simulate a reboot: clears an emergency-stop lock, setpoints and log blocks; the
-    /// Crazyflie stays where it is.
+    /// Simulate a reboot: clears an emergency-stop lock, setpoints, log blocks and the supervisor
+    /// (disarmed unless it auto-arms); the Crazyflie stays where it is.
     pub fn reboot(&self) {
-        let mut fw = lock(&self.shared.fw);
-        fw.flight.reboot();
-        fw.log.reset();
+        lock(&self.shared.fw).reboot();
+    }
+
+    /// The supervisor bitfield (`supervisor.info`) as of the last simulation tick.
+    pub fn supervisor_bits(&self) -> u16 {
+        lock(&self.shared.fw).supervisor_bits()
     }
 
     /// Stop the simulation and wait for its tasks to end.
