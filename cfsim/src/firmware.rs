@@ -6,6 +6,7 @@ use crate::crtp::{
     self, PORT_CONSOLE, PORT_LINK, PORT_LOG, PORT_MEMORY, PORT_PARAM, PORT_PLATFORM, PORT_SUPERVISOR, Packet,
 };
 use crate::dynamics::Gains;
+use crate::estimator::Estimator;
 use crate::flight::{Flight, FlightMode};
 use crate::log::{Log, LogVar};
 use crate::logvars::Sources;
@@ -48,6 +49,8 @@ pub struct Firmware {
     pub flight: Flight,
     /// The supervisor (arming, flying, locked).
     pub supervisor: Supervisor,
+    /// The estimator's covariance (`kalman.var*`).
+    pub estimator: Estimator,
     steps: u64,
     t: f64,
     last_rx: Option<f64>,
@@ -58,16 +61,17 @@ impl Firmware {
     pub fn new(settings: FirmwareSettings) -> Self {
         let flight = Flight::new(settings.initial_position, settings.gains);
         let supervisor = Supervisor::new(settings.auto_arm);
-        let (log, params) = (Log::new(), Params::new());
-        Self { settings, log, params, flight, supervisor, steps: 0, t: 0.0, last_rx: None }
+        let (log, params, estimator) = (Log::new(), Params::new(), Estimator::new());
+        Self { settings, log, params, flight, supervisor, estimator, steps: 0, t: 0.0, last_rx: None }
     }
 
-    /// A reboot: clears an emergency-stop lock, setpoints, log blocks and the supervisor; the
-    /// Crazyflie stays where it is.
+    /// A reboot: clears an emergency-stop lock, setpoints, log blocks, the supervisor and the
+    /// estimator; the Crazyflie stays where it is.
     pub fn reboot(&mut self) {
         self.flight.reboot();
         self.log.reset();
         self.supervisor = Supervisor::new(self.settings.auto_arm);
+        self.estimator.reset();
     }
 
     /// Simulation time (s since boot), a whole number of steps.
@@ -100,6 +104,8 @@ impl Firmware {
                     self.flight.lock();
                 }
             }
+            let std_dev = self.params.get("locSrv", "extPosStdDev").unwrap_or(0.01);
+            self.estimator.step(dt, std_dev);
             if self.last_rx.is_some_and(|r| self.t - r > self.settings.link_timeout) {
                 // The firmware resets logging when the radio link goes quiet.
                 self.last_rx = None;
@@ -109,6 +115,7 @@ impl Firmware {
             let sources = Sources {
                 flight: &self.flight,
                 supervisor: &self.supervisor,
+                estimator: &self.estimator,
                 hl_bits: self.flight.hl_bits(now, hl),
             };
             out.extend(self.log.due(now * 1000.0, |v| sources.sample(v)));
@@ -172,7 +179,9 @@ impl Firmware {
         if let Some(e) = entry
             && (e.group, e.name) == ("kalman", "resetEstimation")
         {
-            // The estimate is the truth; the firmware clears the flag once reset.
+            // The estimate is the truth, its variances start over; the firmware clears the flag
+            // once reset.
+            self.estimator.reset();
             self.params.set("kalman", "resetEstimation", 0.0);
         }
     }
@@ -190,6 +199,7 @@ impl Firmware {
         Sources {
             flight: &self.flight,
             supervisor: &self.supervisor,
+            estimator: &self.estimator,
             hl_bits: self.flight.hl_bits(self.t, self.hl_enabled()),
         }
     }
@@ -361,6 +371,19 @@ mod tests {
         // A reboot waits for arming again.
         f.reboot();
         assert_eq!(f.supervisor_bits() & !HL_DISABLED, CAN_BE_ARMED);
+    }
+
+    #[test]
+    fn reset_estimation_restarts_the_variances() {
+        let mut f = fw();
+        f.advance_to(1.0);
+        assert!(f.sample(LogVar::VarPosition(0)) < 1e-4 && f.sample(LogVar::VarVelocity(2)) < 1e-3);
+        let id = f.params.toc().find("kalman", "resetEstimation").expect("param") as u16;
+        f.handle(&Packet::new(PORT_PARAM, 2, [id.to_le_bytes().as_slice(), &[1]].concat()));
+        assert_eq!(f.params.get("kalman", "resetEstimation"), Some(0.0), "the flag clears");
+        assert!(f.sample(LogVar::VarPosition(0)) > 1000.0, "uncertain again");
+        f.advance_to(1.5);
+        assert!(f.sample(LogVar::VarPosition(0)) < 1e-4);
     }
 
     #[test]

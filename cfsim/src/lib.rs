@@ -4,9 +4,9 @@
 //! [`SimCrazyflie::spawn`] binds a UDP socket and runs the simulated firmware on the current
 //! tokio runtime: platform versions, log and param TOCs (v2) with log blocks streaming at their
 //! period, memory (no memories), link echo, the supervisor (state bitfield, arming, auto-arming or
-//! not), the low-level and high-level commanders with the firmware's setpoint watchdog, external
-//! position and emergency stop. The vehicle is a point mass behind a position/velocity controller
-//! with bounded acceleration.
+//! not), the Kalman estimator's variances, the low-level and high-level commanders with the
+//! firmware's setpoint watchdog, external position and emergency stop. The vehicle is a point
+//! mass behind a position/velocity controller with bounded acceleration.
 //! [`SimHandle`] exposes the ground truth and switches link faults ([`Faults`]) at run time.
 //!
 //! ```no_run
@@ -20,6 +20,7 @@
 pub mod commands;
 pub mod crtp;
 pub mod dynamics;
+pub mod estimator;
 pub mod faults;
 pub mod firmware;
 pub mod flight;

@@ -2,6 +2,7 @@
 //! reads from the simulated vehicle.
 
 use crate::dynamics::G;
+use crate::estimator::Estimator;
 use crate::flight::Flight;
 use crate::supervisor::Supervisor;
 
@@ -72,6 +73,10 @@ pub enum LogVar {
     ExtZ,
     /// Collective thrust command (PWM units, 0..65535).
     Thrust,
+    /// Kalman position variance, axis 0..3 (m²).
+    VarPosition(usize),
+    /// Kalman (body-frame) velocity variance, axis 0..3 ((m/s)²).
+    VarVelocity(usize),
 }
 
 /// The log TOC: (group, name, type, quantity). Ids are the positions.
@@ -98,6 +103,12 @@ pub(crate) const VARIABLES: &[(&str, &str, u8, LogVar)] = &[
     ("ext_pos", "Y", FLOAT, LogVar::ExtY),
     ("ext_pos", "Z", FLOAT, LogVar::ExtZ),
     ("stabilizer", "thrust", FLOAT, LogVar::Thrust),
+    ("kalman", "varX", FLOAT, LogVar::VarPosition(0)),
+    ("kalman", "varY", FLOAT, LogVar::VarPosition(1)),
+    ("kalman", "varZ", FLOAT, LogVar::VarPosition(2)),
+    ("kalman", "varPX", FLOAT, LogVar::VarVelocity(0)),
+    ("kalman", "varPY", FLOAT, LogVar::VarVelocity(1)),
+    ("kalman", "varPZ", FLOAT, LogVar::VarVelocity(2)),
 ];
 
 /// What the log variables read: the vehicle's parts at one instant.
@@ -107,6 +118,8 @@ pub struct Sources<'a> {
     pub flight: &'a Flight,
     /// The supervisor.
     pub supervisor: &'a Supervisor,
+    /// The estimator's covariance.
+    pub estimator: &'a Estimator,
     /// The high-level commander's supervisor bits.
     pub hl_bits: u16,
 }
@@ -123,6 +136,7 @@ impl Sources<'_> {
         let b = &f.body;
         let ext = |k: usize| f.external.map_or(0.0, |p| f64::from(p[k]));
         let flag = |x: bool| if x { 1.0 } else { 0.0 };
+        let axis = |v: [f64; 3], k: usize| v.get(k).copied().unwrap_or(0.0);
         match var {
             LogVar::X => b.p[0],
             LogVar::Y => b.p[1],
@@ -147,6 +161,8 @@ impl Sources<'_> {
             LogVar::ExtZ => ext(2),
             LogVar::Thrust if f.motors_on => (36000.0 * (1.0 + b.a[2] / G)).clamp(0.0, 65535.0),
             LogVar::Thrust => 0.0,
+            LogVar::VarPosition(k) => axis(self.estimator.position_variance(), k),
+            LogVar::VarVelocity(k) => axis(self.estimator.velocity_variance(), k),
         }
     }
 }

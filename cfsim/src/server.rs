@@ -270,8 +270,8 @@ impl SimHandle {
         *lock(&self.shared.client)
     }
 
-    /// Simulate a reboot: clears an emergency-stop lock, setpoints, log blocks and the supervisor
-    /// (disarmed unless it auto-arms); the Crazyflie stays where it is.
+    /// Simulate a reboot: clears an emergency-stop lock, setpoints, log blocks, the supervisor
+    /// (disarmed unless it auto-arms) and the estimator; the Crazyflie stays where it is.
     pub fn reboot(&self) {
         lock(&self.shared.fw).reboot();
     }

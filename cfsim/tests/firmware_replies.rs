@@ -1,7 +1,7 @@
 //! End to end: the simulator answers like the firmware where cflib (Bitcraze's Python client)
-//! looks: the supervisor port's answers carry the response flag, and arming requests are answered
-//! and change the armed bit. Raw UDP checks the exact bytes; the official Rust client
-//! (crazyflie-lib) checks the same through its API.
+//! looks: the supervisor port's answers carry the response flag, arming requests are answered and
+//! change the armed bit, and the Kalman variances cflib's examples wait on are logged. Raw UDP
+//! checks the exact bytes; the official Rust client (crazyflie-lib) checks the same through its API.
 
 mod common;
 
@@ -115,4 +115,40 @@ async fn arming_requests_are_answered_and_gate_the_motors() {
     eventually(PATIENCE, || (sim.truth().position[2] - 0.5).abs() < 0.02).await.expect("takes off");
     let info = cf.supervisor.read_bitfield().await.expect("bitfield");
     assert!(info.is_armed() && info.can_fly() && info.is_flying() && !info.is_auto_armed());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn kalman_variances_are_logged_and_settle() {
+    let sim = sim_at([0.0; 3]);
+    let cf = connect(&sim).await;
+    let vars = ["kalman.varPX", "kalman.varPY", "kalman.varPZ", "kalman.varX", "kalman.varY", "kalman.varZ"];
+    let names = cf.log.names();
+    for v in vars {
+        assert!(names.contains(&v.to_owned()), "{v} missing from the log TOC");
+        assert_eq!(cf.log.get_type(v).expect("type"), crazyflie_lib::ValueType::F32, "{v}");
+    }
+    // cflib's "wait for the position estimator": the last 10 samples of each variance spread by
+    // less than 0.001 (its examples log every 500 ms; 100 ms keeps the test short).
+    let stream = log_stream(&cf, &vars, 100).await;
+    let mut history: Vec<Vec<f64>> = Vec::new();
+    let settled = tokio::time::timeout(PATIENCE, async {
+        loop {
+            let data = stream.next().await.expect("log data");
+            let sample: Vec<f64> = vars.iter().map(|v| data.data[*v].to_f64_lossy()).collect();
+            assert!(sample.iter().all(|x| x.is_finite() && *x > 0.0), "{sample:?}");
+            history.push(sample);
+            let window = &history[history.len().saturating_sub(10)..];
+            let spread = |k: usize| {
+                let v = window.iter().map(|s| s[k]);
+                v.clone().fold(f64::MIN, f64::max) - v.fold(f64::MAX, f64::min)
+            };
+            if window.len() == 10 && (0..3).all(|k| spread(k) < 0.001) {
+                return window.last().cloned().unwrap_or_default();
+            }
+        }
+    })
+    .await
+    .expect("the estimator settles");
+    assert!(settled.iter().all(|v| *v < 0.001), "settled variances {settled:?}");
+    assert!(history.len() < 40, "{} samples to settle", history.len());
 }
