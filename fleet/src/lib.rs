@@ -15,6 +15,7 @@ mod lost;
 mod margins;
 mod metrics;
 mod neighbours;
+pub mod passing;
 pub mod paths;
 mod pipeline;
 pub mod progress;

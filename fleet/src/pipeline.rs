@@ -9,6 +9,7 @@ use crate::condition::Condition;
 use crate::filtering::FilterStage;
 use crate::fleet::{Fleet, StageTimes, Uav, parallel};
 use crate::neighbours::NeighbourSearch;
+use crate::passing::pass_point;
 use crate::rows::RowBuilder;
 use crate::speed::{crowd_limit, govern, keep_distance};
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
@@ -58,6 +59,9 @@ impl TickPipeline {
         self.stages.neighbours_us = lap();
         self.plan_targets(fleet);
         self.make_way(fleet);
+        if fleet.config.nav == NavMode::Traffic {
+            self.pass_parked(fleet);
+        }
         self.stages.navigation_us = lap();
         self.run_policies(fleet);
         self.stages.policies_us = lap();
@@ -139,6 +143,36 @@ impl TickPipeline {
                     .then_some(Flying { p: u.state.p, target: u.last.target })
             });
             fleet.uavs[k].last.target = make_way(me.state.p, goal, flying, d_c);
+        }
+    }
+
+    /// UAVs flying to their goal aim beside an arrived UAV that blocks their way ([`crate::passing`]).
+    fn pass_parked(&mut self, fleet: &mut Fleet) {
+        let params = fleet.config.params;
+        let nav = Navigator::new(&fleet.road, fleet.config.nav, &params);
+        let need = nav.clearance_at(0.0);
+        let road = &fleet.road;
+        for k in 0..fleet.uavs.len() {
+            let me = &fleet.uavs[k];
+            if me.traffic.route.is_none() || me.traffic.waiting.is_some() || me.traffic.back_off.is_some() {
+                continue;
+            }
+            let segment = self.segments[k];
+            let clear = |a: Vec2, b: Vec2| {
+                let (seg_a, seg_b) = (road.locate(&a, Some(segment)), road.locate(&b, Some(segment)));
+                road.boundary_distance_in(seg_b, &b) >= need && road.path_clear(&a, seg_a, &b, seg_b, need)
+            };
+            let segments = &self.segments;
+            let parked = self.neighbours.lists[k]
+                .iter()
+                .map(|&d| (&fleet.uavs[d], segments[d]))
+                .filter(|(u, _)| u.nav.arrived && u.nav.goal().is_some())
+                // Only those that cannot step aside: their way-making point lacks clearance.
+                .filter(|(u, segment)| road.boundary_distance_in(*segment, &u.last.target) < need)
+                .map(|(u, _)| u.state.p);
+            if let Some(c) = pass_point(me.state.p, me.last.target, parked, params.d_c, clear) {
+                fleet.uavs[k].last.target = c;
+            }
         }
     }
 

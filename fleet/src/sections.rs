@@ -25,6 +25,14 @@ pub struct Section {
     pub hold_after: f64,
 }
 
+impl Section {
+    /// True when arc length `s` is nearer the end a UAV from `entry` leaves by than the one it came in.
+    pub fn exit_side(&self, entry: usize, s: f64) -> bool {
+        let middle = (self.start + self.end) / 2.0;
+        if entry == 0 { s >= middle } else { s <= middle }
+    }
+}
+
 /// The single-file sections of `road` for `nav`'s parameters: maximal runs of profile samples where
 /// the lanes are not roomy (single file, or tight), merged when the two-way gap between them is too
 /// short to wait in, and kept only where there are places to wait on both sides: on a road that is

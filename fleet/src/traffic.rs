@@ -70,6 +70,10 @@ pub struct UavTraffic {
     pub grant: Option<(usize, usize)>,
     /// Since when (s) it waits for a zone.
     pub waiting_since: Option<f64>,
+    /// The zone (with its entry) it last crossed with a grant: pushed back over that zone's exit
+    /// edge, it does not queue for it again (the queue's hold point is on the far side: `mixed`
+    /// seed 68 with `rl` flew 12 m back through a section it had crossed).
+    pub passed: Option<(usize, usize)>,
     /// Where it is along its route this tick, while the rules apply to it (flying towards a goal,
     /// not arrived, not held by the operator); set by the fleet before [`TrafficRules::plan`].
     pub route: Option<RoutePosition>,
@@ -149,6 +153,7 @@ impl TrafficRules {
             self.sections = sections(nav.road, nav);
             self.zones = Reservations::new(self.sections.len());
             self.speeds = SpeedProfile::new(nav.road.profile());
+            uavs.iter_mut().for_each(|u| u.traffic.passed = None);
         }
         for u in uavs.iter_mut() {
             u.traffic.restriction = Restriction::default();
@@ -165,9 +170,20 @@ impl TrafficRules {
         let approach = 2.0 * nav.r_s + HOLD_M;
         let gap = FOLLOW_GAP_IN_DC * nav.d_c;
         self.wanted.clear();
-        self.wanted.extend(
-            uavs.iter().map(|u| u.traffic.route.and_then(|p| next_section(&self.sections, &p, approach))),
-        );
+        let sections = &self.sections;
+        self.wanted.extend(uavs.iter_mut().map(|u| {
+            let Some(pos) = u.traffic.route else {
+                u.traffic.passed = None;
+                return None;
+            };
+            let wanted = next_section(sections, &pos, approach).filter(|&(zone, entry)| {
+                u.traffic.passed != Some((zone, entry)) || !sections[zone].exit_side(entry, pos.s)
+            });
+            if let Some(granted) = u.traffic.grant.filter(|&g| wanted != Some(g)) {
+                u.traffic.passed = Some(granted);
+            }
+            wanted
+        }));
         // The foremost UAV waiting at each entry (without its grant).
         self.front.clear();
         self.front.resize(2 * self.sections.len(), f64::INFINITY);

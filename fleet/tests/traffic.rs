@@ -102,3 +102,24 @@ fn an_admitted_uav_overtaken_in_the_queue_hands_its_grant_to_the_head() {
         assert!(m.safe && m.all_arrived, "seed {seed}: {m:#?}");
     }
 }
+
+#[test]
+fn a_uav_behind_one_parked_against_a_wall_passes_it() {
+    // `mixed` seed 13 with `rl`: an arrived UAV stood in a flying one's lane against the wall of a
+    // road 2.8 m wide; it could not step aside towards the wall, the flying one kept D_c behind it
+    // and hovered there for 55 s. Now the flying one aims beside it, on the side with room.
+    let s = fleet::families::Family::Mixed.scenario(13).validate().unwrap();
+    let m = fly(&s, NavMode::Traffic, "rl");
+    assert!(m.safe && m.all_arrived, "{m:#?}");
+    assert!(m.max_stall_s < 10.0, "longest stall {} s", m.max_stall_s);
+}
+
+#[test]
+fn a_uav_pushed_back_over_the_exit_of_a_section_it_crossed_flies_on() {
+    // `mixed` seed 68 with `rl`: a UAV that had crossed a 9 m single-file section was pushed back
+    // over its exit edge while it waited for the next one, queued for the section it had crossed and
+    // flew 12 m back through it to the hold point on the far side: 24 of 25 home in 60 s.
+    let s = fleet::families::Family::Mixed.scenario(68).validate().unwrap();
+    let m = fly(&s, NavMode::Traffic, "rl");
+    assert!(m.safe && m.all_arrived, "{m:#?}");
+}
