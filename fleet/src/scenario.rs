@@ -112,10 +112,8 @@ impl Scenario {
     /// starts through a grid of cells D_c wide, and each point query through the road's index.
     pub fn validate_with(&self, rules: &LinkRules) -> Result<ValidScenario, ScenarioError> {
         self.params.validate().map_err(|e| invalid(format!("params.{}", e.field), e.detail()))?;
-        let road = Road::new(RoadLayout { segments: self.segments.clone() }).map_err(|e| {
-            let field = e.segment.map(|i| format!("segments[{i}]")).unwrap_or_else(|| "segments".into());
-            invalid(field, format!("{} ({})", e.message, e.rule.name()))
-        })?;
+        let road = Road::new(RoadLayout::new(self.segments.clone()))
+            .map_err(|e| invalid(e.field, format!("{} ({})", e.message, e.rule.name())))?;
         if self.uavs.is_empty() {
             return Err(invalid("uavs", "a scenario needs at least one UAV"));
         }

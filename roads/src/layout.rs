@@ -1,6 +1,8 @@
-//! The road layout JSON format: `{"segments": [[p1, p2, p3, p4], ...]}`, vertices `[x, y]` in metres.
+//! The road layout JSON format: `{"segments": [[p1, p2, p3, p4], ...]}`, vertices `[x, y]` in metres,
+//! optionally with `"regions": [{"name", "segments": [first, last]}, ...]`.
 
-use serde::{Deserialize, Serialize};
+use crate::regions::Region;
+use serde::{Deserialize, Deserializer, Serialize};
 use uav::Vec2;
 
 /// A road layout as users write it: a chain of convex quadrilateral segments.
@@ -9,9 +11,23 @@ use uav::Vec2;
 pub struct RoadLayout {
     /// Segment i as `[p1, p2, p3, p4]`, each vertex `[x, y]` in metres.
     pub segments: Vec<[[f64; 2]; 4]>,
+    /// Named ranges of segments that cover every segment exactly once; None (absent from the JSON)
+    /// when the layout is not divided into regions.
+    #[serde(default, skip_serializing_if = "Option::is_none", deserialize_with = "present")]
+    pub regions: Option<Vec<Region>>,
+}
+
+/// `regions` when the key is there: a list (`null` is refused; an absent key is None by default).
+fn present<'de, D: Deserializer<'de>>(d: D) -> Result<Option<Vec<Region>>, D::Error> {
+    Vec::deserialize(d).map(Some)
 }
 
 impl RoadLayout {
+    /// A layout of `segments` without regions.
+    pub fn new(segments: Vec<[[f64; 2]; 4]>) -> Self {
+        Self { segments, regions: None }
+    }
+
     /// A road along a centre polyline with mitre joints (each joint edge bisects its bend);
     /// `widths[k]` is the road's width measured perpendicular to the pieces at polyline vertex k.
     /// The result still has to pass [`crate::Road::new`] (sharp bends on short pieces are not convex).
@@ -46,7 +62,7 @@ impl RoadLayout {
                 [arr(r1), arr(r0), arr(l1), arr(l0)]
             })
             .collect();
-        Self { segments }
+        Self::new(segments)
     }
 
     /// A straight road along +x from `x0` to `x1` (`count` equal segments), `width` wide, centred on y = 0.
@@ -61,6 +77,6 @@ impl RoadLayout {
                 [[b, -h], [a, -h], [b, h], [a, h]]
             })
             .collect();
-        Self { segments }
+        Self::new(segments)
     }
 }

@@ -1,6 +1,7 @@
 //! Air-road layouts: the JSON format, validation with precise errors, and the geometry the
 //! safety filter and navigation need (finite walls with end caps, point-in-road, centre line),
-//! plus navigation (Algorithm 1 and its road-aware `route` variant, `docs/safety.md` §5, §7).
+//! plus navigation (Algorithm 1 and its road-aware `route` variant, `docs/safety.md` §5, §7), and the
+//! layout's optional regions (named segment ranges that partition the road).
 //!
 //! Conventions (paper labels): segment i = `[p1, p2, p3, p4]`; walls (barrier lines) p2→p1 (j = 21)
 //! and p4→p3 (j = 43); passable edges p2–p4 (entry) and p1–p3 (exit); cyclic polygon order
@@ -16,6 +17,9 @@ mod index_tests;
 mod lanes;
 mod layout;
 mod nav;
+mod regions;
+#[cfg(test)]
+mod regions_tests;
 mod road;
 mod traffic_nav;
 mod validate;
@@ -26,6 +30,7 @@ pub use index::NearWalls;
 pub use lanes::{ClearanceProfile, PROFILE_STEP_M, segment_distance};
 pub use layout::RoadLayout;
 pub use nav::{NavMode, NavState, Navigator, Restriction, RoutePosition};
+pub use regions::{MAX_REGION_NAME, Region};
 pub use road::{Road, SegmentTracker};
 pub use traffic_nav::{CLEARANCE_MARGIN_M, LANE_GAP_MARGIN_M, MIN_CLEARANCE_MARGIN_M};
 pub use validate::{MAX_COORDINATE_M, RoadError, RoadRule};

@@ -5,6 +5,7 @@ use crate::geometry::{Quad, Wall, WallKind, segments_intersect};
 use crate::index::{NearWalls, RoadIndex, SEGMENT_NEAR_M};
 use crate::lanes::{ClearanceProfile, path_clear, route_walls};
 use crate::layout::RoadLayout;
+use crate::regions::{Region, RegionOrder, check_regions};
 use crate::validate::{RoadError, check_joins, check_overlaps, check_quads};
 use uav::Vec2;
 
@@ -26,6 +27,8 @@ pub struct Road {
     profile: ClearanceProfile,
     /// R*-trees over quads and walls for the point queries.
     index: RoadIndex,
+    /// The layout's regions in segment order (empty without regions).
+    region_order: RegionOrder,
     /// Unique per built road (clones share it): lets users cache what they derive from the road.
     id: u64,
 }
@@ -39,6 +42,7 @@ impl Road {
         let quads = check_quads(&layout.segments)?;
         check_joins(&quads)?;
         check_overlaps(&quads)?;
+        let region_order = check_regions(layout.regions.as_deref(), quads.len())?;
         let mut walls = Vec::with_capacity(2 * quads.len() + 2);
         let mut segment_walls = Vec::with_capacity(quads.len());
         for (i, q) in quads.iter().enumerate() {
@@ -54,7 +58,18 @@ impl Road {
         let index = RoadIndex::new(&quads, &walls);
         let profile = ClearanceProfile::new(&centerline, &walls, quads.len());
         let id = NEXT_ROAD_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-        Ok(Self { layout, quads, walls, segment_walls, halfplane_walls, centerline, profile, index, id })
+        Ok(Self {
+            layout,
+            quads,
+            walls,
+            segment_walls,
+            halfplane_walls,
+            centerline,
+            profile,
+            index,
+            region_order,
+            id,
+        })
     }
 
     /// A number unique to this road among those built by the process (its clones share it).
@@ -65,6 +80,13 @@ impl Road {
     /// The layout this road was built from.
     pub fn layout(&self) -> &RoadLayout {
         &self.layout
+    }
+
+    /// The region that holds segment `segment`: None when the layout has no regions or the road no
+    /// such segment. A binary search over the regions sorted by first segment, O(log r).
+    pub fn region_of(&self, segment: usize) -> Option<&Region> {
+        let regions = self.layout.regions.as_deref()?;
+        self.region_order.find(regions, segment).map(|k| &regions[k])
     }
 
     /// The segments.

@@ -34,6 +34,22 @@ pub enum RoadRule {
     FoldsBack,
     /// Two non-adjacent segments overlap.
     Overlap,
+    /// `regions` is present but lists no region.
+    EmptyRegions,
+    /// A region's name is empty.
+    EmptyRegionName,
+    /// A region's name is longer than [`crate::MAX_REGION_NAME`] or has a character outside `A-Za-z0-9_-`.
+    InvalidRegionName,
+    /// Two regions have the same name.
+    DuplicateRegionName,
+    /// A region's first segment is after its last.
+    ReversedRegion,
+    /// A region names a segment the road does not have.
+    RegionOutOfRange,
+    /// A segment is in two regions.
+    RegionOverlap,
+    /// A segment is in no region.
+    RegionGap,
 }
 
 impl RoadRule {
@@ -49,15 +65,27 @@ impl RoadRule {
             RoadRule::SeamlessJoin => "seamless_join",
             RoadRule::FoldsBack => "folds_back",
             RoadRule::Overlap => "overlap",
+            RoadRule::EmptyRegions => "empty_regions",
+            RoadRule::EmptyRegionName => "empty_region_name",
+            RoadRule::InvalidRegionName => "invalid_region_name",
+            RoadRule::DuplicateRegionName => "duplicate_region_name",
+            RoadRule::ReversedRegion => "reversed_region",
+            RoadRule::RegionOutOfRange => "region_out_of_range",
+            RoadRule::RegionOverlap => "region_overlap",
+            RoadRule::RegionGap => "region_gap",
         }
     }
 }
 
-/// A layout that breaks a rule: which segment (if any), which rule, and a readable explanation.
+/// A layout that breaks a rule: which field and segment (if any), which rule, and a readable explanation.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{}{}: {message}", segment.map(|i| format!("segments[{i}]")).unwrap_or_else(|| "segments".into()), format_args!(" ({})", rule.name()))]
+#[error("{field} ({}): {message}", rule.name())]
 pub struct RoadError {
-    /// Index of the offending segment (None for layout-wide rules).
+    /// JSON path of the offending field: `segments[i]`, `segments`, `regions[i].name`,
+    /// `regions[i].segments` or `regions`.
+    pub field: String,
+    /// Index of the offending segment (None for layout-wide rules and for a region's name or range;
+    /// the segment in two regions or in none for [`RoadRule::RegionOverlap`], [`RoadRule::RegionGap`]).
     pub segment: Option<usize>,
     /// The rule that was broken.
     pub rule: RoadRule,
@@ -66,7 +94,8 @@ pub struct RoadError {
 }
 
 fn err(segment: Option<usize>, rule: RoadRule, message: String) -> RoadError {
-    RoadError { segment, rule, message }
+    let field = segment.map_or_else(|| "segments".to_string(), |i| format!("segments[{i}]"));
+    RoadError { field, segment, rule, message }
 }
 
 /// Converts raw vertex arrays to quads, checking finiteness, magnitude, edges and convexity.

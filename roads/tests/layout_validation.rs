@@ -37,7 +37,7 @@ fn straight_and_bent_roads_are_valid_with_walls_caps_and_centre_line() {
 
 #[test]
 fn every_rule_names_its_segment() {
-    assert_eq!(rule_of(RoadLayout { segments: vec![] }), (None, RoadRule::Empty));
+    assert_eq!(rule_of(RoadLayout::new(vec![])), (None, RoadRule::Empty));
 
     let mut nan = RoadLayout::straight(0.0, 30.0, 3.0, 3);
     nan.segments[1][2][0] = f64::NAN;

@@ -197,7 +197,7 @@ fn lane_edge_road() -> Road {
             [37.272882241152345, 4.187232617335433],
         ],
     ];
-    Road::new(RoadLayout { segments }).unwrap()
+    Road::new(RoadLayout::new(segments)).unwrap()
 }
 
 #[test]

@@ -95,12 +95,11 @@ async fn put_road(
     }
 }
 
-/// A validated road, or the 422 naming the segment and the rule.
+/// A validated road, or the 422 naming the field (`segments[i]`, `regions[i].segments`, ...) and the rule.
 fn road_of(layout: RoadLayout) -> Result<Road, ApiError> {
     Road::new(layout).map_err(|e| {
-        let field = e.segment.map_or_else(|| "segments".to_string(), |i| format!("segments[{i}]"));
-        let mut err =
-            ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_road", e.message.clone()).field(field);
+        let mut err = ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_road", e.message.clone())
+            .field(e.field.clone());
         let mut extra = serde_json::Map::new();
         extra.insert("segment".into(), json!(e.segment));
         extra.insert("rule".into(), json!(e.rule.name()));

@@ -75,7 +75,7 @@ impl SavedState {
 
     /// The road of this state (validated again: the file may have been edited by hand).
     pub fn road(&self) -> anyhow::Result<Road> {
-        Ok(Road::new(RoadLayout { segments: self.segments.clone() })?)
+        Ok(Road::new(RoadLayout::new(self.segments.clone()))?)
     }
 }
 
