@@ -106,6 +106,73 @@ async fn road_is_validated_and_refused_when_a_uav_would_be_outside() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn road_regions_are_validated_stored_and_returned() {
+    let server = start(config(&small())).await;
+    let plain = server.get("/api/road").await;
+    assert!(plain.get("regions").is_none(), "a layout without regions has no `regions` key: {plain}");
+
+    // Four segments in two regions, listed out of order: applied and returned as sent.
+    let segments = roads::RoadLayout::straight(0.0, 40.0, 4.0, 4).segments;
+    let regions = json!([{"name": "east", "segments": [2, 3]}, {"name": "west", "segments": [0, 1]}]);
+    let divided = json!({"segments": segments, "regions": regions});
+    let (status, body) = server.call("PUT", "/api/road", Some(&divided.to_string())).await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(server.get("/api/road").await, divided);
+    assert_eq!(server.get("/api/road/geometry").await["layout"], divided);
+
+    // 422 `invalid_road` naming the region's field and the rule; the road is unchanged.
+    for (regions, field, rule) in [
+        (
+            json!([{"name": "west", "segments": [0, 1]}, {"name": "east", "segments": [1, 3]}]),
+            "regions[1].segments",
+            "region_overlap",
+        ),
+        (
+            json!([{"name": "west", "segments": [0, 1]}, {"name": "east", "segments": [2, 4]}]),
+            "regions[1].segments",
+            "region_out_of_range",
+        ),
+        (
+            json!([{"name": "west", "segments": [0, 1]}, {"name": "east", "segments": [3, 2]}]),
+            "regions[1].segments",
+            "reversed_region",
+        ),
+        (
+            json!([{"name": "west", "segments": [0, 0]}, {"name": "east", "segments": [2, 3]}]),
+            "regions",
+            "region_gap",
+        ),
+        (
+            json!([{"name": "west", "segments": [0, 1]}, {"name": "we/st", "segments": [2, 3]}]),
+            "regions[1].name",
+            "invalid_region_name",
+        ),
+        (
+            json!([{"name": "west", "segments": [0, 1]}, {"name": "west", "segments": [2, 3]}]),
+            "regions[1].name",
+            "duplicate_region_name",
+        ),
+        (json!([]), "regions", "empty_regions"),
+    ] {
+        let bad = json!({"segments": segments, "regions": regions});
+        let (status, body) = server.call("PUT", "/api/road", Some(&bad.to_string())).await;
+        assert_eq!((status, body["error"]["code"].as_str()), (422, Some("invalid_road")), "{body}");
+        assert_eq!((error_field(&body), body["error"]["rule"].as_str()), (field, Some(rule)), "{body}");
+    }
+    let (status, body) = server
+        .call("PUT", "/api/road", Some(&json!({"segments": segments, "regions": null}).to_string()))
+        .await;
+    assert_eq!((status, error_field(&body)), (422, "regions"), "{body}");
+    assert_eq!(server.get("/api/road").await, divided);
+
+    // A road without regions drops them.
+    let (status, body) = server.call("PUT", "/api/road", Some(&plain.to_string())).await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(server.get("/api/road").await, plain);
+    server.stop().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_road_that_drops_goals_clears_them_and_the_uavs_hover() {
     let server = start(config(&small())).await;
     // Right after the start the UAVs are still near x = 2: a road ending at x = 4 keeps them, not their goals.

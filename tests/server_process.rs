@@ -86,6 +86,11 @@ async fn starts_on_the_demo_and_resumes_after_kill_9() {
     let layout = call(addr, "GET", "/api/road", None).await.1;
     let mut wider = layout.clone();
     wider["segments"][0][1] = json!([-0.5, -1.5]);
+    // Regions are part of the road, stored with it: entry segment alone, the rest after it.
+    let n = layout["segments"].as_array().unwrap().len();
+    assert!(n >= 2, "the demo road has several segments: {layout}");
+    wider["regions"] =
+        json!([{"name": "rest", "segments": [1, n - 1]}, {"name": "entry", "segments": [0, 0]}]);
     assert_eq!(call(addr, "PUT", "/api/road", Some(&wider)).await.0, 200);
     let new = json!({"id": "extra", "position": [13.0, 16.0], "goal": [10.0, 17.0], "policy": "pd"});
     assert_eq!(call(addr, "POST", "/api/uavs", Some(&new)).await.0, 201);

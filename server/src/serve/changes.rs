@@ -84,7 +84,7 @@ impl Engine {
             Command::SetRoad(road) => {
                 let (cleared_goals, undo) = self.fleet.replace_road_undoable(*road)?;
                 self.road_changed();
-                let mut writes = vec![Write::Road(self.fleet.road().layout().segments.clone())];
+                let mut writes = vec![Write::Road(self.fleet.road().layout().clone())];
                 for id in &cleared_goals {
                     writes.extend(uav_record(&self.fleet, id));
                 }

@@ -4,7 +4,7 @@
 
 use anyhow::Context as _;
 use fleet::Fleet;
-use roads::{Road, RoadLayout};
+use roads::{Region, Road, RoadLayout};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use uav::Params;
@@ -22,6 +22,9 @@ pub struct SavedState {
     pub params: Params,
     /// The road layout.
     pub segments: Vec<[[f64; 2]; 4]>,
+    /// The layout's regions; absent when it has none.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub regions: Option<Vec<Region>>,
     /// True while the fleet holds.
     pub paused: bool,
     /// The UAVs.
@@ -68,6 +71,7 @@ impl SavedState {
             format: FORMAT.to_string(),
             params: fleet.config.params,
             segments: fleet.road().layout().segments.clone(),
+            regions: fleet.road().layout().regions.clone(),
             paused: fleet.holding(),
             uavs: fleet.uavs().iter().map(SavedUav::of).collect(),
         }
@@ -75,7 +79,8 @@ impl SavedState {
 
     /// The road of this state (validated again: the file may have been edited by hand).
     pub fn road(&self) -> anyhow::Result<Road> {
-        Ok(Road::new(RoadLayout::new(self.segments.clone()))?)
+        let layout = RoadLayout { segments: self.segments.clone(), regions: self.regions.clone() };
+        Ok(Road::new(layout)?)
     }
 }
 
@@ -118,6 +123,7 @@ mod tests {
             format: FORMAT.into(),
             params: Params::default(),
             segments: RoadLayout::straight(0.0, 10.0, 4.0, 2).segments,
+            regions: None,
             paused: true,
             uavs: vec![SavedUav {
                 id: "cf1".into(),

@@ -5,6 +5,7 @@
 //! ([`super::durable`]) touches it while the server runs.
 
 use super::persist::{self, SavedState, SavedUav};
+use roads::RoadLayout;
 use rusqlite::{Connection, OptionalExtension, params};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -94,8 +95,8 @@ pub struct AuditRecord {
 pub enum Write {
     /// Everything at once (a scenario load, the first state of a new database).
     Replace(SavedState),
-    /// A new road.
-    Road(Vec<[[f64; 2]; 4]>),
+    /// A new road (its segments and regions).
+    Road(RoadLayout),
     /// Hold on or off.
     Paused(bool),
     /// A UAV added or changed (policy, goal).
@@ -187,6 +188,10 @@ impl Store {
         let corrupt = |what: &str, e: serde_json::Error| StoreError::Corrupt(format!("{what}: {e}"));
         let params: Params = serde_json::from_str(&params).map_err(|e| corrupt("params", e))?;
         let segments = serde_json::from_str(&segments).map_err(|e| corrupt("segments", e))?;
+        let regions = match meta("regions")? {
+            Some(r) => Some(serde_json::from_str(&r).map_err(|e| corrupt("regions", e))?),
+            None => None,
+        };
         let paused = meta("paused")?.as_deref() == Some("1");
         let mut statement =
             self.conn.prepare("SELECT id, policy, x, y, goal_x, goal_y, link FROM uavs ORDER BY ord")?;
@@ -205,7 +210,7 @@ impl Store {
                 })
             })?
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Some(SavedState { format: persist::FORMAT.into(), params, segments, paused, uavs }))
+        Ok(Some(SavedState { format: persist::FORMAT.into(), params, segments, regions, paused, uavs }))
     }
 
     /// Writes `writes` in one transaction; Ok only once it is on disk. On an error nothing of it is
@@ -279,6 +284,19 @@ fn put_meta(tx: &rusqlite::Transaction<'_>, key: &str, value: &str) -> rusqlite:
     Ok(())
 }
 
+/// The road's keys: `segments`, and `regions` (deleted when the layout has none).
+fn put_road(
+    tx: &rusqlite::Transaction<'_>,
+    segments: &[[[f64; 2]; 4]],
+    regions: Option<&[roads::Region]>,
+) -> rusqlite::Result<()> {
+    put_meta(tx, "segments", &json(&segments)?)?;
+    match regions {
+        Some(regions) => put_meta(tx, "regions", &json(&regions)?),
+        None => tx.execute("DELETE FROM meta WHERE key = 'regions'", []).map(|_| ()),
+    }
+}
+
 fn json(value: &impl Serialize) -> rusqlite::Result<String> {
     serde_json::to_string(value).map_err(|e| rusqlite::Error::ToSqlConversionFailure(Box::new(e)))
 }
@@ -299,14 +317,14 @@ fn apply(tx: &rusqlite::Transaction<'_>, write: &Write) -> rusqlite::Result<()> 
     match write {
         Write::Replace(state) => {
             put_meta(tx, "params", &json(&state.params)?)?;
-            put_meta(tx, "segments", &json(&state.segments)?)?;
+            put_road(tx, &state.segments, state.regions.as_deref())?;
             put_meta(tx, "paused", if state.paused { "1" } else { "0" })?;
             tx.execute("DELETE FROM uavs", [])?;
             for u in &state.uavs {
                 put_uav(tx, u)?;
             }
         }
-        Write::Road(segments) => put_meta(tx, "segments", &json(segments)?)?,
+        Write::Road(layout) => put_road(tx, &layout.segments, layout.regions.as_deref())?,
         Write::Paused(paused) => put_meta(tx, "paused", if *paused { "1" } else { "0" })?,
         Write::Uav(u) => put_uav(tx, u)?,
         Write::RemoveUav(id) => {
@@ -373,6 +391,7 @@ mod tests {
             format: persist::FORMAT.into(),
             params: Params::default(),
             segments: roads::RoadLayout::straight(0.0, 10.0, 4.0, 2).segments,
+            regions: None,
             paused: false,
             uavs: vec![uav("a", 1.0), uav("b", 2.0)],
         }
@@ -401,6 +420,36 @@ mod tests {
         c.position = [3.5, -0.5];
         assert_eq!(loaded.uavs, vec![changed, c]);
         assert!(loaded.paused);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_roads_regions_survive_reopening_and_leave_with_a_road_without_them() {
+        let dir = std::env::temp_dir().join(format!("airroads-store-regions-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut store = Store::open(&dir).unwrap();
+        store.commit([&Write::Replace(state())]).unwrap();
+        let regions = vec![
+            roads::Region { name: "east".into(), segments: [1, 2] },
+            roads::Region { name: "west".into(), segments: [0, 0] },
+        ];
+        let layout = RoadLayout { regions: Some(regions.clone()), ..RoadLayout::straight(0.0, 30.0, 4.0, 3) };
+        store.commit([&Write::Road(layout.clone())]).unwrap();
+        drop(store);
+        let mut store = Store::open(&dir).unwrap();
+        let loaded = store.load().unwrap().unwrap();
+        assert_eq!((&loaded.segments, &loaded.regions), (&layout.segments, &Some(regions)));
+        assert_eq!(loaded.road().unwrap().region_of(2).map(|r| r.name.as_str()), Some("east"));
+        // A road without regions (or a scenario) removes them.
+        store.commit([&Write::Road(RoadLayout::straight(0.0, 20.0, 4.0, 2))]).unwrap();
+        assert_eq!(store.load().unwrap().unwrap().regions, None);
+        let mut with = state();
+        with.regions = Some(vec![roads::Region { name: "all".into(), segments: [0, 1] }]);
+        store.commit([&Write::Replace(with.clone())]).unwrap();
+        assert_eq!(store.load().unwrap(), Some(with));
+        store.commit([&Write::Replace(state())]).unwrap();
+        assert_eq!(store.load().unwrap(), Some(state()));
+        drop(store);
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
