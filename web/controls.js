@@ -83,9 +83,12 @@ async function applyRoad(app) {
   app.setDrawing(false);
   const editor = app.editor;
   try {
-    const res = await app.api.putRoad(editor.layout());
+    const layout = editor.layout();
+    const res = await app.api.putRoad(layout);
     const cleared = res.cleared_goals && res.cleared_goals.length ? `; goals cleared: ${res.cleared_goals.join(", ")}` : "";
-    showMessage(`road applied (version ${res.version})${cleared}`);
+    const note = editor.regionsNote();
+    showMessage(`road applied (version ${res.version})${cleared}${note ? `; ${note}` : ""}`);
+    editor.applied(layout);
     await app.refreshGeometry();
   } catch (e) {
     const details = e.details || {};
@@ -93,7 +96,7 @@ async function applyRoad(app) {
     const m = /^segments\[(\d+)\]/.exec(e.field || "");
     if (segment === null && m) segment = Number(m[1]);
     editor.error = { segment, message: e.message, code: e.code, status: e.status };
-    const where = segment !== null ? `segment ${segment}: ` : "";
+    const where = /^regions/.test(e.field || "") ? `${e.field}: ` : segment !== null ? `segment ${segment}: ` : "";
     const status = e.status ? `${e.status} ${e.code}` : "network error";
     showMessage(`road not applied (${status}): ${where}${e.message}`, true);
   }
@@ -101,6 +104,8 @@ async function applyRoad(app) {
 }
 
 function exportRoad(app) {
+  const note = app.editor.regionsNote();
+  if (note) showMessage(`road exported; ${note}`);
   const blob = new Blob([JSON.stringify(app.editor.layout(), null, 1)], { type: "application/json" });
   const a = document.createElement("a");
   a.href = URL.createObjectURL(blob);

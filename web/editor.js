@@ -1,11 +1,13 @@
 // The road editor's model. A road of n segments is kept as n + 1 cross edges [a, b]: segment i is
 // [p1, p2, p3, p4] = [a(i+1), a(i), b(i+1), b(i)], so walls are a(i)→a(i+1) and b(i)→b(i+1) and
 // consecutive segments share an edge: joins are seamless by construction and moving a joint vertex
-// moves both segments. Every change is undoable.
+// moves both segments. Every change is undoable. A loaded layout's regions (named segment ranges)
+// are kept while the road has as many segments as when it was loaded, and dropped otherwise.
 
 import { dist2, mid, segmentsCross } from "./geometry.js";
 
 const clone = (edges) => edges.map(([a, b]) => [[...a], [...b]]);
+const cloneRegions = (regions) => regions && regions.map((r) => ({ ...r, segments: [...r.segments] }));
 
 export class RoadEditor {
   constructor() {
@@ -15,6 +17,8 @@ export class RoadEditor {
     this.selected = -1; // selected segment
     this.pending = null; // first point of the next edge while drawing
     this.error = null; // {segment, message} from the server
+    this.regions = null; // the loaded layout's regions, or null
+    this.regionSegments = 0; // how many segments the road had when they were loaded
     this.version = 0; // bumps on every change (for redraws)
   }
 
@@ -26,13 +30,33 @@ export class RoadEditor {
     return out;
   }
 
+  /** The layout to apply or export: with the loaded regions while the segment count is unchanged. */
   layout() {
-    return { segments: this.segments().map((s) => s.map((p) => [...p])) };
+    const layout = { segments: this.segments().map((s) => s.map((p) => [...p])) };
+    if (this.regions && layout.segments.length === this.regionSegments) layout.regions = cloneRegions(this.regions);
+    return layout;
+  }
+
+  /** Why the loaded regions are left out of `layout()`, or null when they are kept (or there are none). */
+  regionsNote() {
+    const n = Math.max(this.edges.length - 1, 0);
+    if (!this.regions || n === this.regionSegments) return null;
+    return `regions dropped: the loaded ${this.regions.length} region(s) covered ${this.regionSegments} segments, the road now has ${n}; add regions to the layout JSON again`;
+  }
+
+  /** After an apply: the applied layout's regions (none when they were dropped) are the ones kept from now on. */
+  applied(layout) {
+    this.regions = cloneRegions(layout.regions) ?? null;
+    this.regionSegments = layout.segments.length;
+  }
+
+  snapshot() {
+    return { edges: clone(this.edges), selected: this.selected, regions: this.regions, regionSegments: this.regionSegments };
   }
 
   /** Call before every change: records the state for undo. */
   commit() {
-    this.undoStack.push({ edges: clone(this.edges), selected: this.selected });
+    this.undoStack.push(this.snapshot());
     if (this.undoStack.length > 200) this.undoStack.shift();
     this.redoStack = [];
     this.changed();
@@ -50,6 +74,8 @@ export class RoadEditor {
   load(layout, undoable = true) {
     if (undoable) this.commit();
     const segs = layout.segments;
+    this.regions = Array.isArray(layout.regions) ? cloneRegions(layout.regions) : null;
+    this.regionSegments = segs.length;
     let broken = 0;
     this.edges = [];
     if (segs.length) {
@@ -69,6 +95,7 @@ export class RoadEditor {
   clear() {
     this.commit();
     this.edges = [];
+    this.regions = null;
     this.selected = -1;
     this.pending = null;
   }
@@ -162,9 +189,11 @@ export class RoadEditor {
   swap(from, to) {
     const state = from.pop();
     if (!state) return false;
-    to.push({ edges: clone(this.edges), selected: this.selected });
+    to.push(this.snapshot());
     this.edges = state.edges;
     this.selected = state.selected;
+    this.regions = state.regions;
+    this.regionSegments = state.regionSegments;
     this.pending = null;
     this.changed();
     return true;
