@@ -35,6 +35,9 @@ pub(crate) struct TickPipeline {
     rows: RowBuilder,
     /// The filter's order, workers and solvers.
     filter: FilterStage,
+    /// Per UAV this tick: arrived, and its way-making point lacks a path's clearance (it cannot
+    /// step aside, so those behind it pass it).
+    cannot_step_aside: Vec<bool>,
     /// One policy's batch: observations, UAV indices, actions.
     observations: Vec<Observation>,
     batch: Vec<usize>,
@@ -152,6 +155,14 @@ impl TickPipeline {
         let nav = Navigator::new(&fleet.road, fleet.config.nav, &params);
         let need = nav.clearance_at(0.0);
         let road = &fleet.road;
+        // One wall query per arrived UAV, not one per flying neighbour of it.
+        let stuck = &mut self.cannot_step_aside;
+        stuck.clear();
+        stuck.extend(fleet.uavs.iter().zip(&self.segments).map(|(u, &segment)| {
+            u.nav.arrived
+                && u.nav.goal().is_some()
+                && road.boundary_distance_in(segment, &u.last.target) < need
+        }));
         for k in 0..fleet.uavs.len() {
             let me = &fleet.uavs[k];
             if me.traffic.route.is_none() || me.traffic.waiting.is_some() || me.traffic.back_off.is_some() {
@@ -162,14 +173,8 @@ impl TickPipeline {
                 let (seg_a, seg_b) = (road.locate(&a, Some(segment)), road.locate(&b, Some(segment)));
                 road.boundary_distance_in(seg_b, &b) >= need && road.path_clear(&a, seg_a, &b, seg_b, need)
             };
-            let segments = &self.segments;
-            let parked = self.neighbours.lists[k]
-                .iter()
-                .map(|&d| (&fleet.uavs[d], segments[d]))
-                .filter(|(u, _)| u.nav.arrived && u.nav.goal().is_some())
-                // Only those that cannot step aside: their way-making point lacks clearance.
-                .filter(|(u, segment)| road.boundary_distance_in(*segment, &u.last.target) < need)
-                .map(|(u, _)| u.state.p);
+            let parked =
+                self.neighbours.lists[k].iter().filter(|&&d| stuck[d]).map(|&d| fleet.uavs[d].state.p);
             if let Some(c) = pass_point(me.state.p, me.last.target, parked, params.d_c, clear) {
                 fleet.uavs[k].last.target = c;
             }

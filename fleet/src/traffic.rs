@@ -170,6 +170,8 @@ impl TrafficRules {
         let approach = 2.0 * nav.r_s + HOLD_M;
         let gap = FOLLOW_GAP_IN_DC * nav.d_c;
         self.wanted.clear();
+        // Each UAV's next section, not the one it last crossed while it is on that one's exit side;
+        // a grant it no longer wants marks its zone as crossed.
         let sections = &self.sections;
         self.wanted.extend(uavs.iter_mut().map(|u| {
             let Some(pos) = u.traffic.route else {
