@@ -23,6 +23,9 @@ pub struct Section {
     pub hold_before: f64,
     /// Where UAVs coming from its end wait.
     pub hold_after: f64,
+    /// Opposite UAVs can pass each other everywhere in it (slowly, in their lanes): it is tight, not
+    /// single file.
+    pub passable: bool,
 }
 
 impl Section {
@@ -54,9 +57,13 @@ pub fn sections(road: &Road, nav: &Navigator) -> Vec<Section> {
             k += 1;
         }
         let (start, end) = (s(first), s(k - 1));
+        let passable = (first..k).all(|j| nav.two_way_at(s(j)));
         match out.last_mut() {
-            Some(last) if start - last.end < 2.0 * HOLD_M + nav.d_c => last.end = end,
-            _ => out.push(Section { start, end, hold_before: start, hold_after: end }),
+            Some(last) if start - last.end < 2.0 * HOLD_M + nav.d_c => {
+                last.end = end;
+                last.passable &= passable;
+            }
+            _ => out.push(Section { start, end, hold_before: start, hold_after: end, passable }),
         }
     }
     out.into_iter()

@@ -123,3 +123,98 @@ fn a_uav_pushed_back_over_the_exit_of_a_section_it_crossed_flies_on() {
     let m = fly(&s, NavMode::Traffic, "rl");
     assert!(m.safe && m.all_arrived, "{m:#?}");
 }
+
+/// The first four segments of `mixed` seed 1002: a sharp right bend (for UAVs flying along them)
+/// between segments 2 and 3.
+fn right_bend_road() -> Vec<[[f64; 2]; 4]> {
+    vec![
+        [
+            [1.993253690436318, -6.106939738905742],
+            [-0.5894691618757221, -0.2673783481154362],
+            [3.6607282991432664, -6.3579739242567035],
+            [0.5894691618757221, 0.2673783481154362],
+        ],
+        [
+            [0.7820102564295447, -7.412446922037804],
+            [1.993253690436318, -6.106939738905742],
+            [1.1382608990381944, -9.269463551487389],
+            [3.6607282991432664, -6.3579739242567035],
+        ],
+        [
+            [-4.521565852048141, -4.974913923396603],
+            [0.7820102564295447, -7.412446922037804],
+            [-5.544126497098324, -5.663196966888963],
+            [1.1382608990381944, -9.269463551487389],
+        ],
+        [
+            [-4.699575990433799, -0.18442892044479786],
+            [-4.521565852048141, -4.974913923396603],
+            [-6.296600760161332, 0.9915557807513974],
+            [-5.544126497098324, -5.663196966888963],
+        ],
+    ]
+}
+
+/// The first three segments of `mixed` seed 194: a narrow segment turning 118° left into a wider one.
+fn sharp_left_bend_road() -> Vec<[[f64; 2]; 4]> {
+    vec![
+        [
+            [-2.0312374964464968, -7.145653634696851],
+            [-0.6028978207731086, 0.11631516677006294],
+            [-0.3667173717408746, -5.283695043454477],
+            [0.6028978207731086, -0.11631516677006294],
+        ],
+        [
+            [7.9640360349889, -4.111497551928893],
+            [-2.0312374964464968, -7.145653634696851],
+            [6.877506631699371, -2.9388618276512934],
+            [-0.3667173717408746, -5.283695043454477],
+        ],
+        [
+            [8.568983613648571, -2.5816137656931035],
+            [7.9640360349889, -4.111497551928893],
+            [7.881862286443691, -0.4235496861355621],
+            [6.877506631699371, -2.9388618276512934],
+        ],
+    ]
+}
+
+fn on_road(name: &str, segments: Vec<[[f64; 2]; 4]>, uavs: Vec<ScenarioUav>) -> ValidScenario {
+    let params = Params { t_max: 30.0, ..Params::default() };
+    Scenario { name: name.into(), params, segments, uavs }.validate().unwrap()
+}
+
+#[test]
+fn a_uav_in_the_corner_of_a_bend_goes_round_it() {
+    // `mixed` seed 1002 with `rl`: a UAV 0.2 m from the inner vertex of a sharp bend hovered there
+    // for 100 s, alone: the lane points near it lay on one piece's lane, then on the other's, from
+    // tick to tick. It now aims at the corner of its lane in that bend.
+    let inner = on_road("inner corner", right_bend_road(), vec![uav("a", [-4.69, -5.11], [-5.3, -1.0])]);
+    // `mixed` seed 194: in the outer corner of a sharp left bend, with traffic coming the other way
+    // (so keeping its lane), a UAV's lane points before the bend lay behind it and those after it
+    // cut the bend: it hovered 0.1 m from its target. It now goes round through its lane's corner.
+    let outer = on_road(
+        "outer corner",
+        sharp_left_bend_road(),
+        vec![uav("a", [-1.32, -6.0], [7.57, -3.83]), uav("b", [3.0, -4.6], [-0.65, -2.76])],
+    );
+    for (s, policy) in [(&inner, "pd"), (&inner, "rl"), (&outer, "pd"), (&outer, "rl")] {
+        let m = fly(s, NavMode::Traffic, policy);
+        assert!(m.safe && m.all_arrived, "{} {policy}: {m:#?}", s.name);
+        assert!(m.max_stall_s < 2.0, "{} {policy}: longest stall {} s", s.name, m.max_stall_s);
+    }
+}
+
+#[test]
+fn crowded_bends_and_a_uav_starting_inside_a_reserved_section_arrive() {
+    // `mixed` with the cases each of this change's rules was found in: seed 194 (`rl`, outer corner
+    // of a left bend, 60.05 s), 1002 (`rl`, inner corner) and 1012 (`pd`, a jog of two bends 1.4 m
+    // apart, where the nearest corner went back and forth between the two: 100 s), and 68 (`pd`: a
+    // UAV that started inside a tight, passable section open to the other direction flew 8 m back
+    // out to queue and lost 25 s; it now flies on in its lane).
+    for (seed, policy) in [(194, "rl"), (1002, "rl"), (1012, "pd"), (68, "pd")] {
+        let s = fleet::families::Family::Mixed.scenario(seed).validate().unwrap();
+        let m = fly(&s, NavMode::Traffic, policy);
+        assert!(m.safe && m.all_arrived, "seed {seed} {policy}: {m:#?}");
+    }
+}

@@ -14,6 +14,10 @@ pub struct CenterLine {
     turns: Vec<f64>,
 }
 
+/// Cosine of the sharpest turn (about 150°) at which [`CenterLine::lane_corner`] still answers: the
+/// corner lies lateral/cos(turn/2) from the vertex, which grows without bound towards a U-turn.
+pub const MAX_LANE_CORNER_TURN_COS: f64 = 0.87;
+
 impl CenterLine {
     /// Builds the centre line of a chain of segments.
     pub fn new(quads: &[Quad]) -> Self {
@@ -98,6 +102,18 @@ impl CenterLine {
         self.arc.partition_point(|&a| a <= s).saturating_sub(1).min(self.points.len().saturating_sub(2))
     }
 
+    /// Where the lines at lateral offset `lateral` beside the two pieces meeting at interior vertex
+    /// `k` cross (the corner of a lane through that bend); `None` at the ends and at turns sharper
+    /// than [`MAX_LANE_CORNER_TURN_COS`] allows.
+    pub fn lane_corner(&self, k: usize, lateral: f64) -> Option<Vec2> {
+        let (before, after) = (*self.points.get(k.checked_sub(1)?)?, *self.points.get(k + 1)?);
+        let v = self.points[k];
+        let left = |t: Vec2| Vec2::new(-t.y, t.x);
+        let (n0, n1) = (left((v - before).try_normalize(0.0)?), left((after - v).try_normalize(0.0)?));
+        let cos = n0.dot(&n1);
+        (cos > -MAX_LANE_CORNER_TURN_COS).then(|| v + (n0 + n1) * (lateral / (1.0 + cos)))
+    }
+
     /// The point at arc length `s` (clamped to the line).
     pub fn point_at(&self, s: f64) -> Vec2 {
         let s = s.clamp(0.0, self.length());
@@ -105,5 +121,41 @@ impl CenterLine {
         let (a, b) = (self.points[k], self.points[k + 1]);
         let len = self.arc[k + 1] - self.arc[k];
         if len <= 0.0 { a } else { a + (b - a) * ((s - self.arc[k]) / len) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Road, RoadLayout};
+
+    /// Distance of `x` from the infinite line through `a` and `b`.
+    fn line_distance(a: Vec2, b: Vec2, x: Vec2) -> f64 {
+        uav::cross(&(b - a).normalize(), &(x - a)).abs()
+    }
+
+    #[test]
+    fn a_lane_corner_is_as_far_from_both_pieces_as_the_lane() {
+        for (turn_deg, lateral) in [(30.0f64, 0.4), (90.0, -0.4), (120.0, 0.3), (-120.0, 0.3), (140.0, -0.25)]
+        {
+            let t = turn_deg.to_radians();
+            let far = Vec2::new(10.0 + 10.0 * t.cos(), 10.0 * t.sin());
+            let road =
+                Road::new(RoadLayout::from_centerline(&[[0.0, 0.0], [10.0, 0.0], [far.x, far.y]], &[3.0; 3]))
+                    .unwrap();
+            let line = road.centerline();
+            let (p, k) = (line.points(), 1);
+            let corner = line.lane_corner(k, lateral).expect("an interior vertex");
+            for (a, b) in [(p[0], p[1]), (p[1], p[2])] {
+                let d = line_distance(a, b, corner);
+                assert!((d - lateral.abs()).abs() < 1e-9, "{turn_deg}°: {d} from a piece, lane at {lateral}");
+            }
+            // On the lane's side of both pieces (left for a positive offset).
+            for (a, b) in [(p[0], p[1]), (p[1], p[2])] {
+                assert!(uav::cross(&(b - a), &(corner - a)) * lateral > 0.0, "{turn_deg}°: wrong side");
+            }
+            assert_eq!(line.lane_corner(0, lateral), None);
+            assert_eq!(line.lane_corner(p.len() - 1, lateral), None);
+        }
     }
 }

@@ -89,15 +89,57 @@ impl Navigator<'_> {
     /// left, where the road is two-way there: it does not cut the bend's inside corner through the
     /// oncoming lane.
     pub fn keeps_lane(&self, p: Vec2, c: Vec2, s0: f64, s1: f64, direction: f64) -> bool {
+        self.cut_bend(p, c, s0, s1, direction).is_none()
+    }
+
+    /// The first centre-line vertex between arc lengths `s0` and `s1` of a sharp left bend (for
+    /// `direction`) in a two-way part that the straight path p→c passes on its right, if any.
+    fn cut_bend(&self, p: Vec2, c: Vec2, s0: f64, s1: f64, direction: f64) -> Option<usize> {
         let line = self.road.centerline();
         let (points, arc, turns) = (line.points(), line.arc(), line.turns());
         let (lo, hi) = (s0.min(s1), s0.max(s1));
         let path = c - p;
-        (arc.partition_point(|&a| a <= lo)..points.len()).take_while(|&k| arc[k] < hi).all(|k| {
-            direction * turns[k] < SHARP_BEND_SIN
-                || !self.two_way_at(arc[k])
-                || uav::cross(&path, &(points[k] - p)) >= 0.0
-        })
+        let mut between = arc.partition_point(|&a| a <= lo)..arc.partition_point(|&a| a < hi);
+        let cut = |&k: &usize| {
+            direction * turns[k] >= SHARP_BEND_SIN
+                && self.two_way_at(arc[k])
+                && uav::cross(&path, &(points[k] - p)) < 0.0
+        };
+        if direction > 0.0 { between.find(cut) } else { between.rev().find(cut) }
+    }
+
+    /// Where the UAV's lane turns at the sharp left bend at centre-line vertex `k` (outside the
+    /// bend, where the lanes of both pieces meet), when a path from `route` reaches it with
+    /// clearance `need`: the way round a bend that [`Self::keeps_lane`] forbids cutting. Without it,
+    /// the lane points on both sides of the vertex jump across the bend's outer corner, and a UAV
+    /// that has reached the last one before the vertex sees the next one only on and off.
+    fn lane_corner(&self, route: &Route, k: usize, need: f64) -> Option<Vec2> {
+        let line = self.road.centerline();
+        // The lane's inner edge (nearest the centre line), whatever the UAV's own offset: the corner
+        // of a lane hugging the inside wall would stand as close to the inner vertex as the UAV.
+        let offset = self.lane_offset(line.arc()[k], route.position.direction(), 0.0);
+        let corner = line.lane_corner(k, offset)?;
+        let clear = |piece: usize| self.road.path_clear(&route.p, route.segment, &corner, piece, need);
+        (clear(k - 1) && clear(k)).then_some(corner)
+    }
+
+    /// The farthest lane corner ([`Self::lane_corner`], reached with clearance `need`) of a sharp
+    /// bend from D_c behind the UAV to `ahead` of arc length in front of it. The farthest, so that
+    /// a UAV between two close bends (a jog) goes on to the second rather than back and forth.
+    fn bend_corner_near(&self, route: &Route, ahead: f64, need: f64) -> Option<Vec2> {
+        let line = self.road.centerline();
+        let (arc, turns) = (line.arc(), line.turns());
+        let (pos, direction) = (route.position, route.position.direction());
+        let (lo, hi) = if direction > 0.0 {
+            (pos.s - self.d_c, pos.s + ahead)
+        } else {
+            (pos.s - ahead, pos.s + self.d_c)
+        };
+        let near = arc.partition_point(|&a| a < lo)..arc.partition_point(|&a| a <= hi);
+        let corner = |k: usize| {
+            if turns[k].abs() < SHARP_BEND_SIN { None } else { self.lane_corner(route, k, need) }
+        };
+        if direction > 0.0 { near.rev().find_map(corner) } else { near.into_iter().find_map(corner) }
     }
 
     pub(crate) fn traffic_target(&self, route: &Route, restriction: &Restriction) -> Vec2 {
@@ -180,6 +222,26 @@ impl Navigator<'_> {
             // every path onwards passes the vertex a little closer than the clearance it keeps. Go on
             // with the smallest clearance a path may have instead of hovering there.
             lo = farthest(self.d_s + MIN_CLEARANCE_MARGIN_M);
+        }
+        // The farthest clear point is where the UAV already is: it stands in a bend's corner, where
+        // the lane points near it jump across the vertex (one piece's lane, then the other's, from
+        // tick to tick: `mixed` seed 1002 with `rl` hovered 100 s 0.2 m from an inner vertex). Go
+        // through the lane's corner of that bend.
+        if lo < count
+            && (candidate(lo, count.max(1)).0 - route.p).norm() < PROFILE_STEP_M
+            && let Some(corner) = self.bend_corner_near(route, ahead, self.d_s + MIN_CLEARANCE_MARGIN_M)
+        {
+            return corner;
+        }
+        // Held short of a sharp left bend by the lane rule alone: round it through the lane's corner.
+        if restriction.keep_lane && lo < count {
+            let (c, segment) = candidate(lo + 1, count);
+            if self.road.path_clear(&route.p, route.segment, &c, segment, need)
+                && let Some(k) = self.cut_bend(route.p, c, pos.s, arc_at(lo + 1, count), direction)
+                && let Some(corner) = self.lane_corner(route, k, need)
+            {
+                return corner;
+            }
         }
         // lo = 0: the lane point beside the UAV (it and the UAV share a segment, or nearly).
         candidate(lo, count.max(1)).0
