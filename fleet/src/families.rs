@@ -139,7 +139,13 @@ fn bends(seed: u64) -> Scenario {
             continue;
         }
         let uavs = starts.iter().zip(&goals).enumerate().map(|(i, (s, g))| uav(i, "u", *s, *g)).collect();
-        let scenario = Scenario { name: format!("bends-{seed}"), params: p, segments: layout.segments, uavs };
+        let scenario = Scenario {
+            name: format!("bends-{seed}"),
+            params: p,
+            segments: layout.segments,
+            regions: None,
+            uavs,
+        };
         if scenario.validate().is_ok() {
             return scenario;
         }
@@ -195,7 +201,7 @@ fn swap_ends(road: &Road, west: usize, east: usize, p: &Params) -> Option<Vec<Sc
 
 /// The scenario if it validates with at least two UAVs.
 fn valid(name: String, params: Params, layout: RoadLayout, uavs: Vec<ScenarioUav>) -> Option<Scenario> {
-    let scenario = Scenario { name, params, segments: layout.segments, uavs };
+    let scenario = Scenario { name, params, segments: layout.segments, regions: None, uavs };
     (scenario.uavs.len() >= 2 && scenario.validate().is_ok()).then_some(scenario)
 }
 

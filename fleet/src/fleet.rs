@@ -179,6 +179,8 @@ pub struct Fleet {
     /// The traffic rules' sections, reservations and speed limits.
     pub(crate) traffic: TrafficRules,
     pub(crate) tick: u64,
+    /// UAVs flown by other regions, as last given ([`Fleet::set_foreign`]).
+    pub(crate) foreign: Vec<crate::ForeignUav>,
     /// The per-tick machinery (its neighbour lists are those of the last tick).
     pub(crate) pipeline: TickPipeline,
 }
@@ -194,6 +196,7 @@ impl Fleet {
             hold: false,
             traffic: TrafficRules::default(),
             tick: 0,
+            foreign: Vec::new(),
             pipeline: TickPipeline::default(),
         }
     }

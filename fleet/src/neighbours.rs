@@ -6,6 +6,11 @@
 //! sweep along x alone degenerated on roads running north–south), and each UAV's list comes out
 //! ordered by x, then index (a merge of three sorted windows), with no sort per list. The lists share
 //! one buffer ([`Ragged`]) reused every tick.
+//!
+//! Foreign UAVs (flown by another region, [`crate::ForeignUav`]) go into the same sort: points from
+//! index `own` on get no list of their own, and each own UAV's foreign neighbours come out in a
+//! second list ([`NeighbourSearch::foreign`], indices counted from `own`), so the search stays
+//! bounded by the same windows whatever their number.
 
 use crate::ragged::Ragged;
 use uav::Vec2;
@@ -21,6 +26,11 @@ pub struct NeighbourSearch {
     by_band: Vec<(i64, f64, u32)>,
     /// `lists[k]`: indices of the UAVs within the radius of UAV k, by x, then index.
     pub lists: Ragged<usize>,
+    /// `foreign[k]`: indices (from 0, i.e. point `own + f` is `f`) of the foreign points within the
+    /// radius of UAV k, by x, then index.
+    pub foreign: Ragged<usize>,
+    /// The foreign neighbours of the UAV being listed.
+    scratch: Vec<usize>,
 }
 
 /// The order of the sorted entries: band, then x, then index.
@@ -29,11 +39,22 @@ fn order(a: &(i64, f64, u32), b: &(i64, f64, u32)) -> std::cmp::Ordering {
 }
 
 impl NeighbourSearch {
-    /// Recomputes `lists` for `positions` and `radius` (m). Non-finite positions get no neighbours;
-    /// a radius that is not a positive finite number puts every point in one band.
+    /// Recomputes `lists` for `positions` and `radius` (m), none of them foreign (the tests' form of
+    /// [`NeighbourSearch::update_with_foreign`]).
+    #[cfg(test)]
     pub fn update(&mut self, positions: &[Vec2], radius: f64) {
+        self.update_with_foreign(positions, positions.len(), radius);
+    }
+
+    /// Recomputes `lists` for `positions` and `radius` (m), where `positions[own..]` are foreign
+    /// points: they get no list, and appear in the own UAVs' [`NeighbourSearch::foreign`] lists
+    /// instead. Non-finite positions get no neighbours; a radius that is not a positive finite number
+    /// puts every point in one band.
+    pub fn update_with_foreign(&mut self, positions: &[Vec2], own: usize, radius: f64) {
         let n = positions.len();
-        self.lists.reset(n);
+        let own = own.min(n);
+        self.lists.reset(own);
+        self.foreign.reset(own);
         let finite_radius = radius.is_finite() && radius > 0.0;
         let band =
             |y: f64| if finite_radius { ((y / radius).floor() as i64).clamp(-MAX_BAND, MAX_BAND) } else { 0 };
@@ -61,6 +82,9 @@ impl NeighbourSearch {
             for i in start..end {
                 let (_, x, a) = entries[i];
                 let (a, p) = (a as usize, positions[a as usize]);
+                if a >= own {
+                    continue;
+                }
                 // Each window: the entries of a run with x in [x − r, x + r].
                 let mut heads = [0; 3];
                 let mut ends = [0; 3];
@@ -84,10 +108,12 @@ impl NeighbourSearch {
                         let d = entries[heads[w]].2 as usize;
                         heads[w] += 1;
                         if d != a && (positions[d] - p).norm_squared() <= r2 {
-                            list.push(d);
+                            if d < own { list.push(d) } else { self.scratch.push(d - own) }
                         }
                     }
                 });
+                let scratch = &mut self.scratch;
+                self.foreign.fill(a, |list| list.append(scratch));
             }
             start = end;
         }
@@ -159,6 +185,33 @@ mod tests {
             let fewer = &pts[..pts.len() / 2];
             s.update(fewer, radius);
             prop_assert_eq!(lists(&s), brute(fewer, radius));
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(500))]
+
+        /// With foreign points, each own UAV's two lists are the all-pairs list split at `own`, and
+        /// foreign points get no list.
+        #[test]
+        fn foreign_points_are_split_off(
+            raw in proptest::collection::vec((-30i32..30, -30i32..30), 0..80),
+            own_share in 0.0f64..=1.0,
+            radius in 0.1f64..4.0,
+        ) {
+            let pts: Vec<Vec2> = raw.iter().map(|&(i, j)| Vec2::new(i as f64 * 0.2, j as f64 * 0.2)).collect();
+            let own = (pts.len() as f64 * own_share) as usize;
+            let mut s = NeighbourSearch::default();
+            s.update_with_foreign(&pts, own, radius);
+            let all = brute(&pts, radius);
+            prop_assert_eq!(s.lists.len(), own);
+            prop_assert_eq!(s.foreign.len(), own);
+            for (k, list) in all.iter().enumerate().take(own) {
+                let mine: Vec<usize> = list.iter().copied().filter(|&d| d < own).collect();
+                let foreign: Vec<usize> = list.iter().filter(|&&d| d >= own).map(|&d| d - own).collect();
+                prop_assert_eq!(s.lists[k].to_vec(), mine);
+                prop_assert_eq!(s.foreign[k].to_vec(), foreign);
+            }
         }
     }
 

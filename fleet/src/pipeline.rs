@@ -10,14 +10,14 @@ use crate::filtering::FilterStage;
 use crate::fleet::{Fleet, StageTimes, Uav, parallel};
 use crate::neighbours::NeighbourSearch;
 use crate::passing::pass_point;
-use crate::rows::RowBuilder;
+use crate::rows::{NeighbourLists, RowBuilder};
 use crate::speed::{crowd_limit, govern, keep_distance};
 use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::LinkPhase;
 use policies::{Observation, observation};
 use rayon::prelude::*;
 use roads::{NavMode, Navigator};
-use safety::activation_radius;
+use safety::{ReachDisk, activation_radius};
 use std::time::Instant;
 use uav::{Vec2, braking_input};
 
@@ -29,6 +29,8 @@ pub(crate) struct TickPipeline {
     velocities: Vec<Vec2>,
     /// The neighbour grid and each UAV's neighbour list of the last tick.
     pub neighbours: NeighbourSearch,
+    /// Where each foreign UAV may be this tick ([`Fleet::foreign_disk`]).
+    foreign_disks: Vec<ReachDisk>,
     /// Each UAV's tracked segment this tick.
     segments: Vec<usize>,
     /// Every UAV's rows this tick.
@@ -69,8 +71,12 @@ impl TickPipeline {
         self.run_policies(fleet);
         self.stages.policies_us = lap();
         let (params, rule) = (fleet.config.params, fleet.config.road_rule);
-        self.rows
-            .build(&fleet.road, rule, &params, &fleet.uavs, &self.neighbours.lists, |d| fleet.disk_of(d));
+        let neighbours = NeighbourLists {
+            own: &self.neighbours.lists,
+            foreign: &self.neighbours.foreign,
+            foreign_disks: &self.foreign_disks,
+        };
+        self.rows.build(&fleet.road, rule, &params, &fleet.uavs, neighbours, |d| fleet.disk_of(d));
         self.stages.rows_us = lap();
         self.filter.run(fleet, &self.rows);
         self.stages.filter_us = lap();
@@ -80,19 +86,30 @@ impl TickPipeline {
         self.stages.send_us = lap();
     }
 
-    /// Finds every UAV's neighbours within the activation radius at twice the fleet's top speed (and
-    /// at least the yielding radius), widened by the farthest reach of a stale UAV.
+    /// Finds every UAV's neighbours, own and foreign, within the activation radius at twice the top
+    /// speed of either (and at least the yielding radius), widened by the farthest reach of a stale
+    /// or foreign UAV's disk. Foreign UAVs go into the same grid after the own ones.
     fn find_neighbours(&mut self, fleet: &Fleet) {
         let params = fleet.config.params;
+        self.foreign_disks.clear();
+        self.foreign_disks.extend((0..fleet.foreign.len()).map(|f| fleet.foreign_disk(f)));
+        let foreign_reach = fleet
+            .foreign
+            .iter()
+            .zip(&self.foreign_disks)
+            .map(|(f, disk)| (disk.centre - f.state.p).norm() + disk.radius)
+            .fold(0.0, f64::max);
         self.positions.clear();
         self.positions.extend(fleet.uavs.iter().map(|u| u.state.p));
+        self.positions.extend(fleet.foreign.iter().map(|f| f.state.p));
         self.velocities.clear();
         self.velocities.extend(fleet.uavs.iter().map(|u| u.state.v));
+        self.velocities.extend(fleet.foreign.iter().map(|f| f.state.v));
         let v_max = self.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
         let reach = activation_radius(params.d_c, 2.0 * v_max, 2.0 * params.delta)
             .max(YIELD_RADIUS_IN_DC * params.d_c)
-            + fleet.max_stale_reach();
-        self.neighbours.update(&self.positions, reach);
+            + fleet.max_stale_reach().max(foreign_reach);
+        self.neighbours.update_with_foreign(&self.positions, fleet.uavs.len(), reach);
     }
 
     /// Locates every UAV on its route, tracks its progress, applies the traffic rules (`traffic`

@@ -157,6 +157,7 @@ fn list_once(list: &mut Vec<usize>, listed: &mut [bool], k: usize) {
 mod tests {
     use super::*;
     use crate::ragged::Ragged;
+    use crate::rows::NeighbourLists;
     use proptest::prelude::*;
     use roads::{Road, RoadLayout};
     use uav::UavState;
@@ -175,7 +176,11 @@ mod tests {
         let n = states.len();
         let lists: Ragged<usize> = (0..n).map(|k| (0..n).filter(|&d| d != k).collect()).collect();
         let mut rows = RowBuilder::default();
-        rows.build(&fleet.road, fleet.config.road_rule, &params, &fleet.uavs, &lists, |d| fleet.disk_of(d));
+        let no_foreign = Ragged::default();
+        let neighbours = NeighbourLists { own: &lists, foreign: &no_foreign, foreign_disks: &[] };
+        rows.build(&fleet.road, fleet.config.road_rule, &params, &fleet.uavs, neighbours, |d| {
+            fleet.disk_of(d)
+        });
         (rows, params)
     }
 

@@ -1,7 +1,8 @@
 //! The rows of every UAV's QP for one tick, built in parallel: its road rows (`safety::road_rows`),
 //! a collision row b_kd per cooperating neighbour within the activation radius, and an obstacle row
 //! per neighbour that does not cooperate but may be in the air (its reach disk; both
-//! `safety::neighbour_rows`).
+//! `safety::neighbour_rows`). A foreign UAV (flown by another region) is such an obstacle, its view
+//! numbered after the fleet's own UAVs.
 //! Each UAV's rows depend only on the states read this tick, so any number of threads gives the same
 //! rows. What depends on the order of filtering (the whole pair row against a neighbour filtered
 //! earlier in the tick, given its u_d) is applied to a copy just before each UAV's QP
@@ -33,6 +34,18 @@ pub(crate) struct RowView {
     pub segment: usize,
 }
 
+/// Every UAV's neighbours this tick: own UAVs (`own[k]`), foreign UAVs (`foreign[k]`, indices into
+/// `foreign_disks`) and where each foreign UAV may be.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct NeighbourLists<'a> {
+    /// `own[k]`: the fleet's UAVs near UAV k.
+    pub own: &'a Ragged<usize>,
+    /// `foreign[k]`: the foreign UAVs near UAV k.
+    pub foreign: &'a Ragged<usize>,
+    /// Each foreign UAV's reach disk.
+    pub foreign_disks: &'a [ReachDisk],
+}
+
 /// UAVs whose rows share one buffer and one parallel task.
 const UAVS_PER_BLOCK: usize = 64;
 
@@ -46,16 +59,18 @@ pub(crate) struct RowBuilder {
 
 impl RowBuilder {
     /// Builds every flying UAV's rows (without the sequential share) from `uavs` and their
-    /// neighbour lists; `disk_of(d)` is UAV d's reach disk.
+    /// neighbour lists; `disk_of(d)` is UAV d's reach disk. Each foreign UAV f is an obstacle, view
+    /// `uavs.len() + f`.
     pub fn build(
         &mut self,
         road: &Road,
         rule: RoadRule,
         params: &Params,
         uavs: &[Uav],
-        lists: &Ragged<usize>,
+        neighbours: NeighbourLists<'_>,
         disk_of: impl Fn(usize) -> ReachDisk,
     ) {
+        let NeighbourLists { own: lists, foreign: foreign_lists, foreign_disks } = neighbours;
         self.views.clear();
         self.views.extend(uavs.iter().enumerate().map(|(d, u)| RowView {
             state: u.state,
@@ -63,6 +78,13 @@ impl RowBuilder {
             cooperates: u.condition.cooperates(),
             obstacle: (!u.condition.cooperates() && u.condition.in_the_air()).then(|| disk_of(d)),
             segment: u.nav.tracker.current.unwrap_or(0),
+        }));
+        self.views.extend(foreign_disks.iter().map(|disk| RowView {
+            state: UavState { p: disk.centre, v: disk.velocity },
+            flying: false,
+            cooperates: false,
+            obstacle: Some(*disk),
+            segment: 0,
         }));
         let n = uavs.len();
         self.blocks.resize_with(n.div_ceil(UAVS_PER_BLOCK), Ragged::default);
@@ -75,7 +97,8 @@ impl RowBuilder {
             for (i, k) in uavs.enumerate() {
                 let me = views[k];
                 if me.flying {
-                    block.fill(i, |rows| rows_of_one(road, rule, params, me, &lists[k], views, rows));
+                    let neighbours = lists[k].iter().copied().chain(foreign_lists[k].iter().map(|&f| n + f));
+                    block.fill(i, |rows| rows_of_one(road, rule, params, me, neighbours, views, rows));
                 }
             }
         };
@@ -86,7 +109,7 @@ impl RowBuilder {
         }
     }
 
-    /// What the rows of other UAVs know of UAV k this tick.
+    /// What the rows of other UAVs know of UAV k this tick (k ≥ the fleet's size: a foreign UAV).
     pub fn view(&self, k: usize) -> RowView {
         self.views[k]
     }
@@ -127,7 +150,7 @@ fn rows_of_one(
     rule: RoadRule,
     p: &Params,
     me: RowView,
-    neighbours: &[usize],
+    neighbours: impl Iterator<Item = usize>,
     views: &[RowView],
     out: &mut Vec<Row>,
 ) {
@@ -142,5 +165,5 @@ fn rows_of_one(
         };
         (d, seen)
     };
-    neighbour_rows(state, neighbours.iter().map(|&d| what(d)), p, out);
+    neighbour_rows(state, neighbours.map(what), p, out);
 }

@@ -1,4 +1,4 @@
-//! Scenario files: `{"name", "params"?, "segments", "uavs": [{"id", "start", "goal"}]}`.
+//! Scenario files: `{"name", "params"?, "segments", "regions"?, "uavs": [{"id", "start", "goal"}]}`.
 
 use links::LinkRules;
 use roads::{Road, RoadLayout};
@@ -17,6 +17,9 @@ pub struct Scenario {
     pub params: Params,
     /// Road segments, as in a road layout.
     pub segments: Vec<[[f64; 2]; 4]>,
+    /// The road's regions, as in a road layout (`airroads serve --region`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub regions: Option<Vec<roads::Region>>,
     /// The fleet.
     pub uavs: Vec<ScenarioUav>,
 }
@@ -112,8 +115,9 @@ impl Scenario {
     /// starts through a grid of cells D_c wide, and each point query through the road's index.
     pub fn validate_with(&self, rules: &LinkRules) -> Result<ValidScenario, ScenarioError> {
         self.params.validate().map_err(|e| invalid(format!("params.{}", e.field), e.detail()))?;
-        let road = Road::new(RoadLayout::new(self.segments.clone()))
-            .map_err(|e| invalid(e.field, format!("{} ({})", e.message, e.rule.name())))?;
+        let layout = RoadLayout { regions: self.regions.clone(), ..RoadLayout::new(self.segments.clone()) };
+        let road =
+            Road::new(layout).map_err(|e| invalid(e.field, format!("{} ({})", e.message, e.rule.name())))?;
         if self.uavs.is_empty() {
             return Err(invalid("uavs", "a scenario needs at least one UAV"));
         }

@@ -20,7 +20,13 @@ pub fn random_scenario(seed: u64) -> Scenario {
         let wanted = rng.random_range(2..=30usize);
         let uavs = random_fleet(&mut rng, &road, &params, wanted);
         if uavs.len() >= 2 {
-            return Scenario { name: format!("stress-{seed}"), params, segments: layout.segments, uavs };
+            return Scenario {
+                name: format!("stress-{seed}"),
+                params,
+                segments: layout.segments,
+                regions: None,
+                uavs,
+            };
         }
     }
 }
@@ -129,7 +135,7 @@ pub fn crowd_scenario(n: usize) -> Scenario {
         })
         .collect();
     let params = Params { t_max: 120.0, ..Params::default() };
-    Scenario { name: format!("crowd{n}"), params, segments, uavs }
+    Scenario { name: format!("crowd{n}"), params, segments, regions: None, uavs }
 }
 
 #[cfg(test)]

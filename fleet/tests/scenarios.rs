@@ -78,6 +78,7 @@ fn hairpin() -> Scenario {
         name: "hairpin".into(),
         params: Params { t_max: 60.0, ..Params::default() },
         segments: layout.segments,
+        regions: None,
         uavs: vec![
             uav(0, [1.0, -0.8], [11.0, 6.9]),
             uav(1, [1.0, 0.8], [10.0, 7.6]),

@@ -33,6 +33,7 @@ fn stall_time_counts_a_uav_that_hovers_with_a_goal_and_nothing_else() {
         name: "u-turn".into(),
         params,
         segments: layout.segments.clone(),
+        regions: None,
         uavs: vec![uav("a", [1.0, -0.5], [1.0, 8.5])],
     };
     let m = fly(&stuck.validate().unwrap(), NavMode::Alg1, "pd");
@@ -70,8 +71,9 @@ fn a_single_file_section_passes_both_directions_in_turn() {
         uavs.push(uav(&format!("e{i}"), [10.5, y], [-10.0, y]));
     }
     let params = Params { t_max: 120.0, ..Params::default() };
-    let s =
-        Scenario { name: "single-file".into(), params, segments: layout.segments, uavs }.validate().unwrap();
+    let s = Scenario { name: "single-file".into(), params, segments: layout.segments, regions: None, uavs }
+        .validate()
+        .unwrap();
     let nav = roads::Navigator::new(&s.road, NavMode::Traffic, &s.params);
     let sections = fleet::sections::sections(&s.road, &nav);
     assert_eq!(sections.len(), 1, "{sections:?}");
@@ -181,7 +183,7 @@ fn sharp_left_bend_road() -> Vec<[[f64; 2]; 4]> {
 
 fn on_road(name: &str, segments: Vec<[[f64; 2]; 4]>, uavs: Vec<ScenarioUav>) -> ValidScenario {
     let params = Params { t_max: 30.0, ..Params::default() };
-    Scenario { name: name.into(), params, segments, uavs }.validate().unwrap()
+    Scenario { name: name.into(), params, segments, regions: None, uavs }.validate().unwrap()
 }
 
 #[test]

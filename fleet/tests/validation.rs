@@ -29,6 +29,7 @@ fn scenario(uavs: Vec<ScenarioUav>) -> Scenario {
         name: "t".into(),
         params: Default::default(),
         segments: RoadLayout::straight(0.0, 30.0, 4.0, 3).segments,
+        regions: None,
         uavs,
     }
 }

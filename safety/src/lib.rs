@@ -21,7 +21,8 @@ pub use barrier::{Row, RowKind};
 pub use exact::{ExactError, ExactSolver, KktResidual, kkt_residual};
 pub use filter::{FilterOutcome, FilterSettings, Objective, SafetyFilter, Solver};
 pub use neighbour_rows::{
-    Neighbour, ReachDisk, WATCHDOG_HOLD_S, neighbour_rows, obstacle_row, point_disk, reach_disk,
+    Neighbour, ReachDisk, WATCHDOG_HOLD_S, flown_reach_disk, neighbour_rows, obstacle_row, point_disk,
+    reach_disk,
 };
 pub use qp::{CLARABEL_TOL, ConstraintRow, QpSolution, QpSolver};
 pub use road_rows::{ACTIVATION_BARRIER, RoadRule, activation_radius, road_rows};

@@ -39,14 +39,27 @@ pub struct ReachDisk {
 
 /// The disk that contains a UAV `t` seconds after its `last` state, frozen after `horizon`.
 pub fn reach_disk(last: UavState, t: f64, delta: f64, horizon: f64) -> ReachDisk {
+    disk_holding(last, t, delta, WATCHDOG_HOLD_S, horizon)
+}
+
+/// The disk that contains a UAV still flown by someone else (another region's fleet loop) `t`
+/// seconds after its `last` state: any command up to δ the whole time (no watchdog levels it out),
+/// so ρ(t) = ½δt², frozen after `horizon` like [`reach_disk`].
+pub fn flown_reach_disk(last: UavState, t: f64, delta: f64, horizon: f64) -> ReachDisk {
+    disk_holding(last, t, delta, f64::INFINITY, horizon)
+}
+
+/// The disk of a UAV accelerating at up to δ for at most `hold` seconds, then coasting, frozen after
+/// `horizon`: centre p + v·t, radius ½δτ² + δτ(t − τ) with τ = min(t, hold).
+fn disk_holding(last: UavState, t: f64, delta: f64, hold: f64, horizon: f64) -> ReachDisk {
     let frozen = t >= horizon;
     let t = t.clamp(0.0, horizon.max(0.0));
-    let tau = t.min(WATCHDOG_HOLD_S);
+    let tau = t.min(hold);
     let radius = 0.5 * delta * tau * tau + delta * tau * (t - tau);
     let (velocity, growth, growth_rate) = if frozen {
         (Vec2::zeros(), 0.0, 0.0)
     } else {
-        (last.v, delta * tau, if t < WATCHDOG_HOLD_S { delta } else { 0.0 })
+        (last.v, delta * tau, if t < hold { delta } else { 0.0 })
     };
     ReachDisk { centre: last.p + last.v * t, velocity, radius, growth, growth_rate }
 }
@@ -112,6 +125,19 @@ pub fn neighbour_rows(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_flown_disk_grows_at_full_delta_until_the_horizon() {
+        let last = UavState { p: Vec2::new(1.0, 0.0), v: Vec2::new(2.0, 0.0) };
+        let d = flown_reach_disk(last, 1.0, 5.0, 2.0);
+        assert!((d.radius - 2.5).abs() < 1e-12 && (d.growth - 5.0).abs() < 1e-12 && d.growth_rate == 5.0);
+        assert!((d.centre - Vec2::new(3.0, 0.0)).norm() < 1e-12);
+        // Held for 0.5 s only, the watchdog's disk is smaller: a flown UAV may do more.
+        assert!(reach_disk(last, 1.0, 5.0, 2.0).radius < d.radius);
+        let frozen = flown_reach_disk(last, 3.0, 5.0, 2.0);
+        assert_eq!(frozen.radius, 10.0);
+        assert_eq!((frozen.velocity, frozen.growth, frozen.growth_rate), (Vec2::zeros(), 0.0, 0.0));
+    }
 
     #[test]
     fn the_disk_grows_while_held_then_linearly_and_freezes_at_the_horizon() {

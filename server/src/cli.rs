@@ -14,6 +14,8 @@ pub struct Cli {
 
 /// Subcommands.
 #[derive(Debug, Subcommand)]
+// Parsed once at start and moved into its subcommand: the size of the largest flags is no cost.
+#[allow(clippy::large_enum_variant)]
 pub enum Command {
     /// Run a scenario headless until every UAV arrived or t_max; exit 0 when safe and all arrived,
     /// 1 otherwise, 2 for invalid input.
@@ -146,6 +148,23 @@ pub struct ServeArgs {
     /// `https://ops.example.com`.
     #[arg(long = "allow-origin", value_name = "ORIGIN")]
     pub allow_origins: Vec<String>,
+    /// Fly only this region of the scenario's road (its `regions`) and share states with the
+    /// neighbouring regions' servers over Zenoh (README "Regions over Zenoh"). Needs --scenario.
+    #[arg(long, value_name = "NAME", requires = "scenario")]
+    pub region: Option<String>,
+    /// Zenoh endpoint to listen on, e.g. `tcp/0.0.0.0:7447` (repeatable; with --region).
+    #[arg(long = "zenoh-listen", value_name = "ENDPOINT", requires = "region")]
+    pub zenoh_listen: Vec<String>,
+    /// Zenoh endpoint to connect to, e.g. `tcp/10.0.0.2:7447` (repeatable; with --region).
+    #[arg(long = "zenoh-connect", value_name = "ENDPOINT", requires = "region")]
+    pub zenoh_connect: Vec<String>,
+    /// Zenoh configuration file (JSON5, Zenoh's own format), applied before --zenoh-listen and
+    /// --zenoh-connect.
+    #[arg(long = "zenoh-config", value_name = "FILE", requires = "region")]
+    pub zenoh_config: Option<PathBuf>,
+    /// First chunks of the Zenoh keys: states go to `PREFIX/region/NAME/state`.
+    #[arg(long = "zenoh-prefix", value_name = "PREFIX", default_value = "airroads")]
+    pub zenoh_prefix: String,
     /// Flight options (`--policy` is the policy of UAVs added without one).
     #[command(flatten)]
     pub flight: FlightArgs,

@@ -93,9 +93,13 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
         ));
     }
     let link_rules = links::LinkRules { udp_hosts: args.allow_link_hosts.clone() };
-    let initial = match &args.scenario {
+    let mut initial = match &args.scenario {
         Some(path) => load_scenario_with(path, &link_rules)?,
         None => serve::demo_scenario().map_err(|e| format!("{e:#}"))?,
+    };
+    let region = match &args.region {
+        Some(name) => Some(keep_region(&mut initial, name, &args.zenoh_prefix)?),
+        None => None,
     };
     let policies = args.flight.policies(initial.params.delta)?;
     if args.cfsim > initial.uavs.len() {
@@ -151,7 +155,22 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
     config.limits = serve::listener::Limits::fitted(open_files);
     config.max_stream_clients = serve::ws::fitted_max_clients(open_files);
     config.link_rules = link_rules;
+    config.region = region;
     Ok(config)
+}
+
+/// `--region NAME`: keeps the scenario's UAVs whose start lies in a segment of that region (the
+/// others belong to other regions' servers) and returns the side the fleet loop shares with Zenoh.
+fn keep_region(
+    initial: &mut fleet::ValidScenario,
+    name: &str,
+    prefix: &str,
+) -> Result<serve::region::RegionShared, String> {
+    serve::region::neighbours_of(&initial.road, name).map_err(|e| format!("--region {e}"))?;
+    serve::region::check_prefix(prefix).map_err(|e| format!("--zenoh-prefix {e}"))?;
+    let road = &initial.road;
+    initial.uavs.retain(|u| road.region_of(road.locate(&u.start, None)).is_some_and(|r| r.name == name));
+    Ok(serve::region::RegionShared::new(name))
 }
 
 async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
@@ -200,7 +219,13 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
             None
         }
     };
+    // Zenoh starts after the fleet loop: states are published from the first tick it sees.
+    let zenoh = match &server.state().region {
+        Some(shared) => Some(start_region(args, shared, server.state()).await?),
+        None => None,
+    };
     let served = serve::serve(listener, server, shutdown_signal()).await;
+    drop(zenoh);
     if let Some(sink) = sink
         && let Ok(None) = tokio::task::spawn_blocking(move || sink.finish()).await
     {
@@ -210,6 +235,28 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
         sim.shutdown().await;
     }
     served
+}
+
+/// Opens the region's Zenoh session (`--region`), subscribed to the regions next to it.
+async fn start_region(
+    args: &ServeArgs,
+    shared: &serve::region::RegionShared,
+    app: &serve::state::AppState,
+) -> anyhow::Result<serve::region::RegionLink> {
+    let options = serve::region::ZenohOptions {
+        listen: args.zenoh_listen.clone(),
+        connect: args.zenoh_connect.clone(),
+        config_file: args.zenoh_config.clone(),
+        prefix: args.zenoh_prefix.clone(),
+    };
+    let road = app.road.borrow().layout.clone();
+    let road = roads::Road::new(road).context("the served road")?;
+    let neighbours = serve::region::neighbours_of(&road, &shared.name).map_err(anyhow::Error::msg)?;
+    let link = serve::region::start(&options, shared, &neighbours).await?;
+    let key = serve::region::state_key(&options.prefix, &shared.name);
+    say!("  region     {} ({} UAVs), states on {key}", shared.name, app.snapshots.borrow().uavs.len());
+    say!("  neighbours {}", if neighbours.is_empty() { "none".to_string() } else { neighbours.join(", ") });
+    Ok(link)
 }
 
 /// Completes on Ctrl-C or SIGTERM.

@@ -36,6 +36,7 @@ pub fn router() -> Router<AppState> {
         .route("/api/state", routing::get(get_state))
         .route("/api/metrics", routing::get(get_metrics))
         .route("/api/audit", routing::get(super::audit::list))
+        .route("/api/region/ownership", routing::get(get_ownership))
         .route("/api/rerun/selection", routing::get(get_rerun_selection).put(put_rerun_selection))
 }
 
@@ -386,6 +387,19 @@ async fn put_rerun_selection(
 /// Links with an error listed by id in `GET /api/metrics` (`links.errors`).
 pub const LISTED_LINK_ERRORS: usize = 16;
 
+/// `GET /api/region/ownership`: this region's ownership intervals (404 without `--region`).
+async fn get_ownership(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+    let Some(region) = &app.region else {
+        return Err(ApiError::new(
+            StatusCode::NOT_FOUND,
+            "no_region",
+            "this server flies no region (--region)",
+        ));
+    };
+    let (intervals, forgotten) = region.ownership.intervals();
+    Ok(Json(json!({"region": region.name, "intervals": intervals, "forgotten": forgotten})))
+}
+
 async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
     use std::sync::atomic::Ordering::Relaxed;
     let metrics = app.metrics.borrow().clone();
@@ -415,6 +429,9 @@ async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
     doc["storage"] = serde_json::to_value(app.storage.report()).unwrap_or(Value::Null);
     doc["mocap"] = app.mocap.report();
     doc["rerun"] = app.rerun.report();
+    if let Some(region) = &app.region {
+        doc["region"] = region.report(std::time::Instant::now());
+    }
     // The first links with an error, by UAV (the count of all is `links.with_error`).
     let snapshot = app.snapshots.borrow().clone();
     let errors: Vec<Value> = snapshot

@@ -101,6 +101,7 @@ impl Engine {
                 self.fleet.check_new(&id, &policy, &state, goal)?;
                 let link = self.links.make(&id, link.as_deref(), state, dt);
                 let undo = self.fleet.add_undoable(id.clone(), policy, link, state, goal)?;
+                self.log_ownership(|log, at| log.open(&id, at, "added"));
                 Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
             }
             Command::Land(Some(id)) => {
@@ -117,6 +118,7 @@ impl Engine {
             }
             Command::RemoveUav(id) => {
                 let undo = self.fleet.remove_undoable(&id)?;
+                self.log_ownership(|log, at| log.close(&id, at, "removed"));
                 Applied::new(Outcome::Done, undo, vec![Write::RemoveUav(id)])
             }
             Command::SetGoal(id, goal) => {
@@ -133,6 +135,11 @@ impl Engine {
                 }
                 let policy = self.default_policy.clone();
                 let undo = load_scenario(&mut self.fleet, &scenario, &policy, &self.links)?;
+                let fleet = &self.fleet;
+                self.log_ownership(|log, at| {
+                    log.close_all(at, "removed");
+                    fleet.uavs().iter().for_each(|u| log.open(&u.id, at, "added"));
+                });
                 self.road_changed();
                 let writes = vec![Write::Replace(SavedState::of(&self.fleet))];
                 Applied::new(Outcome::ScenarioLoaded { tick: self.ticks }, undo, writes)
@@ -142,6 +149,13 @@ impl Engine {
                 Applied::new(Outcome::Done, undo, vec![Write::Paused(hold)])
             }
         })
+    }
+
+    /// Records a change of ownership with `--region` (nothing without).
+    fn log_ownership(&self, change: impl FnOnce(&super::region::OwnershipLog, f64)) {
+        if let Some(region) = &self.region {
+            change(&region.ownership, super::region::ownership::wall_now());
+        }
     }
 
     /// Hands the gap's changes to the writer (after the tick published them). If the writer cannot

@@ -129,6 +129,12 @@ pub struct Engine {
     pub(crate) gap: super::changes::Gap,
     /// Answers held until the next snapshot shows what they say.
     pub(crate) after_publish: Vec<(Reply, Result<Outcome, ChangeError>)>,
+    /// The region this loop flies (`--region`): foreign UAVs in, snapshots out.
+    pub(crate) region: Option<super::region::RegionShared>,
+    /// The foreign UAVs of the next tick (buffer reused).
+    foreign: Vec<fleet::ForeignUav>,
+    /// The loop's side of the handover protocol (`--region`).
+    pub(crate) handover: Option<super::region::Handover>,
 }
 
 impl Engine {
@@ -156,6 +162,9 @@ impl Engine {
             next_seq: 0,
             gap: Default::default(),
             after_publish: Vec::new(),
+            region: None,
+            foreign: Vec::new(),
+            handover: None,
         }
     }
 
@@ -191,6 +200,7 @@ impl Engine {
             if !self.apply_commands() {
                 break;
             }
+            self.hand_over();
             self.tick(started);
             self.send_gap();
             next += period;
@@ -243,6 +253,15 @@ impl Engine {
     }
 
     fn tick(&mut self, started: Instant) {
+        if let Some(region) = &self.region {
+            // A copy under a short lock: the loop never waits on Zenoh.
+            let now = Instant::now();
+            region.foreign.copy_into(now, &mut self.foreign);
+            if let Some(handover) = &mut self.handover {
+                handover.adjust_foreign(&mut self.foreign, now);
+            }
+            self.fleet.set_foreign(&self.foreign);
+        }
         if !self.fleet.uavs().is_empty() {
             self.fleet.tick();
         }
@@ -251,7 +270,12 @@ impl Engine {
         let snapshot = Snapshot::of(&self.fleet, self.ticks, self.time, self.road_version);
         let duration_us = started.elapsed().as_secs_f64() * 1e6;
         self.stats.record(duration_us, &self.fleet, &snapshot);
-        self.channels.snapshots.send_replace(Arc::new(snapshot));
+        let snapshot = Arc::new(snapshot);
+        if let Some(region) = &self.region {
+            let published = super::region::Published { snapshot: snapshot.clone(), read_at: started };
+            region.published.send_replace(Some(published));
+        }
+        self.channels.snapshots.send_replace(snapshot);
         self.channels.metrics.send_replace(Arc::new(self.stats.metrics()));
         self.channels.clock.ticked();
         // The snapshot now shows every held answer's effect (or its absence, when taken back).

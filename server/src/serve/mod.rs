@@ -18,6 +18,7 @@ pub mod listener;
 pub mod mocap;
 pub mod openapi;
 pub mod persist;
+pub mod region;
 pub mod rerun_fleet;
 mod rerun_log;
 pub mod rerun_sink;
@@ -84,6 +85,9 @@ pub struct ServeConfig {
     pub max_stream_clients: usize,
     /// Which Crazyflie links may be given (remote UDP hosts: `--allow-link-host`).
     pub link_rules: links::LinkRules,
+    /// The region this server flies (`--region`) and what its loop shares with Zenoh; None: the
+    /// whole road, no Zenoh.
+    pub region: Option<region::RegionShared>,
 }
 
 impl ServeConfig {
@@ -109,6 +113,7 @@ impl ServeConfig {
             limits: listener::Limits::default(),
             max_stream_clients: ws::MAX_CLIENTS,
             link_rules: links::LinkRules::default(),
+            region: None,
         }
     }
 }
@@ -197,6 +202,7 @@ impl Server {
             (config.max_uavs, config.max_stream_clients, config.limits);
         let (allow_hosts, allow_origins) = (config.allow_hosts.clone(), config.allow_origins.clone());
         let link_rules = Arc::new(config.link_rules.clone());
+        let region = config.region.clone();
         let mut store = open_store(config.data_dir.as_deref())
             .with_context(|| format!("data directory {}", display_dir(config.data_dir.as_deref())))?;
         let factory = LinkFactory::new(tokio::runtime::Handle::current(), config.relay);
@@ -235,7 +241,15 @@ impl Server {
         let stop = Arc::new(AtomicBool::new(false));
         let mocap = factory.mocap.clone();
         let stops = factory.stops.clone();
-        let engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
+        let mut engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
+        engine.region.clone_from(&region);
+        if let Some(region) = &region {
+            engine.handover = region.take_handover();
+            let at = region::ownership::wall_now();
+            for u in engine.fleet.uavs() {
+                region.ownership.open(&u.id, at, "start");
+            }
+        }
         let fleet_loop = engine.spawn(stop.clone())?;
         let stream = Arc::new(StreamCounters::default());
         tokio::spawn(serialise(snapshots.clone(), frames_tx, encoder, stream.clone()));
@@ -266,6 +280,7 @@ impl Server {
             mocap: Arc::default(),
             rerun: Arc::default(),
             rerun_selection: Arc::new(watch::channel(Arc::from(Vec::new())).0),
+            region,
         };
         Ok(Self {
             app,

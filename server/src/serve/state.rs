@@ -132,6 +132,8 @@ pub struct AppState {
     pub body_budget: Arc<Semaphore>,
     /// Validations of large inputs (roads, scenarios) run one at a time, off the async workers.
     pub validation: Arc<Semaphore>,
+    /// The region this server flies and its neighbours' UAVs (`--region`; None without).
+    pub region: Option<super::region::RegionShared>,
     /// Motion-capture counters (all zero without `--mocap`).
     pub mocap: Arc<super::mocap::MocapCounters>,
     /// What the Rerun sink has done.

@@ -1,0 +1,55 @@
+//! The fleet loop's handover step between two ticks (`--region`; the protocol is in `handover`):
+//! releases the UAVs another region accepted, adopts the UAVs released to this one, and makes new
+//! offers. Only plain data moves here; nothing waits.
+
+use super::handover::{FleetChange, record};
+use super::ownership::wall_now;
+use crate::serve::engine::Engine;
+use std::sync::PoisonError;
+use std::time::Instant;
+use uav::Vec2;
+
+impl Engine {
+    /// One handover step (nothing without `--region`).
+    pub(crate) fn hand_over(&mut self) {
+        let Some(mut handover) = self.handover.take() else { return };
+        let now = Instant::now();
+        handover.expire(now);
+        let dt = self.fleet.config.params.dt;
+        for change in handover.receive(&self.fleet, self.max_uavs, now) {
+            match change {
+                FleetChange::Release { id, to, seq } => {
+                    let Ok(mut uav) = self.fleet.remove(&id) else { continue };
+                    // Its last command went out in the last tick: the link's state now is where
+                    // the new owner takes it on.
+                    let state = uav.link.state().filter(|s| s.is_finite()).unwrap_or(uav.state);
+                    uav.state = state;
+                    let rec = record(&uav);
+                    handover.ownership.close(&id, wall_now(), "handover");
+                    handover.released(id, to, seq, rec, now);
+                }
+                FleetChange::Adopt { id, uav } => {
+                    let state = uav.state();
+                    let policy = if self.fleet.policy_names().any(|n| n == uav.policy) {
+                        uav.policy
+                    } else {
+                        self.default_policy.clone()
+                    };
+                    let goal = uav
+                        .goal
+                        .map(|g| Vec2::new(g[0], g[1]))
+                        .filter(|g| self.fleet.check_goal(*g, "goal").is_ok());
+                    let link = self.links.make(&id, None, state, dt);
+                    self.fleet.add(id.clone(), policy, link, state, goal);
+                    handover.ownership.open(&id, wall_now(), "handover");
+                    handover.adopted(&id, now);
+                }
+            }
+        }
+        handover.offer(&self.fleet, self.road_version, now);
+        if let Some(region) = &self.region {
+            *region.handover_counts.lock().unwrap_or_else(PoisonError::into_inner) = handover.counts;
+        }
+        self.handover = Some(handover);
+    }
+}

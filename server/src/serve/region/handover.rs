@@ -1,0 +1,447 @@
+//! Handover of a UAV between two regions (README "Regions over Zenoh", ARCHITECTURE.md
+//! "Handover"): when a UAV's tracked segment lies in a neighbouring region, its owner A offers it
+//! to that region B with the whole UAV record; B reserves the id and accepts; A, at its next gap
+//! between ticks, removes the UAV from its fleet (its last command was the tick before) and releases
+//! it with the state its link gives now; B, at its next gap, adds it with that state and commands it
+//! from its next tick.
+//!
+//! Invariants: A commands the UAV until it releases it and never after (the UAV has left A's
+//! fleet); B commands it only after the release arrived, so two regions never command one UAV. The
+//! UAV is unowned from the release to B's next gap: at most one tick plus the message's transit
+//! ([`MAX_UNOWNED_S`]). Meanwhile A keeps the released UAV as a foreign UAV of its own fleet (a
+//! *ghost* whose reach disk grows from the release) until B's messages list it, and B leaves out of
+//! A's messages any UAV it has just adopted, so no UAV disappears from its neighbours' view or
+//! becomes a neighbour of itself.
+//!
+//! All of this runs on the fleet loop between ticks and never waits: messages come in through a
+//! bounded channel the Zenoh subscriber fills and go out through one a task empties.
+
+use super::ownership::OwnershipLog;
+use fleet::{Fleet, ForeignUav};
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::sync::mpsc::Receiver;
+use std::time::{Duration, Instant};
+use uav::{UavState, Vec2};
+
+/// The bound on a UAV's unowned time during a handover (s): one tick and the transit (stated in
+/// README and ARCHITECTURE.md; `tests/server_regions.rs` checks it on loopback).
+pub const MAX_UNOWNED_S: f64 = 0.25;
+/// An offer not answered in this time is dropped (and made again later).
+pub const OFFER_TIMEOUT: Duration = Duration::from_secs(1);
+/// An accepted offer whose release has not come in this time is forgotten. Longer than
+/// [`OFFER_TIMEOUT`] plus a tick, so a release sent for an accept always finds its reservation.
+pub const RESERVATION_TIMEOUT: Duration = Duration::from_secs(3);
+/// After a refusal, the same UAV is not offered again for this long.
+pub const RETRY_AFTER: Duration = Duration::from_secs(1);
+/// A ghost (a released UAV the new owner's messages do not list yet) is kept at most this long.
+pub const GHOST_TTL: Duration = Duration::from_secs(2);
+/// Most handover messages read per gap (the rest wait for the next one).
+pub const MAX_MESSAGES_PER_GAP: usize = 256;
+/// Largest handover message accepted (bytes).
+pub const MAX_MESSAGE_BYTES: usize = 16 << 10;
+
+/// Everything the new owner needs to fly a UAV on.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct UavRecord {
+    /// Position (m).
+    pub p: [f64; 2],
+    /// Velocity (m/s).
+    pub v: [f64; 2],
+    /// Its goal (None: it hovers).
+    pub goal: Option<[f64; 2]>,
+    /// Its policy's name.
+    pub policy: String,
+    /// Its link (None: simulated in the owner's process).
+    pub link: Option<String>,
+}
+
+impl UavRecord {
+    /// The record's state.
+    pub fn state(&self) -> UavState {
+        UavState { p: Vec2::new(self.p[0], self.p[1]), v: Vec2::new(self.v[0], self.v[1]) }
+    }
+}
+
+/// A handover message, on the key `PREFIX/region/<to>/handover` (JSON).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+pub enum Message {
+    /// `from` offers UAV `id` to `to`; `seq` names this offer.
+    Offer {
+        /// The owner.
+        from: String,
+        /// The region asked to take it.
+        to: String,
+        /// The UAV.
+        id: String,
+        /// The offer's number (per owner).
+        seq: u64,
+        /// The UAV as it is now.
+        uav: UavRecord,
+    },
+    /// `from` has reserved the id and will take the UAV when released.
+    Accept {
+        /// The region taking it.
+        from: String,
+        /// The owner.
+        to: String,
+        /// The UAV.
+        id: String,
+        /// The offer answered.
+        seq: u64,
+    },
+    /// `from` will not take the UAV (`reason` says why); the owner keeps flying it.
+    Refuse {
+        /// The region asked.
+        from: String,
+        /// The owner.
+        to: String,
+        /// The UAV.
+        id: String,
+        /// The offer answered.
+        seq: u64,
+        /// Why not.
+        reason: String,
+    },
+    /// `from` no longer commands the UAV: `to` owns it from now on, with this record.
+    Release {
+        /// The old owner.
+        from: String,
+        /// The new owner.
+        to: String,
+        /// The UAV.
+        id: String,
+        /// The accepted offer.
+        seq: u64,
+        /// The UAV when released.
+        uav: UavRecord,
+    },
+}
+
+impl Message {
+    /// The region the message is for.
+    pub fn to(&self) -> &str {
+        match self {
+            Message::Offer { to, .. }
+            | Message::Accept { to, .. }
+            | Message::Refuse { to, .. }
+            | Message::Release { to, .. } => to,
+        }
+    }
+
+    /// The region that sent it.
+    pub fn from(&self) -> &str {
+        match self {
+            Message::Offer { from, .. }
+            | Message::Accept { from, .. }
+            | Message::Refuse { from, .. }
+            | Message::Release { from, .. } => from,
+        }
+    }
+}
+
+/// An offer made and not answered yet.
+#[derive(Debug)]
+struct Offer {
+    to: String,
+    seq: u64,
+    sent: Instant,
+}
+
+/// An accepted offer waiting for its release.
+#[derive(Debug)]
+struct Reservation {
+    from: String,
+    accepted: Instant,
+}
+
+/// A released UAV that the new owner's messages do not list yet.
+#[derive(Debug)]
+struct Ghost {
+    state: UavState,
+    released: Instant,
+}
+
+/// What the loop does with the fleet for a handover (applied by the engine, which owns the links).
+#[derive(Debug, Clone, PartialEq)]
+pub enum FleetChange {
+    /// Remove UAV `id` and release it to `to` (offer `seq`).
+    Release {
+        /// The UAV.
+        id: String,
+        /// The new owner.
+        to: String,
+        /// The accepted offer.
+        seq: u64,
+    },
+    /// Add UAV `id` with this record.
+    Adopt {
+        /// The UAV.
+        id: String,
+        /// What it is.
+        uav: UavRecord,
+    },
+}
+
+/// Counters for `GET /api/metrics` `region.handover`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+pub struct HandoverCounts {
+    /// Offers made.
+    pub offered: u64,
+    /// UAVs released to another region.
+    pub released: u64,
+    /// UAVs adopted from another region.
+    pub adopted: u64,
+    /// Offers refused by this region.
+    pub refused: u64,
+    /// Messages dropped (malformed, not for this region, or the inbox full).
+    pub dropped: u64,
+}
+
+/// The loop's side of the handover protocol.
+#[derive(Debug)]
+pub struct Handover {
+    own: String,
+    inbox: Receiver<Message>,
+    outbox: tokio::sync::mpsc::Sender<Message>,
+    next_seq: u64,
+    offers: HashMap<String, Offer>,
+    reservations: HashMap<String, Reservation>,
+    retry_at: HashMap<String, Instant>,
+    ghosts: HashMap<String, Ghost>,
+    /// UAVs adopted lately: their old owner's messages may still list them.
+    adopted: HashMap<String, Instant>,
+    /// Each segment's region, when it is a neighbour of this one (by the road's version).
+    segment_owner: Vec<Option<String>>,
+    road_version: Option<u64>,
+    /// Who owned what when.
+    pub ownership: Arc<OwnershipLog>,
+    /// What happened so far.
+    pub counts: HandoverCounts,
+}
+
+impl Handover {
+    /// The protocol for region `own`, reading `inbox` and writing `outbox`.
+    pub fn new(
+        own: &str,
+        inbox: Receiver<Message>,
+        outbox: tokio::sync::mpsc::Sender<Message>,
+        ownership: Arc<OwnershipLog>,
+    ) -> Self {
+        Self {
+            own: own.into(),
+            inbox,
+            outbox,
+            next_seq: 0,
+            offers: HashMap::new(),
+            reservations: HashMap::new(),
+            retry_at: HashMap::new(),
+            ghosts: HashMap::new(),
+            adopted: HashMap::new(),
+            segment_owner: Vec::new(),
+            road_version: None,
+            ownership,
+            counts: HandoverCounts::default(),
+        }
+    }
+
+    /// Queues `message` for the Zenoh task; a full queue drops it (counted): offers and answers are
+    /// made again, and a release is only made when the queue has room for it.
+    fn send(&mut self, message: Message) {
+        if self.outbox.try_send(message).is_err() {
+            self.counts.dropped += 1;
+        }
+    }
+
+    /// Reads up to [`MAX_MESSAGES_PER_GAP`] messages: answers offers (checked against `fleet`, which
+    /// may hold at most `max_uavs`), and returns what the loop must do to the fleet now.
+    pub fn receive(&mut self, fleet: &Fleet, max_uavs: usize, now: Instant) -> Vec<FleetChange> {
+        let mut changes = Vec::new();
+        for _ in 0..MAX_MESSAGES_PER_GAP {
+            let Ok(message) = self.inbox.try_recv() else { break };
+            if message.to() != self.own || message.from() == self.own {
+                self.counts.dropped += 1;
+                continue;
+            }
+            match message {
+                Message::Offer { from, id, seq, uav, .. } => {
+                    let answer = match self.check_offer(fleet, max_uavs, &from, &id, &uav) {
+                        Ok(()) => {
+                            self.reservations
+                                .insert(id.clone(), Reservation { from: from.clone(), accepted: now });
+                            Message::Accept { from: self.own.clone(), to: from, id, seq }
+                        }
+                        Err(reason) => {
+                            self.counts.refused += 1;
+                            Message::Refuse { from: self.own.clone(), to: from, id, seq, reason }
+                        }
+                    };
+                    self.send(answer);
+                }
+                Message::Accept { from, id, seq, .. } => {
+                    let answered = self.offers.get(&id).is_some_and(|o| o.to == from && o.seq == seq);
+                    // Released only with room to send the release (only this thread sends, so the
+                    // room is still there when it is sent); otherwise the offer times out.
+                    if answered && self.outbox.capacity() > 0 && fleet.uav(&id).is_some() {
+                        self.offers.remove(&id);
+                        changes.push(FleetChange::Release { id, to: from, seq });
+                    }
+                }
+                Message::Refuse { from, id, seq, .. } => {
+                    if self.offers.get(&id).is_some_and(|o| o.to == from && o.seq == seq) {
+                        self.offers.remove(&id);
+                        self.retry_at.insert(id, now + RETRY_AFTER);
+                    }
+                }
+                Message::Release { id, uav, .. } => {
+                    // The old owner no longer commands it: taking it can never make two owners,
+                    // so a release is taken even when its reservation was forgotten.
+                    self.reservations.remove(&id);
+                    if fleet.uav(&id).is_none() && uav.state().is_finite() {
+                        changes.push(FleetChange::Adopt { id, uav });
+                    } else {
+                        self.counts.dropped += 1;
+                    }
+                }
+            }
+        }
+        changes
+    }
+
+    /// Why this region cannot take UAV `id` offered by `from` (Err: the reason sent back).
+    fn check_offer(
+        &self,
+        fleet: &Fleet,
+        max_uavs: usize,
+        from: &str,
+        id: &str,
+        uav: &UavRecord,
+    ) -> Result<(), String> {
+        uav::check_uav_id(id).map_err(|e| format!("id: {e}"))?;
+        if fleet.uav(id).is_some() {
+            return Err(format!("a UAV `{id}` is flown here already"));
+        }
+        if self.reservations.get(id).is_some_and(|r| r.from != from) {
+            return Err(format!("UAV `{id}` is being handed over from another region"));
+        }
+        if !uav.state().is_finite() {
+            return Err("its state is not finite".into());
+        }
+        if !fleet.policy_names().any(|n| n == uav.policy) {
+            return Err(format!("policy `{}` is not loaded here", uav.policy));
+        }
+        if uav.link.is_some() {
+            return Err("only simulated UAVs are handed over".into());
+        }
+        if fleet.uavs().len() + self.reservations.len() >= max_uavs {
+            return Err(format!("this region flies its maximum of {max_uavs} UAVs"));
+        }
+        Ok(())
+    }
+
+    /// Offers every UAV of `fleet` whose tracked segment lies in a neighbouring region to that
+    /// region (one offer at a time per UAV); `road_version` tells when to recompute the segments'
+    /// regions. Only simulated UAVs are offered (a Crazyflie's link is not handed over yet).
+    pub fn offer(&mut self, fleet: &Fleet, road_version: u64, now: Instant) {
+        if self.road_version != Some(road_version) {
+            self.road_version = Some(road_version);
+            let road = fleet.road();
+            let neighbours = super::neighbours_of(road, &self.own).unwrap_or_default();
+            self.segment_owner = (0..road.quads().len())
+                .map(|s| road.region_of(s).map(|r| r.name.clone()).filter(|n| neighbours.contains(n)))
+                .collect();
+        }
+        for u in fleet.uavs() {
+            let Some(Some(to)) = u.nav.tracker.current.and_then(|s| self.segment_owner.get(s)) else {
+                continue;
+            };
+            if self.offers.contains_key(&u.id)
+                || self.retry_at.get(&u.id).is_some_and(|t| now < *t)
+                || u.link.describe() != links::SIM_LINK
+                || !u.state.is_finite()
+            {
+                continue;
+            }
+            self.next_seq += 1;
+            let (to, seq) = (to.clone(), self.next_seq);
+            let offer = Message::Offer {
+                from: self.own.clone(),
+                to: to.clone(),
+                id: u.id.clone(),
+                seq,
+                uav: record(u),
+            };
+            self.offers.insert(u.id.clone(), Offer { to, seq, sent: now });
+            self.counts.offered += 1;
+            self.send(offer);
+        }
+    }
+
+    /// UAV `id` has left the fleet as `uav`: releases it to `to` and keeps it as a ghost.
+    pub fn released(&mut self, id: String, to: String, seq: u64, uav: UavRecord, now: Instant) {
+        self.counts.released += 1;
+        self.adopted.remove(&id);
+        self.ghosts.insert(id.clone(), Ghost { state: uav.state(), released: now });
+        self.send(Message::Release { from: self.own.clone(), to, id, seq, uav });
+    }
+
+    /// UAV `id` has joined the fleet from another region.
+    pub fn adopted(&mut self, id: &str, now: Instant) {
+        self.counts.adopted += 1;
+        self.ghosts.remove(id);
+        self.adopted.insert(id.to_string(), now);
+    }
+
+    /// Forgets what has waited too long: unanswered offers (made again after [`RETRY_AFTER`]),
+    /// reservations, ghosts and the adopted list.
+    pub fn expire(&mut self, now: Instant) {
+        let retry = &mut self.retry_at;
+        self.offers.retain(|id, o| {
+            let keep = now.saturating_duration_since(o.sent) < OFFER_TIMEOUT;
+            if !keep {
+                retry.insert(id.clone(), now + RETRY_AFTER);
+            }
+            keep
+        });
+        self.retry_at.retain(|_, t| now < *t);
+        self.reservations.retain(|_, r| now.saturating_duration_since(r.accepted) < RESERVATION_TIMEOUT);
+        self.ghosts.retain(|_, g| now.saturating_duration_since(g.released) < GHOST_TTL);
+        self.adopted.retain(|_, t| now.saturating_duration_since(*t) < GHOST_TTL);
+    }
+
+    /// Corrects the foreign UAVs of the next tick: leaves out the UAVs this region has just adopted
+    /// (their old owner's last messages may still list them) and adds the ghosts their new owner
+    /// does not list yet, aged from their release.
+    pub fn adjust_foreign(&mut self, foreign: &mut Vec<ForeignUav>, now: Instant) {
+        if !self.adopted.is_empty() {
+            foreign.retain(|f| !self.adopted.contains_key(&f.id));
+        }
+        if !self.ghosts.is_empty() {
+            for f in foreign.iter() {
+                self.ghosts.remove(&f.id);
+            }
+            for (id, ghost) in &self.ghosts {
+                let age_s = now.saturating_duration_since(ghost.released).as_secs_f64();
+                foreign.push(ForeignUav { id: id.clone(), state: ghost.state, age_s });
+            }
+        }
+    }
+}
+
+/// The record of a UAV flown here (its link is simulated).
+pub fn record(u: &fleet::Uav) -> UavRecord {
+    UavRecord {
+        p: [u.state.p.x, u.state.p.y],
+        v: [u.state.v.x, u.state.v.y],
+        goal: u.nav.goal().map(|g| [g.x, g.y]),
+        policy: u.policy.clone(),
+        link: None,
+    }
+}
+
+#[cfg(test)]
+#[path = "handover_tests.rs"]
+mod tests;

@@ -1,0 +1,217 @@
+//! The handover protocol between two regions' loops, messages carried by hand (as Zenoh would, in
+//! any order the tests choose): one owner at every step, refusals, stale answers and timeouts.
+
+use super::*;
+use fleet::{Fleet, FleetConfig};
+use links::SimLink;
+use policies::PolicyRegistry;
+use roads::{Region, Road, RoadLayout};
+use std::sync::mpsc::{SyncSender, sync_channel};
+
+/// One region's loop side: its fleet, its protocol, the ends the test carries messages through.
+struct Side {
+    fleet: Fleet,
+    handover: Handover,
+    inbox: SyncSender<Message>,
+    outbox: tokio::sync::mpsc::Receiver<Message>,
+}
+
+/// A straight road x ∈ [0, 40] of 8 segments: `west` 0–3, `east` 4–7.
+fn road() -> Road {
+    let mut layout = RoadLayout::straight(0.0, 40.0, 4.0, 8);
+    let region = |name: &str, first, last| Region { name: name.into(), segments: [first, last] };
+    layout.regions = Some(vec![region("west", 0, 3), region("east", 4, 7)]);
+    Road::new(layout).unwrap() // a valid layout: two regions covering the eight segments
+}
+
+fn side(name: &str) -> Side {
+    let config = FleetConfig::default();
+    let fleet = Fleet::new(config, road(), PolicyRegistry::with_pd(config.params.delta));
+    let (inbox, inbox_rx) = sync_channel(16);
+    let (outbox_tx, outbox) = tokio::sync::mpsc::channel(16);
+    let handover = Handover::new(name, inbox_rx, outbox_tx, Arc::new(OwnershipLog::default()));
+    Side { fleet, handover, inbox, outbox }
+}
+
+impl Side {
+    fn add(&mut self, id: &str, x: f64) {
+        let state = UavState { p: Vec2::new(x, 0.0), v: Vec2::new(1.0, 0.0) };
+        let link = Box::new(SimLink::new(state, self.fleet.config.params.dt));
+        self.fleet.add(id.into(), "pd".into(), link, state, Some(Vec2::new(35.0, 0.0)));
+        self.fleet.tick(); // tracks its segment
+    }
+
+    /// The next message it sent, if any.
+    fn sent(&mut self) -> Option<Message> {
+        self.outbox.try_recv().ok()
+    }
+
+    /// One gap: receives, applies the changes as the engine does, offers.
+    fn gap(&mut self, now: Instant) {
+        self.handover.expire(now);
+        for change in self.handover.receive(&self.fleet, 100, now) {
+            match change {
+                FleetChange::Release { id, to, seq } => {
+                    let uav = self.fleet.remove(&id).unwrap(); // receive() checked it is here
+                    let rec = record(&uav);
+                    self.handover.released(id, to, seq, rec, now);
+                }
+                FleetChange::Adopt { id, uav } => {
+                    let (state, dt) = (uav.state(), self.fleet.config.params.dt);
+                    self.fleet.add(id.clone(), uav.policy, Box::new(SimLink::new(state, dt)), state, None);
+                    self.handover.adopted(&id, now);
+                }
+            }
+        }
+        self.handover.offer(&self.fleet, 0, now);
+    }
+
+    fn owns(&self, id: &str) -> bool {
+        self.fleet.uav(id).is_some()
+    }
+}
+
+#[test]
+fn a_uav_in_the_neighbours_segment_is_offered_accepted_released_and_adopted_with_one_owner_throughout() {
+    let (mut west, mut east) = (side("west"), side("east"));
+    west.add("u", 10.0); // segment 2: west's own
+    let t0 = Instant::now();
+    west.gap(t0);
+    assert!(west.sent().is_none(), "a UAV in its own region is not offered");
+    west.fleet.remove("u").unwrap();
+    west.add("u", 21.0); // segment 4: east's
+    west.gap(t0);
+    let offer = west.sent().expect("an offer");
+    assert!(matches!(&offer, Message::Offer { to, id, .. } if to == "east" && id == "u"), "{offer:?}");
+    west.gap(t0);
+    assert!(west.sent().is_none(), "one offer at a time");
+    east.inbox.send(offer).unwrap();
+    east.gap(t0);
+    let accept = east.sent().expect("an accept");
+    assert!(matches!(accept, Message::Accept { .. }), "{accept:?}");
+    assert!(west.owns("u") && !east.owns("u"), "accepting does not take it");
+    west.inbox.send(accept).unwrap();
+    west.gap(t0);
+    assert!(!west.owns("u") && !east.owns("u"), "released, not adopted yet");
+    let release = west.sent().expect("a release");
+    let Message::Release { uav, .. } = &release else { panic!("{release:?}") };
+    assert_eq!(uav.p, [21.0, 0.0]);
+    assert_eq!(uav.goal, Some([35.0, 0.0]));
+    // Meanwhile west's fleet sees the UAV as a ghost, and east leaves west's stale listing of it out.
+    let mut foreign = Vec::new();
+    west.handover.adjust_foreign(&mut foreign, t0);
+    assert_eq!(foreign.iter().map(|f| f.id.as_str()).collect::<Vec<_>>(), ["u"]);
+    east.inbox.send(release).unwrap();
+    east.gap(t0);
+    assert!(east.owns("u") && !west.owns("u"));
+    let mut stale = vec![ForeignUav { id: "u".into(), state: UavState::at_rest(Vec2::zeros()), age_s: 0.0 }];
+    east.handover.adjust_foreign(&mut stale, t0);
+    assert!(stale.is_empty(), "an adopted UAV is never its own neighbour");
+    // Once east lists it, west's ghost goes.
+    let mut listed = vec![ForeignUav { id: "u".into(), state: UavState::at_rest(Vec2::zeros()), age_s: 0.0 }];
+    west.handover.adjust_foreign(&mut listed, t0);
+    assert_eq!(listed.len(), 1);
+    assert_eq!((west.handover.counts.released, east.handover.counts.adopted), (1, 1));
+}
+
+#[test]
+fn refusals_stale_answers_and_silence_leave_the_owner_flying_it() {
+    let (mut west, mut east) = (side("west"), side("east"));
+    west.add("u", 21.0);
+    east.add("u", 30.0); // east flies a UAV of the same id: it must refuse
+    let t0 = Instant::now();
+    west.gap(t0);
+    east.inbox.send(west.sent().unwrap()).unwrap();
+    east.gap(t0);
+    let refuse = east.sent().unwrap();
+    assert!(matches!(&refuse, Message::Refuse { reason, .. } if reason.contains("flown here")), "{refuse:?}");
+    west.inbox.send(refuse).unwrap();
+    west.gap(t0);
+    assert!(west.owns("u") && west.sent().is_none(), "kept, and not offered again at once");
+    west.gap(t0 + RETRY_AFTER);
+    let offer = west.sent().expect("offered again after the pause");
+    let Message::Offer { seq, .. } = offer else { panic!("{offer:?}") };
+    // An accept for another offer, or from another region, releases nothing.
+    for stale in [
+        Message::Accept { from: "east".into(), to: "west".into(), id: "u".into(), seq: seq + 7 },
+        Message::Accept { from: "north".into(), to: "west".into(), id: "u".into(), seq },
+        Message::Accept { from: "east".into(), to: "elsewhere".into(), id: "u".into(), seq },
+    ] {
+        west.inbox.send(stale).unwrap();
+    }
+    west.gap(t0 + RETRY_AFTER);
+    assert!(west.owns("u") && west.sent().is_none());
+    assert_eq!(west.handover.counts.dropped, 1, "the message for another region");
+    // Unanswered, the offer lapses and is made again.
+    west.gap(t0 + RETRY_AFTER + OFFER_TIMEOUT);
+    assert!(west.sent().is_none(), "lapsed, waiting before the next");
+    west.gap(t0 + 2 * RETRY_AFTER + OFFER_TIMEOUT);
+    assert!(matches!(west.sent(), Some(Message::Offer { seq: s, .. }) if s > seq));
+    assert!(west.owns("u"));
+}
+
+#[test]
+fn offers_of_unknown_policies_and_bad_states_are_refused_and_releases_of_owned_uavs_ignored() {
+    let mut east = side("east");
+    east.add("mine", 30.0);
+    let record = |policy: &str, p: [f64; 2]| UavRecord {
+        p,
+        v: [0.0, 0.0],
+        goal: None,
+        policy: policy.into(),
+        link: None,
+    };
+    let offer =
+        |id: &str, uav| Message::Offer { from: "west".into(), to: "east".into(), id: id.into(), seq: 1, uav };
+    east.inbox.send(offer("a", record("nope", [21.0, 0.0]))).unwrap();
+    east.inbox.send(offer("b", record("pd", [f64::NAN, 0.0]))).unwrap();
+    east.inbox.send(offer("bad id!", record("pd", [21.0, 0.0]))).unwrap();
+    let t0 = Instant::now();
+    east.gap(t0);
+    let reasons: Vec<String> = std::iter::from_fn(|| east.sent())
+        .map(|m| match m {
+            Message::Refuse { reason, .. } => reason,
+            other => panic!("{other:?}"),
+        })
+        .collect();
+    assert_eq!(reasons.len(), 3, "{reasons:?}");
+    assert!(
+        reasons[0].contains("policy `nope`")
+            && reasons[1].contains("not finite")
+            && reasons[2].starts_with("id")
+    );
+    // A release of a UAV east flies already changes nothing.
+    let release = Message::Release {
+        from: "west".into(),
+        to: "east".into(),
+        id: "mine".into(),
+        seq: 1,
+        uav: record("pd", [21.0, 0.0]),
+    };
+    east.inbox.send(release).unwrap();
+    east.gap(t0);
+    assert_eq!(east.fleet.uavs().len(), 1);
+    assert_eq!(east.fleet.uav("mine").unwrap().state.p, Vec2::new(30.0, 0.0));
+}
+
+#[test]
+fn messages_round_trip_as_json_and_unknown_fields_are_refused() {
+    let m = Message::Release {
+        from: "west".into(),
+        to: "east".into(),
+        id: "u".into(),
+        seq: 3,
+        uav: UavRecord {
+            p: [1.0, 2.0],
+            v: [0.5, 0.0],
+            goal: Some([3.0, 0.0]),
+            policy: "rl".into(),
+            link: None,
+        },
+    };
+    let text = serde_json::to_string(&m).unwrap();
+    assert!(text.contains(r#""kind":"release""#), "{text}");
+    assert_eq!(serde_json::from_str::<Message>(&text).unwrap(), m);
+    let extra = text.replacen('{', r#"{"x":1,"#, 1);
+    assert!(serde_json::from_str::<Message>(&extra).is_err());
+}

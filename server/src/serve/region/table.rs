@@ -1,0 +1,185 @@
+//! The latest message of each neighbouring region, shared between the Zenoh subscriber (which
+//! replaces a region's entry) and the fleet loop (which copies every entry out before each tick).
+//! The lock is held only to replace an entry or to copy the UAVs out, never across I/O, so the loop
+//! never waits on the network.
+
+use super::wire::RegionStates;
+use fleet::ForeignUav;
+use serde_json::{Value, json};
+use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+use std::sync::{Mutex, MutexGuard, PoisonError};
+use std::time::Instant;
+use uav::{UavState, Vec2};
+
+/// Added to every foreign state's age: the time a message spends between the sender's `put` and its
+/// arrival, which neither clock measures alone (loopback and LAN take well under this).
+pub const TRANSIT_ALLOWANCE_S: f64 = 0.01;
+
+/// A region's last message as received.
+#[derive(Debug)]
+struct Heard {
+    /// When it arrived (this process's monotonic clock).
+    received: Instant,
+    /// How old its states were when sent (the sender's measure).
+    age_at_send_s: f64,
+    /// Its UAVs: id and state.
+    uavs: Vec<(String, UavState)>,
+}
+
+/// The latest message per neighbouring region, and counters for `GET /api/metrics`.
+#[derive(Debug)]
+pub struct ForeignTable {
+    /// This server's region (messages naming it are refused).
+    own: String,
+    regions: Mutex<HashMap<String, Heard>>,
+    /// Messages accepted.
+    received: AtomicU64,
+    /// Messages refused (undecodable, or naming another region than their key).
+    refused: AtomicU64,
+}
+
+impl ForeignTable {
+    /// An empty table for the server of region `own`.
+    pub fn new(own: &str) -> Self {
+        Self {
+            own: own.into(),
+            regions: Mutex::default(),
+            received: AtomicU64::new(0),
+            refused: AtomicU64::new(0),
+        }
+    }
+
+    fn lock(&self) -> MutexGuard<'_, HashMap<String, Heard>> {
+        // The table holds plain data replaced whole: a panic elsewhere cannot leave it half-written.
+        self.regions.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Replaces the entry of the region `states` comes from (received at `at`); each message lists
+    /// all of a region's UAVs, so UAVs it no longer lists are forgotten. A message from `expected`'s
+    /// key that names another region, or this server's own, is refused.
+    pub fn accept(&self, expected: &str, states: RegionStates, at: Instant) -> bool {
+        if states.region != expected || states.region == self.own {
+            self.refuse();
+            return false;
+        }
+        let uavs = states
+            .uavs
+            .into_iter()
+            .map(|u| {
+                let (p, v) = (
+                    Vec2::new(f64::from(u.p[0]), f64::from(u.p[1])),
+                    Vec2::new(f64::from(u.v[0]), f64::from(u.v[1])),
+                );
+                (u.id, UavState { p, v })
+            })
+            .collect();
+        let heard = Heard { received: at, age_at_send_s: f64::from(states.age_at_send_s), uavs };
+        self.lock().insert(states.region, heard);
+        self.received.fetch_add(1, Relaxed);
+        true
+    }
+
+    /// Counts a message that could not be used.
+    pub fn refuse(&self) {
+        self.refused.fetch_add(1, Relaxed);
+    }
+
+    /// Every foreign UAV into `out` with its age at `now`: the sender's age at sending, plus the
+    /// time since it arrived, plus [`TRANSIT_ALLOWANCE_S`]. Reuses `out`'s strings.
+    pub fn copy_into(&self, now: Instant, out: &mut Vec<ForeignUav>) {
+        let regions = self.lock();
+        let mut n = 0;
+        for heard in regions.values() {
+            let age_s = heard.age_at_send_s
+                + now.saturating_duration_since(heard.received).as_secs_f64()
+                + TRANSIT_ALLOWANCE_S;
+            for (id, state) in &heard.uavs {
+                if let Some(slot) = out.get_mut(n) {
+                    slot.id.clone_from(id);
+                    (slot.state, slot.age_s) = (*state, age_s);
+                } else {
+                    out.push(ForeignUav { id: id.clone(), state: *state, age_s });
+                }
+                n += 1;
+            }
+        }
+        out.truncate(n);
+    }
+
+    /// `GET /api/metrics` `region`: its name, the foreign UAVs known (`foreign_uavs`), per
+    /// neighbouring region heard from the UAVs of its last message and that message's age at
+    /// `now`, and the counts of messages accepted and refused.
+    pub fn report(&self, now: Instant) -> Value {
+        let regions = self.lock();
+        let heard: serde_json::Map<String, Value> = regions
+            .iter()
+            .map(|(name, h)| {
+                let age = h.age_at_send_s + now.saturating_duration_since(h.received).as_secs_f64();
+                (name.clone(), json!({"uavs": h.uavs.len(), "age_s": age}))
+            })
+            .collect();
+        json!({
+            "name": self.own,
+            "foreign_uavs": regions.values().map(|h| h.uavs.len()).sum::<usize>(),
+            "heard": heard,
+            "messages": self.received.load(Relaxed),
+            "refused": self.refused.load(Relaxed),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::serve::region::wire::WireUav;
+    use std::time::Duration;
+
+    fn states(region: &str, ids: &[&str]) -> RegionStates {
+        let uav = |id: &&str| WireUav {
+            id: id.to_string(),
+            p: [1.0, 2.0],
+            v: [0.5, 0.0],
+            u: [0.0; 2],
+            target: [0.0; 2],
+            status: 0,
+            flags: 0,
+        };
+        RegionStates {
+            region: region.into(),
+            tick: 1,
+            time: 0.05,
+            age_at_send_s: 0.02,
+            uavs: ids.iter().map(uav).collect(),
+        }
+    }
+
+    #[test]
+    fn ages_count_from_arrival_and_a_new_message_replaces_the_region() {
+        let table = ForeignTable::new("west");
+        let t0 = Instant::now();
+        assert!(table.accept("east", states("east", &["a", "b"]), t0));
+        let mut out = Vec::new();
+        table.copy_into(t0 + Duration::from_millis(100), &mut out);
+        assert_eq!(out.len(), 2);
+        let expected = 0.02 + 0.1 + TRANSIT_ALLOWANCE_S;
+        assert!(out.iter().all(|f| (f.age_s - expected).abs() < 1e-6), "{out:?}");
+        assert_eq!(out[0].state.p, Vec2::new(1.0, 2.0));
+        assert!(table.accept("east", states("east", &["b"]), t0 + Duration::from_millis(150)));
+        table.copy_into(t0 + Duration::from_millis(150), &mut out);
+        assert_eq!(out.iter().map(|f| f.id.as_str()).collect::<Vec<_>>(), ["b"]);
+        assert_eq!(table.report(t0)["foreign_uavs"], 1);
+    }
+
+    #[test]
+    fn a_message_naming_another_region_or_this_one_is_refused() {
+        let table = ForeignTable::new("west");
+        let t0 = Instant::now();
+        assert!(!table.accept("east", states("north", &["a"]), t0));
+        assert!(!table.accept("west", states("west", &["a"]), t0));
+        let mut out = Vec::new();
+        table.copy_into(t0, &mut out);
+        assert!(out.is_empty());
+        assert_eq!(table.report(t0)["refused"], 2);
+    }
+}

@@ -1,0 +1,315 @@
+//! Two `airroads serve --region` processes on loopback, joined over Zenoh (one listens, the other
+//! connects; multicast scouting is off whenever endpoints are given, so runs never see each other).
+//! A road of two regions, UAVs of each flying head-on across the border into the other: each region
+//! sees the other's UAVs (`/api/metrics` `region`) and every pair, own and foreign, stays D_c apart.
+//! Three regions as three processes: UAVs fly through all three and are handed over at each
+//! border; the regions' ownership logs (`/api/region/ownership`) never overlap for a UAV and leave
+//! it unowned for at most `MAX_UNOWNED_S`; every UAV arrives, every pair D_c apart.
+//! Also: `--region` errors name the region and the known ones.
+
+mod support;
+
+use serde_json::{Value, json};
+use std::io::{BufRead, BufReader};
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// D_c of the scenario's default parameters (m).
+const D_C: f64 = 0.3;
+/// Below D_c by at most this much (m), beyond what the two snapshots' skew explains.
+const TOLERANCE_M: f64 = 0.02;
+/// A snapshot may be this old when served (one tick, s).
+const TICK_S: f64 = 0.05;
+/// The stated bound on a UAV's unowned time in a handover (`region::handover::MAX_UNOWNED_S`).
+const MAX_UNOWNED_S: f64 = 0.25;
+
+fn scratch(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("airroads-regions-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A straight road from x = 0 to 40 (8 segments of 5 m, 4 m wide): `west` segments 0–3, `east` 4–7.
+/// Two UAVs start in each region and fly into the other, head-on through the border at x = 20.
+fn two_region_scenario(dir: &Path) -> PathBuf {
+    let scenario = json!({
+        "name": "border",
+        "segments": roads::RoadLayout::straight(0.0, 40.0, 4.0, 8).segments,
+        "regions": [{"name": "west", "segments": [0, 3]}, {"name": "east", "segments": [4, 7]}],
+        "uavs": [
+            {"id": "w1", "start": [14.0, 0.1], "goal": [32.0, 0.1]},
+            {"id": "w2", "start": [12.0, -1.0], "goal": [30.0, -1.0]},
+            {"id": "e1", "start": [26.0, -0.1], "goal": [8.0, -0.1]},
+            {"id": "e2", "start": [28.0, 1.0], "goal": [10.0, 1.0]}
+        ]
+    });
+    let path = dir.join("border.json");
+    std::fs::write(&path, scenario.to_string()).unwrap();
+    path
+}
+
+/// A server process, killed when dropped (a failing test leaves nothing running).
+struct Proc(Child);
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+/// Starts `airroads serve --ephemeral` on 127.0.0.1:0 with `args`; returns it and its address.
+fn serve(args: &[&str]) -> (Proc, SocketAddr) {
+    let mut child = Command::new(env!("CARGO_BIN_EXE_airroads"))
+        .args(["serve", "--addr", "127.0.0.1:0", "--ephemeral"])
+        .args(args)
+        .env_remove("AIRROADS_TOKEN")
+        .stdout(Stdio::piped())
+        .stderr(Stdio::inherit())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
+    let first = lines.next().expect("a banner line").unwrap();
+    let addr = first.rsplit("http://").next().unwrap().trim().parse().unwrap_or_else(|_| panic!("{first}"));
+    // Keep draining stdout so the server never blocks on a full pipe.
+    std::thread::spawn(move || for _ in lines.by_ref() {});
+    (Proc(child), addr)
+}
+
+/// A loopback TCP port free a moment ago.
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+async fn get(addr: SocketAddr, path: &str) -> Value {
+    let (status, body) = support::raw(addr, "GET", path, None, &[]).await;
+    assert_eq!(status, 200, "{path}: {body}");
+    serde_json::from_str(&body).unwrap()
+}
+
+/// (id, position, velocity) of every UAV in a `/api/state` document.
+fn uavs(state: &Value) -> Vec<(String, [f64; 2], [f64; 2])> {
+    let pair = |v: &Value| [v[0].as_f64().unwrap(), v[1].as_f64().unwrap()];
+    state["uavs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|u| (u["id"].as_str().unwrap().to_string(), pair(&u["p"]), pair(&u["v"])))
+        .collect()
+}
+
+fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
+    (a[0] - b[0]).hypot(a[1] - b[1])
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn two_regions_see_each_other_and_keep_d_c_across_the_border() {
+    let dir = scratch("border");
+    let scenario = two_region_scenario(&dir);
+    let scenario = scenario.to_str().unwrap();
+    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
+    let (_west, west) = serve(&["--scenario", scenario, "--region", "west", "--zenoh-listen", &endpoint]);
+    let (_east, east) = serve(&["--scenario", scenario, "--region", "east", "--zenoh-connect", &endpoint]);
+    // Each region flies only the UAVs that start in it.
+    let ids = |state: &Value| uavs(state).into_iter().map(|u| u.0).collect::<Vec<_>>();
+    assert_eq!(ids(&get(west, "/api/state").await), ["w1", "w2"]);
+    assert_eq!(ids(&get(east, "/api/state").await), ["e1", "e2"]);
+    let started = Instant::now();
+    let (mut seen_west, mut seen_east) = (false, false);
+    let mut closest = f64::INFINITY;
+    let mut crossed = false;
+    while started.elapsed() < Duration::from_secs(20) {
+        let asked = Instant::now();
+        let (w, e) = tokio::join!(get(west, "/api/state"), get(east, "/api/state"));
+        let skew = asked.elapsed().as_secs_f64() + 2.0 * TICK_S;
+        let (w, e) = (uavs(&w), uavs(&e));
+        for (list, name) in [(&w, "west"), (&e, "east")] {
+            for (i, a) in list.iter().enumerate() {
+                for b in &list[i + 1..] {
+                    let d = distance(a.1, b.1);
+                    assert!(d >= D_C - TOLERANCE_M, "{name}: {} and {} {d} m apart", a.0, b.0);
+                }
+            }
+        }
+        // Across the regions the two snapshots were taken up to `skew` apart: allow the distance
+        // the pair's relative speed covers in that time.
+        for a in &w {
+            // A UAV handed over between the two requests is in both snapshots: not a pair.
+            for b in e.iter().filter(|b| b.0 != a.0) {
+                let d = distance(a.1, b.1);
+                let closing = distance(a.2, b.2);
+                closest = closest.min(d);
+                assert!(
+                    d >= D_C - TOLERANCE_M - closing * skew,
+                    "{} (west) and {} (east) {d} m apart (skew {skew} s, relative speed {closing} m/s)",
+                    a.0,
+                    b.0
+                );
+            }
+        }
+        crossed |= w.iter().any(|u| u.1[0] > 20.0) || e.iter().any(|u| u.1[0] < 20.0);
+        let (mw, me) = tokio::join!(get(west, "/api/metrics"), get(east, "/api/metrics"));
+        seen_west |= mw["region"]["foreign_uavs"] == 2 && mw["region"]["heard"]["east"]["uavs"] == 2;
+        seen_east |= me["region"]["foreign_uavs"] == 2 && me["region"]["heard"]["west"]["uavs"] == 2;
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert!(seen_west && seen_east, "each region must see the other's two UAVs");
+    assert!(crossed, "some UAV must have crossed the border");
+    assert!(closest < 3.0, "the UAVs must have met (closest {closest} m)");
+    for metrics in [get(west, "/api/metrics").await, get(east, "/api/metrics").await] {
+        assert_eq!(metrics["region"]["refused"], 0, "{}", metrics["region"]);
+    }
+}
+
+/// UAVs flying each way in the three-region test (30 in all).
+const EACH_WAY: usize = 15;
+
+/// A straight road x ∈ [0, 60] (12 segments of 5 m, 4 m wide) in three regions `a` 0–3, `b` 4–7,
+/// `c` 8–11, with [`EACH_WAY`] UAVs flying from each end to the other through all three: a grid of
+/// starts at one end, a grid of goals at the other (3 m by 0.7 m).
+fn three_region_scenario(dir: &Path) -> PathBuf {
+    let mut uavs = Vec::new();
+    for k in 0..EACH_WAY {
+        let (x, y) = (3.0 + 3.0 * (k / 3) as f64, -1.4 + 0.7 * (k % 3) as f64);
+        uavs.push(json!({"id": format!("east{k}"), "start": [x, y], "goal": [x + 43.5, y]}));
+        uavs.push(json!({"id": format!("west{k}"), "start": [60.0 - x, -y], "goal": [16.5 - x, -y]}));
+    }
+    let scenario = json!({
+        "name": "three",
+        "params": {"t_max": 120.0},
+        "segments": roads::RoadLayout::straight(0.0, 60.0, 4.0, 12).segments,
+        "regions": [
+            {"name": "a", "segments": [0, 3]}, {"name": "b", "segments": [4, 7]}, {"name": "c", "segments": [8, 11]}
+        ],
+        "uavs": uavs,
+    });
+    let path = dir.join("three.json");
+    std::fs::write(&path, scenario.to_string()).unwrap();
+    path
+}
+
+/// Every UAV's ownership intervals over all regions, by UAV: `(from, to, region)`, by `from`.
+async fn ownership(
+    regions: &[(&str, SocketAddr)],
+) -> std::collections::BTreeMap<String, Vec<(f64, f64, String)>> {
+    let mut by_uav: std::collections::BTreeMap<String, Vec<(f64, f64, String)>> = Default::default();
+    for (name, addr) in regions {
+        let doc = get(*addr, "/api/region/ownership").await;
+        assert_eq!(doc["region"], *name);
+        for i in doc["intervals"].as_array().unwrap() {
+            let to = i["to"].as_f64().unwrap_or(f64::INFINITY);
+            let entry = (i["from"].as_f64().unwrap(), to, name.to_string());
+            by_uav.entry(i["id"].as_str().unwrap().to_string()).or_default().push(entry);
+        }
+    }
+    for intervals in by_uav.values_mut() {
+        intervals.sort_by(|a, b| a.0.total_cmp(&b.0));
+    }
+    by_uav
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn three_regions_hand_uavs_over_with_one_owner_at_every_moment() {
+    let dir = scratch("three");
+    let scenario = three_region_scenario(&dir);
+    let scenario = scenario.to_str().unwrap();
+    let ports: Vec<String> = (0..3).map(|_| format!("tcp/127.0.0.1:{}", free_port())).collect();
+    let (_a, a) = serve(&["--scenario", scenario, "--region", "a", "--zenoh-listen", &ports[0]]);
+    let (_b, b) = serve(&[
+        "--scenario",
+        scenario,
+        "--region",
+        "b",
+        "--zenoh-listen",
+        &ports[1],
+        "--zenoh-connect",
+        &ports[0],
+    ]);
+    let (_c, c) = serve(&[
+        "--scenario",
+        scenario,
+        "--region",
+        "c",
+        "--zenoh-listen",
+        &ports[2],
+        "--zenoh-connect",
+        &ports[0],
+        "--zenoh-connect",
+        &ports[1],
+    ]);
+    let regions = [("a", a), ("b", b), ("c", c)];
+    let started = Instant::now();
+    let mut arrived = Vec::new();
+    while started.elapsed() < Duration::from_secs(110) {
+        let asked = Instant::now();
+        let (sa, sb, sc) = tokio::join!(get(a, "/api/state"), get(b, "/api/state"), get(c, "/api/state"));
+        let skew = asked.elapsed().as_secs_f64() + 2.0 * TICK_S;
+        let states = [&sa, &sb, &sc];
+        let all: Vec<_> = states.iter().flat_map(|s| uavs(s)).collect();
+        for (i, x) in all.iter().enumerate() {
+            for y in &all[i + 1..] {
+                let d = distance(x.1, y.1);
+                let slack = TOLERANCE_M + distance(x.2, y.2) * skew;
+                // The same UAV in two snapshots (taken around its handover) is not a pair.
+                assert!(x.0 == y.0 || d >= D_C - slack, "{} and {} {d} m apart", x.0, y.0);
+            }
+        }
+        arrived = states
+            .iter()
+            .flat_map(|s| s["uavs"].as_array().unwrap().iter())
+            .filter(|u| u["arrived"] == true)
+            .map(|u| u["id"].as_str().unwrap().to_string())
+            .collect();
+        if arrived.len() == 2 * EACH_WAY {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    assert_eq!(arrived.len(), 2 * EACH_WAY, "all arrive: {arrived:?}");
+    let by_uav = ownership(&regions).await;
+    assert_eq!(by_uav.len(), 2 * EACH_WAY, "{by_uav:?}");
+    let mut longest_gap = 0.0f64;
+    for (id, intervals) in &by_uav {
+        let path: Vec<&str> = intervals.iter().map(|i| i.2.as_str()).collect();
+        let expected = if id.starts_with("east") { ["a", "b", "c"] } else { ["c", "b", "a"] };
+        assert_eq!(path, expected, "{id}: {intervals:?}");
+        for pair in intervals.windows(2) {
+            let gap = pair[1].0 - pair[0].1;
+            assert!(gap >= 0.0, "{id}: owned by {} and {} at once ({intervals:?})", pair[0].2, pair[1].2);
+            assert!(gap <= MAX_UNOWNED_S, "{id}: unowned {gap} s between {} and {}", pair[0].2, pair[1].2);
+            longest_gap = longest_gap.max(gap);
+        }
+        assert!(intervals.last().unwrap().1.is_infinite(), "{id}: owned at the end");
+    }
+    eprintln!("{} handovers, longest unowned gap {longest_gap:.3} s", 4 * EACH_WAY);
+    for (_, addr) in regions {
+        let metrics = get(addr, "/api/metrics").await;
+        assert_eq!(metrics["region"]["refused"], 0, "{}", metrics["region"]);
+    }
+}
+
+#[test]
+fn an_unknown_region_is_refused_naming_the_known_ones() {
+    let dir = scratch("unknown");
+    let scenario = two_region_scenario(&dir);
+    let out = Command::new(env!("CARGO_BIN_EXE_airroads"))
+        .args(["serve", "--addr", "127.0.0.1:0", "--ephemeral", "--region", "north", "--scenario"])
+        .arg(&scenario)
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("--region `north`") && err.contains("known: west, east"), "{err}");
+    // Zenoh flags need --region, and --region needs --scenario.
+    for args in [&["--zenoh-listen", "tcp/127.0.0.1:0"][..], &["--region", "west"][..]] {
+        let out = Command::new(env!("CARGO_BIN_EXE_airroads"))
+            .args(["serve", "--addr", "127.0.0.1:0", "--ephemeral"])
+            .args(args)
+            .output()
+            .unwrap();
+        assert_eq!(out.status.code(), Some(2), "{args:?}");
+    }
+}
