@@ -7,6 +7,7 @@ use links::SimLink;
 use policies::PolicyRegistry;
 use roads::{Region, Road, RoadLayout};
 use std::sync::mpsc::{SyncSender, sync_channel};
+use uav::Vec2;
 
 /// One region's loop side: its fleet, its protocol, the ends the test carries messages through.
 struct Side {

@@ -9,6 +9,7 @@
 
 mod engine_side;
 pub mod handover;
+pub mod messages;
 pub mod ownership;
 pub mod table;
 pub mod wire;
