@@ -176,8 +176,17 @@ test("10,000 UAVs loaded over REST are drawn from the binary stream; one is sele
       };
       const free = (q) => snapshot.uavs.every((u) => Math.hypot(u.p[0] - q[0], u.p[1] - q[1]) >= 1);
       const far = (q) => Math.hypot(q[0] - p[0], q[1] - p[1]);
-      const candidates = app.geometry.centerline.filter((q) => far(q) >= 2 && far(q) <= 20 && seen(q) && free(q));
-      const near20 = app.geometry.centerline.filter((q) => far(q) <= 20);
+      // Points every 0.5 m along the centre line (its vertices alone are tens of metres apart here,
+      // and whether the few near the UAV are free depends on where the fleet happened to stop).
+      const line = app.geometry.centerline;
+      const along = line.flatMap((a, i) => {
+        const b = line[i + 1];
+        if (!b) return [a];
+        const steps = Math.max(1, Math.ceil(Math.hypot(b[0] - a[0], b[1] - a[1]) / 0.5));
+        return Array.from({ length: steps }, (_, k) => [a[0] + (b[0] - a[0]) * k / steps, a[1] + (b[1] - a[1]) * k / steps]);
+      });
+      const candidates = along.filter((q) => far(q) >= 2 && far(q) <= 20 && seen(q) && free(q));
+      const near20 = along.filter((q) => far(q) <= 20);
       return candidates.sort((a, b) => far(a) - far(b))[0] || JSON.stringify({ n: near20.length, seen: near20.filter(seen).length, free: near20.filter(free).length, scale: app.camera.scale, w: app.canvas.clientWidth, h: app.canvas.clientHeight, p });
     }, [p]);
     assert.ok(Array.isArray(goal), `a free point on the centre line near the UAV: ${goal}`);
