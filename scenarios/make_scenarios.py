@@ -35,9 +35,11 @@ def road(points, width):
     return [[r[i + 1], r[i], l[i + 1], l[i]] for i in range(len(points) - 1)]
 
 
-def write(name, params, segments, uavs):
-    doc = {"name": name, "params": params, "segments": segments,
-           "uavs": [{"id": i, "start": s, "goal": g} for i, s, g in uavs]}
+def write(name, params, segments, uavs, regions=None):
+    doc = {"name": name, "params": params, "segments": segments}
+    if regions:
+        doc["regions"] = [{"name": n, "segments": [a, b]} for n, a, b in regions]
+    doc["uavs"] = [{"id": i, "start": s, "goal": g} for i, s, g in uavs]
     path = os.path.join(os.path.dirname(__file__), name + ".json")
     with open(path, "w") as f:
         json.dump(doc, f, indent=1)
@@ -83,3 +85,14 @@ write("bends10", {"t_max": 120},
       road([[float(x), float(y)] for x, y in bends], 2.0),
       [(f"u{i}", s, g) for i, (s, g) in enumerate(zip(starts, goals))]
       + [(f"v{i}", [g[0], g[1]], [s[0], s[1]]) for i, (s, g) in enumerate(zip(starts, goals))])
+
+# Three regions for `serve --region` (README "Regions over Zenoh"): a straight road 60 m long, 4 m
+# wide, in regions a (segments 0-3), b (4-7) and c (8-11), with six UAVs flying each way through all.
+three = []
+for k in range(6):
+    x, y = 3.0 + 3.0 * (k // 3), -1.0 + 2.0 * (k % 3) / 2
+    three.append((f"east{k}", [x, y], [x + 50.0, y]))
+    three.append((f"west{k}", [60.0 - x, -y], [10.0 - x, -y]))
+write("regions3", {"t_max": 120},
+      road([[5.0 * k, 0.0] for k in range(13)], 4.0), three,
+      regions=[("a", 0, 3), ("b", 4, 7), ("c", 8, 11)])

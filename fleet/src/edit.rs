@@ -149,6 +149,11 @@ impl Fleet {
         Ok(self.uavs.remove(k))
     }
 
+    /// Removes every UAV (a region server giving way to another owner) and returns them.
+    pub fn take_all(&mut self) -> Vec<Uav> {
+        std::mem::take(&mut self.uavs)
+    }
+
     /// Sets (Some) or clears (None: the UAV hovers where it is) the goal of a UAV.
     pub fn set_goal(&mut self, id: &str, goal: Option<Vec2>) -> Result<(), EditError> {
         let k = self.index(id)?;

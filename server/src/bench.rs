@@ -18,6 +18,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         BenchTarget::Durability => return crate::bench_durability::main(&args),
         BenchTarget::Fleet => return crate::bench_fleet::main(&args),
         BenchTarget::Scale => return crate::bench_scale::main(&args),
+        BenchTarget::Regions => return crate::bench_regions::main(&args),
         BenchTarget::Solver => return crate::bench_solver::main(args.instances, args.seed),
     }
     ExitCode::SUCCESS

@@ -150,17 +150,24 @@ pub struct ServeArgs {
     pub allow_origins: Vec<String>,
     /// Fly only this region of the scenario's road (its `regions`) and share states with the
     /// neighbouring regions' servers over Zenoh (README "Regions over Zenoh"). Needs --scenario.
-    #[arg(long, value_name = "NAME", requires = "scenario")]
+    /// A server started while the region's owner is alive joins as its standby.
+    #[arg(long, value_name = "NAME", requires = "scenario", group = "regional")]
     pub region: Option<String>,
-    /// Zenoh endpoint to listen on, e.g. `tcp/0.0.0.0:7447` (repeatable; with --region).
-    #[arg(long = "zenoh-listen", value_name = "ENDPOINT", requires = "region")]
+    /// Be the hot standby of this region: mirror its owner over Zenoh and take over within 1 s
+    /// when the owner is gone (README "Regions over Zenoh"). Needs --scenario (for the road).
+    #[arg(long = "standby-for", value_name = "NAME", requires = "scenario", group = "regional")]
+    pub standby_for: Option<String>,
+    /// Zenoh endpoint to listen on, e.g. `tcp/0.0.0.0:7447` (repeatable; with --region or
+    /// --standby-for).
+    #[arg(long = "zenoh-listen", value_name = "ENDPOINT", requires = "regional")]
     pub zenoh_listen: Vec<String>,
-    /// Zenoh endpoint to connect to, e.g. `tcp/10.0.0.2:7447` (repeatable; with --region).
-    #[arg(long = "zenoh-connect", value_name = "ENDPOINT", requires = "region")]
+    /// Zenoh endpoint to connect to, e.g. `tcp/10.0.0.2:7447` (repeatable; with --region or
+    /// --standby-for).
+    #[arg(long = "zenoh-connect", value_name = "ENDPOINT", requires = "regional")]
     pub zenoh_connect: Vec<String>,
     /// Zenoh configuration file (JSON5, Zenoh's own format), applied before --zenoh-listen and
     /// --zenoh-connect.
-    #[arg(long = "zenoh-config", value_name = "FILE", requires = "region")]
+    #[arg(long = "zenoh-config", value_name = "FILE", requires = "regional")]
     pub zenoh_config: Option<PathBuf>,
     /// First chunks of the Zenoh keys: states go to `PREFIX/region/NAME/state`.
     #[arg(long = "zenoh-prefix", value_name = "PREFIX", default_value = "airroads")]
@@ -283,6 +290,9 @@ pub struct BenchArgs {
     /// Seed of the random instances (`solver`).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Region servers of the deployment (`regions`).
+    #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(2..=16))]
+    pub regions: u64,
 }
 
 /// Benchmarks.
@@ -303,6 +313,9 @@ pub enum BenchTarget {
     /// Per-stage time of one tick (navigation and traffic rules, policies, filter, ...) per UAV, for
     /// dense two-way crowds of each `--uavs` size.
     Fleet,
+    /// `--regions` region servers in one process over Zenoh (loopback TCP) flying the trunk road's
+    /// `--uavs` UAVs: bytes per second each publishes, the age of the foreign states used, ticks.
+    Regions,
     /// Tick p50/p99 and each stage's time for UAVs flying both ways along a long winding trunk road
     /// (1.2 km per 1,000 UAVs), for each `--uavs` size, and how the per-UAV cost grows.
     Scale,

@@ -14,6 +14,7 @@ mod bench;
 mod bench_crazyflie;
 mod bench_durability;
 mod bench_fleet;
+mod bench_regions;
 mod bench_scale;
 mod bench_server;
 mod bench_solver;

@@ -97,9 +97,16 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
         Some(path) => load_scenario_with(path, &link_rules)?,
         None => serve::demo_scenario().map_err(|e| format!("{e:#}"))?,
     };
-    let region = match &args.region {
-        Some(name) => Some(keep_region(&mut initial, name, &args.zenoh_prefix)?),
-        None => None,
+    let region = match (&args.region, &args.standby_for) {
+        (Some(name), _) => Some(keep_region(&mut initial, name, &args.zenoh_prefix)?),
+        (None, Some(name)) => {
+            let shared = keep_region(&mut initial, name, &args.zenoh_prefix)
+                .map_err(|e| e.replace("--region", "--standby-for"))?;
+            // The owner's UAVs come with the takeover.
+            initial.uavs.clear();
+            Some(shared)
+        }
+        (None, None) => None,
     };
     let policies = args.flight.policies(initial.params.delta)?;
     if args.cfsim > initial.uavs.len() {
@@ -178,6 +185,15 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     let listener = tokio::net::TcpListener::bind(addr).await.with_context(|| format!("binding {addr}"))?;
     let local = listener.local_addr()?;
     let data_dir = config.data_dir.clone();
+    // A region's ownership is settled before the loop starts: a server started while the region's
+    // owner lives joins as its standby and flies nothing.
+    let zenoh = match &config.region {
+        Some(shared) => Some(claim_region(args, shared).await?),
+        None => None,
+    };
+    if config.region.as_ref().is_some_and(|r| !r.failover.is_owner()) {
+        config.initial.uavs.clear();
+    }
     let sims = airroads::cfsim_fleet::spawn(&mut config.initial, args.cfsim, args.cfsim_port)?;
     let server = Server::start(config)?;
     let mocap = match args.mocap {
@@ -220,9 +236,11 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
         }
     };
     // Zenoh starts after the fleet loop: states are published from the first tick it sees.
-    let zenoh = match &server.state().region {
-        Some(shared) => Some(start_region(args, shared, server.state()).await?),
-        None => None,
+    let zenoh = match (zenoh, &server.state().region) {
+        (Some((session, claim)), Some(shared)) => {
+            Some(start_region(args, session, claim, shared, server.state()).await?)
+        }
+        _ => None,
     };
     let served = serve::serve(listener, server, shutdown_signal()).await;
     drop(zenoh);
@@ -237,25 +255,53 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     served
 }
 
-/// Opens the region's Zenoh session (`--region`), subscribed to the regions next to it.
-async fn start_region(
-    args: &ServeArgs,
-    shared: &serve::region::RegionShared,
-    app: &serve::state::AppState,
-) -> anyhow::Result<serve::region::RegionLink> {
-    let options = serve::region::ZenohOptions {
+fn zenoh_options(args: &ServeArgs) -> serve::region::ZenohOptions {
+    serve::region::ZenohOptions {
         listen: args.zenoh_listen.clone(),
         connect: args.zenoh_connect.clone(),
         config_file: args.zenoh_config.clone(),
         prefix: args.zenoh_prefix.clone(),
-    };
+    }
+}
+
+/// Opens the region's Zenoh session (`--region`, `--standby-for`) and settles who owns the region.
+async fn claim_region(
+    args: &ServeArgs,
+    shared: &serve::region::RegionShared,
+) -> anyhow::Result<(zenoh::Session, serve::region::tokens::Claim)> {
+    let options = zenoh_options(args);
+    let session = serve::region::open(&options).await?;
+    let keys =
+        serve::region::tokens::RegionKeys { prefix: options.prefix.clone(), name: shared.name.clone() };
+    let standby = args.standby_for.is_some();
+    let claim = serve::region::tokens::claim(&session, &keys, &shared.failover, standby).await?;
+    Ok((session, claim))
+}
+
+/// Subscribes to the regions next to this one and starts publishing (`--region`, `--standby-for`).
+async fn start_region(
+    args: &ServeArgs,
+    session: zenoh::Session,
+    claim: serve::region::tokens::Claim,
+    shared: &serve::region::RegionShared,
+    app: &serve::state::AppState,
+) -> anyhow::Result<serve::region::RegionLink> {
+    let options = zenoh_options(args);
     let road = app.road.borrow().layout.clone();
     let road = roads::Road::new(road).context("the served road")?;
     let neighbours = serve::region::neighbours_of(&road, &shared.name).map_err(anyhow::Error::msg)?;
-    let link = serve::region::start(&options, shared, &neighbours).await?;
+    let link = serve::region::start(session, &options, shared, &neighbours, claim).await?;
     let key = serve::region::state_key(&options.prefix, &shared.name);
-    say!("  region     {} ({} UAVs), states on {key}", shared.name, app.snapshots.borrow().uavs.len());
+    let role = if shared.failover.is_owner() { "owner" } else { "standby" };
+    say!(
+        "  region     {} as {role} ({} UAVs), states on {key}",
+        shared.name,
+        app.snapshots.borrow().uavs.len()
+    );
     say!("  neighbours {}", if neighbours.is_empty() { "none".to_string() } else { neighbours.join(", ") });
+    if args.region.is_some() && !shared.failover.is_owner() {
+        say!("  standby    region {}'s owner is alive: this server joins as its standby", shared.name);
+    }
     Ok(link)
 }
 

@@ -58,6 +58,10 @@ impl Engine {
             let _ = reply.send(Err(ChangeError::NotDurable(reason)));
             return;
         }
+        if let Some(region) = self.region.as_ref().filter(|r| !r.failover.is_owner()) {
+            let _ = reply.send(Err(ChangeError::Standby(region.name.clone())));
+            return;
+        }
         let (status, detail) = (command.success_status(), command.describe());
         match self.apply(command) {
             Ok(applied) => {

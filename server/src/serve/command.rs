@@ -111,6 +111,9 @@ pub enum ChangeError {
     /// The client gave up before the loop took it.
     #[error("the request was withdrawn before it was applied")]
     Withdrawn,
+    /// This server is the standby of its region: changes go to the owner.
+    #[error("this server is the standby of region `{0}`; send changes to its owner")]
+    Standby(String),
 }
 
 /// Where a queued request is: the handler and the loop race to claim it exactly once.

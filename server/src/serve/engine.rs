@@ -132,9 +132,11 @@ pub struct Engine {
     /// The region this loop flies (`--region`): foreign UAVs in, snapshots out.
     pub(crate) region: Option<super::region::RegionShared>,
     /// The foreign UAVs of the next tick (buffer reused).
-    foreign: Vec<fleet::ForeignUav>,
+    pub(crate) foreign: Vec<fleet::ForeignUav>,
     /// The loop's side of the handover protocol (`--region`).
     pub(crate) handover: Option<super::region::Handover>,
+    /// This loop flies its region (false while a standby, and until a takeover's UAVs are in).
+    pub(crate) owns_region: bool,
 }
 
 impl Engine {
@@ -165,6 +167,7 @@ impl Engine {
             region: None,
             foreign: Vec::new(),
             handover: None,
+            owns_region: false,
         }
     }
 
@@ -261,6 +264,7 @@ impl Engine {
                 handover.adjust_foreign(&mut self.foreign, now);
             }
             self.fleet.set_foreign(&self.foreign);
+            region.foreign_ages.record(&self.foreign);
         }
         if !self.fleet.uavs().is_empty() {
             self.fleet.tick();
@@ -272,7 +276,11 @@ impl Engine {
         self.stats.record(duration_us, &self.fleet, &snapshot);
         let snapshot = Arc::new(snapshot);
         if let Some(region) = &self.region {
-            let published = super::region::Published { snapshot: snapshot.clone(), read_at: started };
+            let published = super::region::Published {
+                snapshot: snapshot.clone(),
+                read_at: started,
+                owned: self.owns_region,
+            };
             region.published.send_replace(Some(published));
         }
         self.channels.snapshots.send_replace(snapshot);

@@ -96,6 +96,7 @@ impl From<ChangeError> for ApiError {
             ChangeError::Withdrawn => {
                 Self::busy("the fleet loop did not take the change in time; nothing changed")
             }
+            e @ ChangeError::Standby(_) => Self::new(StatusCode::CONFLICT, "standby", e.to_string()),
         }
     }
 }

@@ -2,8 +2,8 @@
 //! releases the UAVs another region accepted, adopts the UAVs released to this one, and makes new
 //! offers. Only plain data moves here; nothing waits.
 
-use super::handover::{FleetChange, record};
-use super::ownership::wall_now;
+use super::handover::{FleetChange, UavRecord, record};
+use super::ownership::{OwnershipLog, wall_now};
 use crate::serve::engine::Engine;
 use std::sync::PoisonError;
 use std::time::Instant;
@@ -14,8 +14,14 @@ impl Engine {
     pub(crate) fn hand_over(&mut self) {
         let Some(mut handover) = self.handover.take() else { return };
         let now = Instant::now();
+        let standby = self.fail_over(&mut handover, now);
+        self.owns_region = !standby;
+        if standby {
+            // Nothing to offer or answer.
+            self.handover = Some(handover);
+            return;
+        }
         handover.expire(now);
-        let dt = self.fleet.config.params.dt;
         for change in handover.receive(&self.fleet, self.max_uavs, now) {
             match change {
                 FleetChange::Release { id, to, seq } => {
@@ -29,20 +35,9 @@ impl Engine {
                     handover.released(id, to, seq, rec, now);
                 }
                 FleetChange::Adopt { id, uav } => {
-                    let state = uav.state();
-                    let policy = if self.fleet.policy_names().any(|n| n == uav.policy) {
-                        uav.policy
-                    } else {
-                        self.default_policy.clone()
-                    };
-                    let goal = uav
-                        .goal
-                        .map(|g| Vec2::new(g[0], g[1]))
-                        .filter(|g| self.fleet.check_goal(*g, "goal").is_ok());
-                    let link = self.links.make(&id, None, state, dt);
-                    self.fleet.add(id.clone(), policy, link, state, goal);
-                    handover.ownership.open(&id, wall_now(), "handover");
-                    handover.adopted(&id, now);
+                    if self.adopt(&id, uav, &handover.ownership, "handover") {
+                        handover.adopted(&id, now);
+                    }
                 }
             }
         }
@@ -51,5 +46,26 @@ impl Engine {
             *region.handover_counts.lock().unwrap_or_else(PoisonError::into_inner) = handover.counts;
         }
         self.handover = Some(handover);
+    }
+
+    /// Adds UAV `id` from its record (a handover or a takeover; `came` says which) and opens its
+    /// ownership; false when its link is not valid. The caller makes sure the id is new here.
+    pub(crate) fn adopt(&mut self, id: &str, uav: UavRecord, log: &OwnershipLog, came: &'static str) -> bool {
+        if uav.link.as_deref().is_some_and(|l| links::check_link(l).is_err()) {
+            tracing::warn!("UAV `{id}`: link {:?} refused; not adopted", uav.link);
+            return false;
+        }
+        let state = uav.state();
+        let policy = if self.fleet.policy_names().any(|n| n == uav.policy) {
+            uav.policy
+        } else {
+            self.default_policy.clone()
+        };
+        let goal =
+            uav.goal.map(|g| Vec2::new(g[0], g[1])).filter(|g| self.fleet.check_goal(*g, "goal").is_ok());
+        let link = self.links.make(id, uav.link.as_deref(), state, self.fleet.config.params.dt);
+        self.fleet.add(id.to_string(), policy, link, state, goal);
+        log.open(id, wall_now(), came);
+        true
     }
 }

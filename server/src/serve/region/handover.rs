@@ -40,6 +40,8 @@ pub const RETRY_AFTER: Duration = Duration::from_secs(1);
 pub const GHOST_TTL: Duration = Duration::from_secs(2);
 /// Most handover messages read per gap (the rest wait for the next one).
 pub const MAX_MESSAGES_PER_GAP: usize = 256;
+/// A release held by a standby (`hold_releases`) is kept this long.
+pub const HELD_RELEASE_TTL: Duration = Duration::from_secs(2);
 /// Largest handover message accepted (bytes).
 pub const MAX_MESSAGE_BYTES: usize = 16 << 10;
 
@@ -117,6 +119,8 @@ pub struct Handover {
     /// Each segment's region, when it is a neighbour of this one (by the road's version).
     segment_owner: Vec<Option<String>>,
     road_version: Option<u64>,
+    /// Releases to this region read while it was a standby, with when.
+    held: HashMap<String, (UavRecord, Instant)>,
     /// Who owned what when.
     pub ownership: Arc<OwnershipLog>,
     /// What happened so far.
@@ -143,6 +147,7 @@ impl Handover {
             adopted: HashMap::new(),
             segment_owner: Vec::new(),
             road_version: None,
+            held: HashMap::new(),
             ownership,
             counts: HandoverCounts::default(),
         }
@@ -286,6 +291,35 @@ impl Handover {
         self.adopted.remove(&id);
         self.ghosts.insert(id.clone(), Ghost { state: uav.state(), released: now });
         self.send(Message::Release { from: self.own.clone(), to, id, seq, uav });
+    }
+
+    /// As a standby: reads the inbox, answers nothing, and keeps the releases to this region for
+    /// [`HELD_RELEASE_TTL`] (an owner that dies between a release and its adoption leaves them to
+    /// the standby that takes over).
+    pub fn hold_releases(&mut self, now: Instant) {
+        for _ in 0..MAX_MESSAGES_PER_GAP {
+            let Ok(message) = self.inbox.try_recv() else { break };
+            if let Message::Release { to, id, uav, .. } = message
+                && to == self.own
+            {
+                self.held.insert(id, (uav, now));
+            }
+        }
+        self.held.retain(|_, (_, at)| now.saturating_duration_since(*at) < HELD_RELEASE_TTL);
+    }
+
+    /// The releases held as a standby (taken at a takeover).
+    pub fn take_held(&mut self) -> Vec<(String, UavRecord)> {
+        self.held.drain().map(|(id, (uav, _))| (id, uav)).collect()
+    }
+
+    /// Forgets every offer, reservation, ghost and adoption (this server gave way to another owner).
+    pub fn forget_all(&mut self) {
+        self.offers.clear();
+        self.reservations.clear();
+        self.retry_at.clear();
+        self.ghosts.clear();
+        self.adopted.clear();
     }
 
     /// UAV `id` has joined the fleet from another region.

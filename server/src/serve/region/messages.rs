@@ -1,6 +1,7 @@
 //! The handover protocol's messages (`handover`), JSON on the key `PREFIX/region/<to>/handover`
 //! (README "Regions over Zenoh", Handover): `offer`, `accept`, `refuse`, `release`.
 
+use crate::serve::snapshot::UavSnapshot;
 use serde::{Deserialize, Serialize};
 use uav::{UavState, Vec2};
 
@@ -21,6 +22,17 @@ pub struct UavRecord {
 }
 
 impl UavRecord {
+    /// The record of a UAV as a snapshot shows it (link None for a simulated one).
+    pub fn of_snapshot(u: &UavSnapshot) -> Self {
+        Self {
+            p: u.p,
+            v: u.v,
+            goal: u.goal,
+            policy: u.policy.clone(),
+            link: (u.link != links::SIM_LINK).then(|| u.link.clone()),
+        }
+    }
+
     /// The record's state.
     pub fn state(&self) -> UavState {
         UavState { p: Vec2::new(self.p[0], self.p[1]), v: Vec2::new(self.v[0], self.v[1]) }

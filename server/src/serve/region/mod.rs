@@ -7,13 +7,19 @@
 //! (the publishing task sends the newest one it has, skipping any it was too slow for) and copies
 //! the foreign UAVs out of a [`ForeignTable`] that the subscriber's callback fills.
 
+pub mod ages;
 mod engine_side;
+pub mod failover;
 pub mod handover;
 pub mod messages;
 pub mod ownership;
+mod publish;
 pub mod table;
+mod takeover;
+pub mod tokens;
 pub mod wire;
 
+pub use failover::Failover;
 pub use handover::Handover;
 pub use ownership::OwnershipLog;
 pub use table::ForeignTable;
@@ -123,6 +129,8 @@ pub struct Published {
     pub snapshot: Arc<Snapshot>,
     /// When that tick started (its states were read just after).
     pub read_at: Instant,
+    /// The loop flew the region in that tick (a standby's empty fleet is never published).
+    pub owned: bool,
 }
 
 /// What the fleet loop and `GET /api/metrics` share with the region's Zenoh side.
@@ -136,6 +144,12 @@ pub struct RegionShared {
     pub published: Arc<watch::Sender<Option<Published>>>,
     /// Who owned which UAV when (`GET /api/region/ownership`).
     pub ownership: Arc<OwnershipLog>,
+    /// Ages of the foreign states the loop used (`foreign_age_ms`).
+    pub foreign_ages: Arc<ages::AgeHistogram>,
+    /// Bytes of state messages published so far.
+    pub published_bytes: Arc<AtomicU64>,
+    /// Who owns the region: this server or another (`failover`).
+    pub failover: Arc<Failover>,
     /// The handover counters, as the loop last wrote them.
     pub handover_counts: Arc<Mutex<handover::HandoverCounts>>,
     /// Handover messages received, for the loop.
@@ -160,6 +174,9 @@ impl RegionShared {
             foreign: Arc::new(ForeignTable::new(name)),
             published: Arc::new(watch::channel(None).0),
             ownership,
+            foreign_ages: Arc::default(),
+            published_bytes: Arc::default(),
+            failover: Arc::new(Failover::new()),
             handover_counts: Arc::default(),
             inbox,
             inbox_dropped: Arc::default(),
@@ -180,6 +197,9 @@ impl RegionShared {
         let mut handover = serde_json::to_value(counts).unwrap_or_default();
         handover["dropped"] = (counts.dropped + self.inbox_dropped.load(Relaxed)).into();
         doc["handover"] = handover;
+        doc["failover"] = self.failover.report(now);
+        doc["foreign_age_ms"] = self.foreign_ages.report();
+        doc["published_bytes"] = self.published_bytes.load(Relaxed).into();
         doc
     }
 }
@@ -191,15 +211,24 @@ pub struct RegionLink {
     _subscribers: Vec<zenoh::pubsub::Subscriber<()>>,
 }
 
-/// Opens the Zenoh session, subscribes to `neighbours` and starts publishing `shared`'s snapshots.
+/// Opens the Zenoh session.
+pub async fn open(options: &ZenohOptions) -> anyhow::Result<zenoh::Session> {
+    let config = zenoh_config(options)?;
+    zenoh::open(config).await.map_err(|e| anyhow::anyhow!("opening the Zenoh session: {e}"))
+}
+
+/// Subscribes to `neighbours`, starts publishing `shared`'s snapshots (while this server owns the
+/// region) and its mirror, and watches the region's ownership from `claim` on.
 pub async fn start(
+    session: zenoh::Session,
     options: &ZenohOptions,
     shared: &RegionShared,
     neighbours: &[String],
+    claim: tokens::Claim,
 ) -> anyhow::Result<RegionLink> {
-    let config = zenoh_config(options)?;
-    let session = zenoh::open(config).await.map_err(|e| anyhow::anyhow!("opening the Zenoh session: {e}"))?;
-    let mut subscribers = Vec::new();
+    let keys = tokens::RegionKeys { prefix: options.prefix.clone(), name: shared.name.clone() };
+    let mut subscribers = tokens::follow(&session, &keys, neighbours, &shared.failover).await?;
+    tokio::spawn(tokens::watch(session.clone(), keys, shared.failover.clone(), claim));
     for name in neighbours {
         let key = state_key(&options.prefix, name);
         let (table, expected) = (shared.foreign.clone(), name.clone());
@@ -230,14 +259,27 @@ pub async fn start(
     subscribers.push(subscriber);
     let outbox = shared.outbox.lock().unwrap_or_else(PoisonError::into_inner).take();
     if let Some(outbox) = outbox {
-        tokio::spawn(send_handover(session.clone(), options.prefix.clone(), outbox));
+        tokio::spawn(publish::send_handover(session.clone(), options.prefix.clone(), outbox));
     }
     let key = state_key(&options.prefix, &shared.name);
     let publisher = session
         .declare_publisher(key.clone())
         .await
         .map_err(|e| anyhow::anyhow!("declaring the publisher {key}: {e}"))?;
-    tokio::spawn(publish(publisher, shared.name.clone(), shared.published.subscribe()));
+    let key = failover::mirror_key(&options.prefix, &shared.name);
+    // Only remote subscribers count: every server of the region subscribes to its mirror.
+    let mirror = session
+        .declare_publisher(key.clone())
+        .allowed_destination(zenoh::sample::Locality::Remote)
+        .await
+        .map_err(|e| anyhow::anyhow!("declaring the publisher {key}: {e}"))?;
+    let publishers = publish::Publishers {
+        states: publisher,
+        mirror,
+        failover: shared.failover.clone(),
+        bytes: shared.published_bytes.clone(),
+    };
+    tokio::spawn(publish::publish(publishers, shared.name.clone(), shared.published.subscribe()));
     Ok(RegionLink { session, _subscribers: subscribers })
 }
 
@@ -255,40 +297,6 @@ fn receive(table: &ForeignTable, expected: &str, payload: &zenoh::bytes::ZBytes)
         Err(e) => {
             tracing::debug!("region {expected}: payload refused: {e}");
             table.refuse();
-        }
-    }
-}
-
-/// Sends the newest snapshot after each change (skipping any it was too slow for) until the loop
-/// ends. Zenoh's default congestion control for a put drops rather than blocks.
-async fn publish(
-    publisher: zenoh::pubsub::Publisher<'static>,
-    region: String,
-    mut snapshots: watch::Receiver<Option<Published>>,
-) {
-    while snapshots.changed().await.is_ok() {
-        let Some(published) = snapshots.borrow_and_update().clone() else { continue };
-        let age = published.read_at.elapsed().as_secs_f32();
-        let payload = wire::encode(&region, &published.snapshot, age);
-        if let Err(e) = publisher.put(payload).await {
-            tracing::warn!("region {region}: publishing: {e}");
-        }
-    }
-}
-
-/// Puts each handover message the loop queues on its region's key, waiting (congestion control:
-/// block) rather than dropping: a release must arrive.
-async fn send_handover(
-    session: zenoh::Session,
-    prefix: String,
-    mut outbox: tokio::sync::mpsc::Receiver<handover::Message>,
-) {
-    while let Some(message) = outbox.recv().await {
-        let key = handover_key(&prefix, message.to());
-        let Ok(payload) = serde_json::to_vec(&message) else { continue };
-        let put = session.put(key.as_str(), payload).congestion_control(zenoh::qos::CongestionControl::Block);
-        if let Err(e) = put.await {
-            tracing::warn!("handover to {key}: {e}");
         }
     }
 }

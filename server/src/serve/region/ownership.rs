@@ -20,9 +20,9 @@ pub struct Interval {
     pub from: f64,
     /// When it stopped (None: it still does).
     pub to: Option<f64>,
-    /// How it came: `start` (with the server), `handover` or `added` (over REST).
+    /// How it came: `start` (with the server), `handover`, `failover` (a takeover) or `added` (over REST).
     pub came: &'static str,
-    /// How it left: `handover` or `removed` (None while owned).
+    /// How it left: `handover`, `gave_way` (to another owner) or `removed` (None while owned).
     pub left: Option<&'static str>,
 }
 

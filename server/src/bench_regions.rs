@@ -1,0 +1,137 @@
+//! `airroads bench regions`: one deployment of `--regions` region servers in this process (each its
+//! own fleet loop and its own Zenoh session, joined over loopback TCP like separate machines), the
+//! `--uavs` UAVs of the trunk road of `bench scale` split among them by equal segment ranges. After
+//! a warm-up it measures for `--seconds`: per region the Zenoh bytes per second it publishes, the
+//! age of the foreign states its fleet used (p50/p99/max), the handovers, and its tick p50/p99.
+
+use crate::cli::BenchArgs;
+use airroads::serve::region::{self, RegionShared, ZenohOptions};
+use airroads::serve::{ServeConfig, Server};
+use anyhow::Context as _;
+use fleet::trunk::trunk_scenario;
+use std::process::ExitCode;
+use std::sync::atomic::Ordering::Relaxed;
+use std::time::{Duration, Instant};
+
+/// Runs the benchmark.
+pub fn main(args: &BenchArgs) -> ExitCode {
+    crate::bench::block_on(bench(args))
+}
+
+/// One region's server and what it shares with Zenoh.
+struct Running {
+    server: Server,
+    shared: RegionShared,
+    _link: region::RegionLink,
+}
+
+fn free_endpoint() -> anyhow::Result<String> {
+    let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
+    Ok(format!("tcp/127.0.0.1:{port}"))
+}
+
+async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
+    let n = args.uavs_or(&[10_000])[0];
+    let count = usize::try_from(args.regions)?;
+    let mut scenario = trunk_scenario(n, 1).context("the trunk road")?;
+    let segments = scenario.segments.len();
+    anyhow::ensure!(segments >= count, "{segments} segments cannot make {count} regions");
+    scenario.regions = Some(
+        (0..count)
+            .map(|k| roads::Region {
+                name: format!("r{k}"),
+                segments: [k * segments / count, (k + 1) * segments / count - 1],
+            })
+            .collect(),
+    );
+    let scenario = scenario.validate().context("the trunk road's regions")?;
+    let endpoints: Vec<String> = (0..count).map(|_| free_endpoint()).collect::<anyhow::Result<_>>()?;
+    let seconds = args.seconds.max(1.0);
+    say!(
+        "airroads bench regions: {n} UAVs on the trunk road ({segments} segments) over {count} regions, \
+         one process, Zenoh over loopback TCP, policy {}, {seconds} s measured after 3 s",
+        args.policy
+    );
+    let mut running = Vec::new();
+    for k in 0..count {
+        let name = format!("r{k}");
+        let mut initial = scenario.clone();
+        let road = initial.road.clone();
+        initial.uavs.retain(|u| road.region_of(road.locate(&u.start, None)).is_some_and(|r| r.name == name));
+        let shared = RegionShared::new(&name);
+        let options = ZenohOptions {
+            listen: vec![endpoints[k].clone()],
+            connect: endpoints[..k].to_vec(),
+            config_file: None,
+            prefix: "bench".into(),
+        };
+        let session = region::open(&options).await?;
+        let keys = region::tokens::RegionKeys { prefix: options.prefix.clone(), name: name.clone() };
+        let claim = region::tokens::claim(&session, &keys, &shared.failover, false).await?;
+        let uavs = initial.uavs.len();
+        let policies = policies::PolicyRegistry::standard(scenario.params.delta)?;
+        policies.check(&args.policy).map_err(|e| anyhow::anyhow!("--policy {}: {e}", args.policy))?;
+        let mut config =
+            ServeConfig::new(fleet::FleetConfig::default(), policies, args.policy.clone(), initial);
+        config.resume = false;
+        config.max_uavs = n;
+        config.region = Some(shared.clone());
+        let server = Server::start(config)?;
+        let neighbours = region::neighbours_of(&scenario.road, &name).map_err(anyhow::Error::msg)?;
+        let link = region::start(session, &options, &shared, &neighbours, claim).await?;
+        say!("  {name}: {uavs} UAVs, neighbours {}", neighbours.join(", "));
+        running.push(Running { server, shared, _link: link });
+    }
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let bytes_at_start: Vec<u64> = running.iter().map(|r| r.shared.published_bytes.load(Relaxed)).collect();
+    let missed_at_start: Vec<u64> =
+        running.iter().map(|r| r.server.state().metrics.borrow().missed_ticks).collect();
+    let started = Instant::now();
+    tokio::time::sleep(Duration::from_secs_f64(seconds)).await;
+    let elapsed = started.elapsed().as_secs_f64();
+    say!(
+        "{:>6} {:>6} {:>10} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8} {:>7}",
+        "region",
+        "uavs",
+        "MB/s out",
+        "foreign",
+        "age p50",
+        "age p99",
+        "age max",
+        "handed",
+        "tick p50",
+        "tick p99",
+        "missed"
+    );
+    let mut total = 0.0;
+    for (k, r) in running.iter().enumerate() {
+        let now = Instant::now();
+        let report = r.shared.report(now);
+        let metrics = r.server.state().metrics.borrow().clone();
+        let uavs = r.server.state().snapshots.borrow().uavs.len();
+        let rate = (r.shared.published_bytes.load(Relaxed) - bytes_at_start[k]) as f64 / elapsed / 1e6;
+        total += rate;
+        let ages = &report["foreign_age_ms"];
+        let ms = |v: &serde_json::Value| v.as_u64().map_or("-".into(), |x| format!("{x} ms"));
+        say!(
+            "{:>6} {:>6} {:>10.2} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8.1} {:>8.1} {:>7}",
+            r.shared.name,
+            uavs,
+            rate,
+            report["foreign_uavs"],
+            ms(&ages["p50"]),
+            ms(&ages["p99"]),
+            ms(&ages["max"]),
+            report["handover"]["adopted"],
+            metrics.tick.p50_us / 1e3,
+            metrics.tick.p99_us / 1e3,
+            metrics.missed_ticks - missed_at_start[k],
+        );
+    }
+    say!("all regions: {total:.2} MB/s of state messages published ({elapsed:.1} s measured)");
+    say!("age: of every foreign state each tick gave the fleet, on the receiver's clock (since the start)");
+    for r in running {
+        r.server.shutdown().await;
+    }
+    Ok(())
+}

@@ -1,0 +1,61 @@
+//! The fleet loop's failover step between two ticks (`failover` has the rules): a standby holds
+//! the releases sent to its region and commands nothing; a takeover adopts the mirror's UAVs; an
+//! owner that gives way drops its fleet. Only plain data moves here; nothing waits.
+
+use super::Handover;
+use super::ownership::wall_now;
+use crate::serve::engine::Engine;
+use std::collections::HashSet;
+use std::time::Instant;
+
+impl Engine {
+    /// One failover step; true while this server is a standby (the handover step then stops).
+    pub(crate) fn fail_over(&mut self, handover: &mut Handover, now: Instant) -> bool {
+        let Some(failover) = self.region.as_ref().map(|r| r.failover.clone()) else { return false };
+        if failover.take_give_way() {
+            self.give_way(handover);
+        }
+        if !failover.is_owner() {
+            handover.hold_releases(now);
+            return true;
+        }
+        if failover.take_takeover() {
+            self.take_over(handover, &failover, now);
+        }
+        false
+    }
+
+    /// Another owner is ahead: this server stops commanding every UAV at once.
+    fn give_way(&mut self, handover: &mut Handover) {
+        let at = wall_now();
+        for uav in self.fleet.take_all() {
+            handover.ownership.close(&uav.id, at, "gave_way");
+        }
+        handover.forget_all();
+    }
+
+    /// Adopts the mirror's UAVs and the releases held, except those a neighbour now lists or that
+    /// this region was seen releasing (they are the neighbour's), and those already flown here.
+    fn take_over(&mut self, handover: &mut Handover, failover: &super::Failover, now: Instant) {
+        let mut records: Vec<(String, super::handover::UavRecord)> = failover
+            .mirror()
+            .map(|(mirror, _)| mirror.uavs.iter().map(|u| (u.id.clone(), u.uav.clone())).collect())
+            .unwrap_or_default();
+        records.extend(handover.take_held());
+        let listed: HashSet<String> = self.foreign.iter().map(|f| f.id.clone()).collect();
+        let mut flown: HashSet<String> = self.fleet.uavs().iter().map(|u| u.id.clone()).collect();
+        let (mut adopted, mut skipped) = (0usize, 0usize);
+        for (id, uav) in records {
+            let theirs = listed.contains(&id) || failover.released_away(&id, now);
+            if theirs || flown.contains(&id) || !uav.state().is_finite() || flown.len() >= self.max_uavs {
+                skipped += 1;
+                continue;
+            }
+            if self.adopt(&id, uav, &handover.ownership, "failover") {
+                flown.insert(id);
+                adopted += 1;
+            }
+        }
+        tracing::warn!("took over: {adopted} UAVs adopted, {skipped} left (a neighbour's, or already here)");
+    }
+}
