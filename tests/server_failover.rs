@@ -16,114 +16,22 @@ use std::collections::BTreeMap;
 use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use support::procs::{
+    self, D_C, Proc, TICK_S, TOLERANCE_M, banner_has, distance, free_endpoint, get, serve, uavs,
+};
 
-/// D_c of the scenario's default parameters (m).
-const D_C: f64 = 0.3;
-/// Below D_c by at most this much (m), beyond what the snapshots' skew explains.
-const TOLERANCE_M: f64 = 0.02;
-/// A snapshot may be this old when served (one tick, s).
-const TICK_S: f64 = 0.05;
 /// The takeover bound the issue states (s).
 const TAKEOVER_S: f64 = 1.0;
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("airroads-failover-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    procs::scratch("failover", name)
 }
 
 fn wall_now() -> f64 {
     SystemTime::now().duration_since(UNIX_EPOCH).unwrap().as_secs_f64()
-}
-
-/// A child process, killed when dropped (a failing test leaves nothing running).
-struct Proc(Child);
-
-impl Proc {
-    fn pid(&self) -> String {
-        self.0.id().to_string()
-    }
-
-    /// kill -9, and reaped.
-    fn kill(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        // A test that stopped it (SIGSTOP) and failed before SIGCONT: kill needs it running.
-        let _ = Command::new("kill").args(["-CONT", &self.pid()]).stderr(Stdio::null()).status();
-        self.kill();
-    }
-}
-
-/// Starts `airroads serve --ephemeral` on 127.0.0.1:0 with `args`; returns it, its address, and
-/// the banner lines it printed.
-fn serve(args: &[&str]) -> (Proc, SocketAddr, Arc<Mutex<Vec<String>>>) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_airroads"))
-        .args(["serve", "--addr", "127.0.0.1:0", "--ephemeral"])
-        .args(args)
-        .env_remove("AIRROADS_TOKEN")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
-    let first = lines.next().expect("a banner line").unwrap();
-    let addr = first.rsplit("http://").next().unwrap().trim().parse().unwrap_or_else(|_| panic!("{first}"));
-    let banner = Arc::new(Mutex::new(vec![first]));
-    let kept = banner.clone();
-    // Keep draining stdout so the server never blocks on a full pipe.
-    std::thread::spawn(move || {
-        for line in lines.map_while(Result::ok) {
-            kept.lock().unwrap().push(line);
-        }
-    });
-    (Proc(child), addr, banner)
-}
-
-/// Whether a banner line contains `text` (read by a thread: waits up to 2 s for it).
-fn banner_has(banner: &Mutex<Vec<String>>, text: &str) -> bool {
-    let deadline = Instant::now() + Duration::from_secs(2);
-    while Instant::now() < deadline {
-        if banner.lock().unwrap().iter().any(|l| l.contains(text)) {
-            return true;
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    false
-}
-
-fn free_port() -> String {
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-    format!("tcp/127.0.0.1:{port}")
-}
-
-async fn get(addr: SocketAddr, path: &str) -> Value {
-    let (status, body) = support::raw(addr, "GET", path, None, &[]).await;
-    assert_eq!(status, 200, "{path}: {body}");
-    serde_json::from_str(&body).unwrap()
-}
-
-/// (id, position, velocity, arrived) of every UAV in a `/api/state` document.
-fn uavs(state: &Value) -> Vec<(String, [f64; 2], [f64; 2], bool)> {
-    let pair = |v: &Value| [v[0].as_f64().unwrap(), v[1].as_f64().unwrap()];
-    state["uavs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|u| (u["id"].as_str().unwrap().to_string(), pair(&u["p"]), pair(&u["v"]), u["arrived"] == true))
-        .collect()
-}
-
-fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
 }
 
 /// Asserts every pair of UAVs across `states` (taken within `skew` s) is D_c apart, allowing the
@@ -213,6 +121,39 @@ async fn until_role(addr: SocketAddr, role: &str, within: f64) -> Option<f64> {
     None
 }
 
+/// `serve` arguments flying region `name` of `scenario` (`flag`: `--region` or `--standby-for`),
+/// listening on `listen` and connecting to `connect`.
+fn region_args<'a>(
+    scenario: &'a str,
+    flag: &'a str,
+    name: &'a str,
+    listen: &'a str,
+    connect: &[&'a str],
+) -> Vec<&'a str> {
+    let mut args = vec!["--scenario", scenario, flag, name, "--zenoh-listen", listen];
+    for endpoint in connect {
+        args.extend(["--zenoh-connect", endpoint]);
+    }
+    args
+}
+
+/// Samples two servers' states every 50 ms, checking D_c across them, until all `n` UAVs arrived
+/// or `until` passed; returns how many arrived and the closest pair seen.
+async fn fly_until_arrived(a: SocketAddr, b: SocketAddr, n: usize, until: Instant) -> (usize, f64) {
+    let (mut arrived, mut closest) = (0, f64::INFINITY);
+    while Instant::now() < until {
+        let asked = Instant::now();
+        let (sa, sb) = tokio::join!(get(a, "/api/state"), get(b, "/api/state"));
+        closest = closest.min(check_pairs(&[&sa, &sb], asked.elapsed().as_secs_f64() + 2.0 * TICK_S));
+        arrived = uavs(&sa).iter().chain(uavs(&sb).iter()).filter(|u| u.3).count();
+        if arrived == n {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    (arrived, closest)
+}
+
 /// Sim UAVs: four start in the west and fly east through the border, four fly within the west,
 /// two start in the east and fly west.
 fn sim_uavs() -> Vec<Value> {
@@ -234,32 +175,11 @@ async fn a_standby_takes_over_a_killed_primary_within_a_second() {
     let dir = scratch("sim");
     let scenario = scenario(&dir, sim_uavs());
     let scenario = scenario.to_str().unwrap();
-    let ports = [free_port(), free_port(), free_port()];
-    let (mut primary, p, _) =
-        serve(&["--scenario", scenario, "--region", "west", "--zenoh-listen", &ports[0]]);
-    let east_args = [
-        "--scenario",
-        scenario,
-        "--region",
-        "east",
-        "--zenoh-listen",
-        &ports[1],
-        "--zenoh-connect",
-        &ports[0],
-    ];
-    let (_east, e, _) = serve(&east_args);
-    let (_standby, s, banner) = serve(&[
-        "--scenario",
-        scenario,
-        "--standby-for",
-        "west",
-        "--zenoh-listen",
-        &ports[2],
-        "--zenoh-connect",
-        &ports[0],
-        "--zenoh-connect",
-        &ports[1],
-    ]);
+    let ports = [free_endpoint(), free_endpoint(), free_endpoint()];
+    let (mut primary, p, _) = serve(&region_args(scenario, "--region", "west", &ports[0], &[]));
+    let (_east, e, _) = serve(&region_args(scenario, "--region", "east", &ports[1], &[&ports[0]]));
+    let standby_args = region_args(scenario, "--standby-for", "west", &ports[2], &[&ports[0], &ports[1]]);
+    let (_standby, s, banner) = serve(&standby_args);
     // The standby flies nothing, refuses changes, and mirrors the primary.
     assert!(get(s, "/api/state").await["uavs"].as_array().unwrap().is_empty());
     let add = r#"{"id": "intruder", "position": [5.0, 0.0]}"#;
@@ -293,18 +213,7 @@ async fn a_standby_takes_over_a_killed_primary_within_a_second() {
     eprintln!("takeover seen {takeover:.3} s after the kill");
     assert!(takeover <= TAKEOVER_S, "took over {takeover:.3} s after the kill");
     // Everyone arrives, with D_c held between the standby's and the neighbour's UAVs.
-    let mut arrived = 0;
-    let mut closest = f64::INFINITY;
-    while started.elapsed() < Duration::from_secs(100) {
-        let asked = Instant::now();
-        let (ss, se) = tokio::join!(get(s, "/api/state"), get(e, "/api/state"));
-        closest = closest.min(check_pairs(&[&ss, &se], asked.elapsed().as_secs_f64() + 2.0 * TICK_S));
-        arrived = uavs(&ss).iter().chain(uavs(&se).iter()).filter(|u| u.3).count();
-        if arrived == 10 {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    let (arrived, closest) = fly_until_arrived(s, e, 10, started + Duration::from_secs(100)).await;
     assert_eq!(arrived, 10, "every UAV arrives (closest pair {closest} m)");
     // One owner at every moment: the killed primary's intervals end at its death.
     let mut by_uav = ownership(&[("standby", s), ("east", e)]).await;
@@ -331,19 +240,9 @@ async fn a_stopped_region_is_avoided_and_keeps_one_owner_per_uav_after_sigcont()
     let dir = scratch("sigstop");
     let scenario = scenario(&dir, sim_uavs());
     let scenario = scenario.to_str().unwrap();
-    let ports = [free_port(), free_port()];
-    let (west, w, _) = serve(&["--scenario", scenario, "--region", "west", "--zenoh-listen", &ports[0]]);
-    let east_args = [
-        "--scenario",
-        scenario,
-        "--region",
-        "east",
-        "--zenoh-listen",
-        &ports[1],
-        "--zenoh-connect",
-        &ports[0],
-    ];
-    let (_east, e, _) = serve(&east_args);
+    let ports = [free_endpoint(), free_endpoint()];
+    let (west, w, _) = serve(&region_args(scenario, "--region", "west", &ports[0], &[]));
+    let (_east, e, _) = serve(&region_args(scenario, "--region", "east", &ports[1], &[&ports[0]]));
     let started = Instant::now();
     // Until UAVs are near the border on both sides, then stop the west for 2 s.
     let mut last_west = Value::Null;
@@ -360,26 +259,18 @@ async fn a_stopped_region_is_avoided_and_keeps_one_owner_per_uav_after_sigcont()
     }
     assert!(Command::new("kill").args(["-STOP", &west.pid()]).status().unwrap().success());
     let stopped = Instant::now();
-    // Meanwhile the east keeps D_c from where the west's UAVs can be: the west's last state plus
-    // their reach, which the east's reach disks cover (checked against the last positions here).
+    // Meanwhile the west's UAVs stand where its last state put them (their simulator is stopped
+    // with it), and the east, which only knows they may be anywhere in their growing reach
+    // disks, keeps D_c from them.
+    let mut closest = f64::INFINITY;
     while stopped.elapsed() < Duration::from_secs(2) {
         let se = get(e, "/api/state").await;
-        let frozen = stopped.elapsed().as_secs_f64() + 2.0 * TICK_S;
-        check_pairs(&[&last_west, &se], frozen);
+        closest = closest.min(check_pairs(&[&last_west, &se], 2.0 * TICK_S));
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
+    eprintln!("closest pair while the west was stopped: {closest:.3} m");
     assert!(Command::new("kill").args(["-CONT", &west.pid()]).status().unwrap().success());
-    let mut arrived = 0;
-    while started.elapsed() < Duration::from_secs(100) {
-        let asked = Instant::now();
-        let (sw, se) = tokio::join!(get(w, "/api/state"), get(e, "/api/state"));
-        check_pairs(&[&sw, &se], asked.elapsed().as_secs_f64() + 2.0 * TICK_S);
-        arrived = uavs(&sw).iter().chain(uavs(&se).iter()).filter(|u| u.3).count();
-        if arrived == 10 {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    let (arrived, _) = fly_until_arrived(w, e, 10, started + Duration::from_secs(100)).await;
     assert_eq!(arrived, 10, "every UAV arrives");
     let by_uav = ownership(&[("west", w), ("east", e)]).await;
     assert_eq!(by_uav.len(), 10, "{by_uav:?}");
@@ -489,19 +380,9 @@ async fn a_standby_flies_on_the_crazyflies_of_a_killed_primary() {
         .collect();
     let scenario = scenario(&dir, crazyflies);
     let scenario = scenario.to_str().unwrap();
-    let ports = [free_port(), free_port()];
-    let (mut primary, p, _) =
-        serve(&["--scenario", scenario, "--region", "west", "--zenoh-listen", &ports[0]]);
-    let standby_args = [
-        "--scenario",
-        scenario,
-        "--standby-for",
-        "west",
-        "--zenoh-listen",
-        &ports[1],
-        "--zenoh-connect",
-        &ports[0],
-    ];
+    let ports = [free_endpoint(), free_endpoint()];
+    let (mut primary, p, _) = serve(&region_args(scenario, "--region", "west", &ports[0], &[]));
+    let standby_args = region_args(scenario, "--standby-for", "west", &ports[1], &[&ports[0]]);
     let (_standby, s, _) = serve(&standby_args);
     // Airborne and on their way (take-off takes 2 s), then kill the primary.
     let started = Instant::now();

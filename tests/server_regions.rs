@@ -10,26 +10,17 @@
 mod support;
 
 use serde_json::{Value, json};
-use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
+use std::process::Command;
 use std::time::{Duration, Instant};
+use support::procs::{self, D_C, TICK_S, TOLERANCE_M, distance, free_endpoint, get, serve, uavs};
 
-/// D_c of the scenario's default parameters (m).
-const D_C: f64 = 0.3;
-/// Below D_c by at most this much (m), beyond what the two snapshots' skew explains.
-const TOLERANCE_M: f64 = 0.02;
-/// A snapshot may be this old when served (one tick, s).
-const TICK_S: f64 = 0.05;
 /// The stated bound on a UAV's unowned time in a handover (`region::handover::MAX_UNOWNED_S`).
 const MAX_UNOWNED_S: f64 = 0.25;
 
 fn scratch(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("airroads-regions-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
+    procs::scratch("regions", name)
 }
 
 /// A straight road from x = 0 to 40 (8 segments of 5 m, 4 m wide): `west` segments 0–3, `east` 4–7.
@@ -51,68 +42,14 @@ fn two_region_scenario(dir: &Path) -> PathBuf {
     path
 }
 
-/// A server process, killed when dropped (a failing test leaves nothing running).
-struct Proc(Child);
-
-impl Drop for Proc {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
-/// Starts `airroads serve --ephemeral` on 127.0.0.1:0 with `args`; returns it and its address.
-fn serve(args: &[&str]) -> (Proc, SocketAddr) {
-    let mut child = Command::new(env!("CARGO_BIN_EXE_airroads"))
-        .args(["serve", "--addr", "127.0.0.1:0", "--ephemeral"])
-        .args(args)
-        .env_remove("AIRROADS_TOKEN")
-        .stdout(Stdio::piped())
-        .stderr(Stdio::inherit())
-        .spawn()
-        .unwrap();
-    let mut lines = BufReader::new(child.stdout.take().unwrap()).lines();
-    let first = lines.next().expect("a banner line").unwrap();
-    let addr = first.rsplit("http://").next().unwrap().trim().parse().unwrap_or_else(|_| panic!("{first}"));
-    // Keep draining stdout so the server never blocks on a full pipe.
-    std::thread::spawn(move || for _ in lines.by_ref() {});
-    (Proc(child), addr)
-}
-
-/// A loopback TCP port free a moment ago.
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
-async fn get(addr: SocketAddr, path: &str) -> Value {
-    let (status, body) = support::raw(addr, "GET", path, None, &[]).await;
-    assert_eq!(status, 200, "{path}: {body}");
-    serde_json::from_str(&body).unwrap()
-}
-
-/// (id, position, velocity) of every UAV in a `/api/state` document.
-fn uavs(state: &Value) -> Vec<(String, [f64; 2], [f64; 2])> {
-    let pair = |v: &Value| [v[0].as_f64().unwrap(), v[1].as_f64().unwrap()];
-    state["uavs"]
-        .as_array()
-        .unwrap()
-        .iter()
-        .map(|u| (u["id"].as_str().unwrap().to_string(), pair(&u["p"]), pair(&u["v"])))
-        .collect()
-}
-
-fn distance(a: [f64; 2], b: [f64; 2]) -> f64 {
-    (a[0] - b[0]).hypot(a[1] - b[1])
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn two_regions_see_each_other_and_keep_d_c_across_the_border() {
     let dir = scratch("border");
     let scenario = two_region_scenario(&dir);
     let scenario = scenario.to_str().unwrap();
-    let endpoint = format!("tcp/127.0.0.1:{}", free_port());
-    let (_west, west) = serve(&["--scenario", scenario, "--region", "west", "--zenoh-listen", &endpoint]);
-    let (_east, east) = serve(&["--scenario", scenario, "--region", "east", "--zenoh-connect", &endpoint]);
+    let endpoint = free_endpoint();
+    let (_west, west, _) = serve(&["--scenario", scenario, "--region", "west", "--zenoh-listen", &endpoint]);
+    let (_east, east, _) = serve(&["--scenario", scenario, "--region", "east", "--zenoh-connect", &endpoint]);
     // Each region flies only the UAVs that start in it.
     let ids = |state: &Value| uavs(state).into_iter().map(|u| u.0).collect::<Vec<_>>();
     assert_eq!(ids(&get(west, "/api/state").await), ["w1", "w2"]);
@@ -216,9 +153,9 @@ async fn three_regions_hand_uavs_over_with_one_owner_at_every_moment() {
     let dir = scratch("three");
     let scenario = three_region_scenario(&dir);
     let scenario = scenario.to_str().unwrap();
-    let ports: Vec<String> = (0..3).map(|_| format!("tcp/127.0.0.1:{}", free_port())).collect();
-    let (_a, a) = serve(&["--scenario", scenario, "--region", "a", "--zenoh-listen", &ports[0]]);
-    let (_b, b) = serve(&[
+    let ports: Vec<String> = (0..3).map(|_| free_endpoint()).collect();
+    let (_a, a, _) = serve(&["--scenario", scenario, "--region", "a", "--zenoh-listen", &ports[0]]);
+    let (_b, b, _) = serve(&[
         "--scenario",
         scenario,
         "--region",
@@ -228,7 +165,7 @@ async fn three_regions_hand_uavs_over_with_one_owner_at_every_moment() {
         "--zenoh-connect",
         &ports[0],
     ]);
-    let (_c, c) = serve(&[
+    let (_c, c, _) = serve(&[
         "--scenario",
         scenario,
         "--region",

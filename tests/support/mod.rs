@@ -3,6 +3,8 @@
 
 #![allow(dead_code)]
 
+pub mod procs;
+
 use airroads::serve::{ServeConfig, Server};
 use serde_json::Value;
 use std::net::SocketAddr;
