@@ -137,6 +137,9 @@ pub struct Engine {
     pub(crate) handover: Option<super::region::Handover>,
     /// This loop flies its region (false while a standby, and until a takeover's UAVs are in).
     pub(crate) owns_region: bool,
+    /// Which Crazyflie links this server may open (`--allow-link-host`), for UAVs that come from
+    /// another server (a handover or a takeover).
+    pub(crate) link_rules: Arc<links::LinkRules>,
 }
 
 impl Engine {
@@ -168,6 +171,7 @@ impl Engine {
             foreign: Vec::new(),
             handover: None,
             owns_region: false,
+            link_rules: Arc::default(),
         }
     }
 

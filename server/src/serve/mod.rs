@@ -243,6 +243,7 @@ impl Server {
         let stops = factory.stops.clone();
         let mut engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
         engine.region.clone_from(&region);
+        engine.link_rules = link_rules.clone();
         if let Some(region) = &region {
             engine.handover = region.take_handover();
             let at = region::ownership::wall_now();

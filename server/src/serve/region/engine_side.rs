@@ -49,10 +49,11 @@ impl Engine {
     }
 
     /// Adds UAV `id` from its record (a handover or a takeover; `came` says which) and opens its
-    /// ownership; false when its link is not valid. The caller makes sure the id is new here.
+    /// ownership; false when its link is not one this server may open (the same rules as a link
+    /// given over REST). The caller makes sure the id is new here.
     pub(crate) fn adopt(&mut self, id: &str, uav: UavRecord, log: &OwnershipLog, came: &'static str) -> bool {
-        if uav.link.as_deref().is_some_and(|l| links::check_link(l).is_err()) {
-            tracing::warn!("UAV `{id}`: link {:?} refused; not adopted", uav.link);
+        if let Some(Err(reason)) = uav.link.as_deref().map(|l| links::check_link_with(l, &self.link_rules)) {
+            tracing::warn!("UAV `{id}`: link {:?} refused ({reason}); not adopted", uav.link);
             return false;
         }
         let state = uav.state();
