@@ -66,7 +66,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             prefix: "bench".into(),
         };
         let session = region::open(&options).await?;
-        let keys = region::tokens::RegionKeys { prefix: options.prefix.clone(), name: name.clone() };
+        let keys = region::tokens::RegionKeys::new(&options, &name);
         let claim = region::tokens::claim(&session, &keys, &shared.failover, false).await?;
         let uavs = initial.uavs.len();
         let policies = policies::PolicyRegistry::standard(scenario.params.delta)?;

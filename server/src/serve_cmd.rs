@@ -271,8 +271,7 @@ async fn claim_region(
 ) -> anyhow::Result<(zenoh::Session, serve::region::tokens::Claim)> {
     let options = zenoh_options(args);
     let session = serve::region::open(&options).await?;
-    let keys =
-        serve::region::tokens::RegionKeys { prefix: options.prefix.clone(), name: shared.name.clone() };
+    let keys = serve::region::tokens::RegionKeys::new(&options, &shared.name);
     let standby = args.standby_for.is_some();
     let claim = serve::region::tokens::claim(&session, &keys, &shared.failover, standby).await?;
     Ok((session, claim))

@@ -27,16 +27,6 @@ pub const CLAIM_SETTLE: Duration = Duration::from_millis(600);
 /// A release seen on Zenoh is remembered this long (it keeps the UAV out of a takeover).
 pub const RELEASE_MEMORY: Duration = Duration::from_secs(10);
 
-/// The key of a region's mirror: `<prefix>/region/<name>/mirror`.
-pub fn mirror_key(prefix: &str, region: &str) -> String {
-    format!("{prefix}/region/{region}/mirror")
-}
-
-/// The key expression of every liveliness token of a region: `<prefix>/region/<name>/**`.
-pub fn tokens_key(prefix: &str, region: &str) -> String {
-    format!("{prefix}/region/{region}/**")
-}
-
 /// One owner token: `owner/EPOCH/INCARNATION`; ordered by epoch, then incarnation.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord)]
 pub struct OwnerToken {

@@ -226,7 +226,8 @@ pub async fn start(
     neighbours: &[String],
     claim: tokens::Claim,
 ) -> anyhow::Result<RegionLink> {
-    let keys = tokens::RegionKeys { prefix: options.prefix.clone(), name: shared.name.clone() };
+    let keys = tokens::RegionKeys::new(options, &shared.name);
+    let mirror_key = keys.mirror();
     let mut subscribers = tokens::follow(&session, &keys, neighbours, &shared.failover).await?;
     tokio::spawn(tokens::watch(session.clone(), keys, shared.failover.clone(), claim));
     for name in neighbours {
@@ -266,7 +267,7 @@ pub async fn start(
         .declare_publisher(key.clone())
         .await
         .map_err(|e| anyhow::anyhow!("declaring the publisher {key}: {e}"))?;
-    let key = failover::mirror_key(&options.prefix, &shared.name);
+    let key = mirror_key;
     // Only remote subscribers count: every server of the region subscribes to its mirror.
     let mirror = session
         .declare_publisher(key.clone())

@@ -8,7 +8,8 @@ use std::time::Instant;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::sample::{Sample, SampleKind};
 
-/// Where a region's tokens live.
+/// The keys of one region's ownership: `<prefix>/region/<name>/` then `mirror`, `owner/...`,
+/// `standby/...`.
 #[derive(Debug, Clone)]
 pub struct RegionKeys {
     /// `--zenoh-prefix`.
@@ -18,8 +19,23 @@ pub struct RegionKeys {
 }
 
 impl RegionKeys {
+    /// The keys of region `name` under `options`' prefix.
+    pub fn new(options: &super::ZenohOptions, name: &str) -> Self {
+        Self { prefix: options.prefix.clone(), name: name.to_string() }
+    }
+
     fn base(&self) -> String {
         format!("{}/region/{}/", self.prefix, self.name)
+    }
+
+    /// The mirror's key (JSON [`Mirror`] after each of the owner's ticks).
+    pub fn mirror(&self) -> String {
+        format!("{}mirror", self.base())
+    }
+
+    /// Every liveliness token of the region.
+    fn tokens(&self) -> String {
+        format!("{}**", self.base())
     }
 
     fn owner(&self, token: &OwnerToken) -> String {
@@ -64,7 +80,7 @@ pub async fn claim(
     failover: &Failover,
     standby: bool,
 ) -> anyhow::Result<Claim> {
-    let what = failover::tokens_key(&keys.prefix, &keys.name);
+    let what = keys.tokens();
     let subscriber =
         session.liveliness().declare_subscriber(what.as_str()).history(true).await.map_err(zerr(&what))?;
     let mut tokens = Tokens::default();
@@ -106,7 +122,13 @@ pub async fn watch(session: zenoh::Session, keys: RegionKeys, failover: Arc<Fail
                         claim.owner_token = Some((token, handle));
                         claim.standby_token = None;
                     }
-                    Err(e) => tracing::warn!("region {}: taking over: {e:#}", keys.name),
+                    Err(e) if !session.is_closed() => {
+                        // No sample may come to decide again: try again shortly.
+                        tracing::warn!("region {}: taking over: {e:#}; trying again", keys.name);
+                        tokio::time::sleep(std::time::Duration::from_millis(100)).await;
+                        continue;
+                    }
+                    Err(_) => return,
                 }
             }
             Decision::GiveWay => {
@@ -140,7 +162,7 @@ pub async fn follow(
     failover: &Arc<Failover>,
 ) -> anyhow::Result<Vec<zenoh::pubsub::Subscriber<()>>> {
     let mut subscribers = Vec::new();
-    let key = failover::mirror_key(&keys.prefix, &keys.name);
+    let key = keys.mirror();
     let kept = failover.clone();
     let subscriber = session
         .declare_subscriber(key.as_str())
