@@ -107,7 +107,7 @@ pub fn decide(tokens: &Tokens, me: &str, mine: Option<&OwnerToken>) -> Decision 
     }
 }
 
-/// A region's UAVs as its owner flew them at one tick (JSON on [`mirror_key`]).
+/// A region's UAVs as its owner flew them at one tick (JSON on the key of [`super::tokens::RegionKeys::mirror`]).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Mirror {
