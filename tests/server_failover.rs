@@ -13,15 +13,11 @@ mod support;
 
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
-use std::io::{BufRead, BufReader};
 use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
-use std::sync::{Arc, Mutex};
+use std::process::Command;
 use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
-use support::procs::{
-    self, D_C, Proc, TICK_S, TOLERANCE_M, banner_has, distance, free_endpoint, get, serve, uavs,
-};
+use support::procs::{self, D_C, TICK_S, TOLERANCE_M, banner_has, distance, free_endpoint, get, serve, uavs};
 
 /// The takeover bound the issue states (s).
 const TAKEOVER_S: f64 = 1.0;
@@ -284,93 +280,20 @@ async fn a_stopped_region_is_avoided_and_keeps_one_owner_per_uav_after_sigcont()
 }
 
 /// Not a test on its own: the process of simulated Crazyflies that
-/// `a_standby_flies_on_the_crazyflies_of_a_killed_primary` starts (this test binary again, with
-/// `AIRROADS_CFSIM_HOST=x,y;x,y;...`). Prints `uri URI` per simulator, then every 20 ms
-/// `truth CLOSEST AIRBORNE`: the closest pair's horizontal distance and how many fly, by the
-/// simulators' own state, until killed.
+/// `a_standby_flies_on_the_crazyflies_of_a_killed_primary` starts (`support::crazyflies`).
 #[test]
 #[ignore = "a helper process of a_standby_flies_on_the_crazyflies_of_a_killed_primary"]
 fn cfsim_host() {
-    let Ok(positions) = std::env::var("AIRROADS_CFSIM_HOST") else { return };
-    let runtime = tokio::runtime::Runtime::new().unwrap();
-    runtime.block_on(async {
-        let sims: Vec<cfsim::SimHandle> = positions
-            .split(';')
-            .map(|xy| {
-                let (x, y) = xy.split_once(',').unwrap();
-                let start = [x.parse().unwrap(), y.parse().unwrap(), 0.0];
-                let config =
-                    cfsim::SimConfig { initial_position: start, max_accel: 6.0, ..Default::default() };
-                cfsim::SimCrazyflie::spawn("127.0.0.1:0".parse().unwrap(), config).unwrap()
-            })
-            .collect();
-        for sim in &sims {
-            println!("uri {}", sim.uri());
-        }
-        loop {
-            tokio::time::sleep(Duration::from_millis(20)).await;
-            let at: Vec<[f64; 3]> = sims.iter().map(|s| s.truth().position).collect();
-            let airborne = at.iter().filter(|p| p[2] > 0.3).count();
-            let mut closest = f64::INFINITY;
-            for (i, a) in at.iter().enumerate() {
-                for b in &at[i + 1..] {
-                    closest = closest.min(distance([a[0], a[1]], [b[0], b[1]]));
-                }
-            }
-            println!("truth {closest} {airborne}");
-        }
-    });
-}
-
-/// The latest `truth` line of the simulators' process and the closest pair seen since `watching`.
-#[derive(Debug, Default)]
-struct Truth {
-    airborne: usize,
-    closest_while_flying: f64,
-    watching: bool,
-    fell: bool,
+    support::crazyflies::host();
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_standby_flies_on_the_crazyflies_of_a_killed_primary() {
     const N: usize = 3;
     let starts: Vec<[f64; 2]> = (0..N).map(|k| [4.0, -1.0 + k as f64]).collect();
-    let list = starts.iter().map(|p| format!("{},{}", p[0], p[1])).collect::<Vec<_>>().join(";");
-    let mut host = Command::new(std::env::current_exe().unwrap())
-        .args(["--exact", "cfsim_host", "--ignored", "--nocapture", "--test-threads", "1"])
-        .env("AIRROADS_CFSIM_HOST", list)
-        .stdout(Stdio::piped())
-        .stderr(Stdio::null())
-        .spawn()
-        .unwrap();
-    let lines = BufReader::new(host.stdout.take().unwrap()).lines().map_while(Result::ok);
-    let _host = Proc(host);
-    // The harness prints `test cfsim_host ... ` before the first line: find the words anywhere.
-    let after = |line: &str, word: &str| line.find(word).map(|i| line[i + word.len()..].to_string());
-    let truth = Arc::new(Mutex::new(Truth { closest_while_flying: f64::INFINITY, ..Default::default() }));
-    let (kept, (uri_tx, uri_rx)) = (truth.clone(), std::sync::mpsc::channel());
-    std::thread::spawn(move || {
-        for line in lines {
-            if let Some(uri) = after(&line, "uri ") {
-                let _ = uri_tx.send(uri);
-            }
-            let Some(rest) = after(&line, "truth ") else { continue };
-            let mut parts = rest.split(' ');
-            let closest: f64 = parts.next().unwrap().parse().unwrap();
-            let airborne: usize = parts.next().unwrap().parse().unwrap();
-            let mut t = kept.lock().unwrap();
-            if t.watching {
-                t.closest_while_flying = t.closest_while_flying.min(closest);
-                t.fell |= airborne < N;
-            }
-            t.airborne = airborne;
-        }
-    });
-    let uris: Vec<String> = (0..N)
-        .map(|_| {
-            uri_rx.recv_timeout(Duration::from_secs(30)).expect("the simulators' process prints its URIs")
-        })
-        .collect();
+    // Killed when dropped, at the end of the test.
+    let crazyflies = support::crazyflies::start(&starts);
+    let (uris, truth) = (&crazyflies.uris, &crazyflies.truth);
     let dir = scratch("crazyflies");
     let crazyflies = (0..N)
         .map(|k| {

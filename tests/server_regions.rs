@@ -5,6 +5,9 @@
 //! Three regions as three processes: UAVs fly through all three and are handed over at each
 //! border; the regions' ownership logs (`/api/region/ownership`) never overlap for a UAV and leave
 //! it unowned for at most `MAX_UNOWNED_S`; every UAV arrives, every pair D_c apart.
+//! Crazyflies (cfsim, in a process of their own) handed over both ways: the old owner closes the
+//! link without landing, the new one opens it; one owner at every moment, unowned at most
+//! `MAX_UNOWNED_LINK_S`, none came down, every pair D_c apart by the simulators' own state.
 //! Also: `--region` errors name the region and the known ones.
 
 mod support;
@@ -18,6 +21,8 @@ use support::procs::{self, D_C, TICK_S, TOLERANCE_M, distance, free_endpoint, ge
 
 /// The stated bound on a UAV's unowned time in a handover (`region::handover::MAX_UNOWNED_S`).
 const MAX_UNOWNED_S: f64 = 0.25;
+/// The same for a Crazyflie, whose old link closes first (`region::handover::MAX_UNOWNED_LINK_S`).
+const MAX_UNOWNED_LINK_S: f64 = 1.0;
 
 fn scratch(name: &str) -> PathBuf {
     procs::scratch("regions", name)
@@ -226,6 +231,89 @@ async fn three_regions_hand_uavs_over_with_one_owner_at_every_moment() {
         let metrics = get(addr, "/api/metrics").await;
         assert_eq!(metrics["region"]["refused"], 0, "{}", metrics["region"]);
     }
+}
+
+/// Not a test on its own: the process of simulated Crazyflies that
+/// `crazyflies_are_handed_over_with_their_links` starts (`support::crazyflies`).
+#[test]
+#[ignore = "a helper process of crazyflies_are_handed_over_with_their_links"]
+fn cfsim_host() {
+    support::crazyflies::host();
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn crazyflies_are_handed_over_with_their_links() {
+    // Two fly east through the border at x = 20, one flies west between them.
+    let starts = [[12.0, -1.0], [12.0, 1.0], [28.0, 0.0]];
+    let goals = [[28.0, -1.0], [28.0, 1.0], [12.0, 0.0]];
+    let crazyflies = support::crazyflies::start(&starts);
+    let (uris, truth) = (&crazyflies.uris, &crazyflies.truth);
+    let uavs_json: Vec<Value> = (0..3)
+        .map(|k| json!({"id": format!("cf{k}"), "start": starts[k], "goal": goals[k], "link": uris[k]}))
+        .collect();
+    let dir = scratch("crazyflies");
+    let scenario = json!({
+        "name": "crazyflies",
+        "params": {"t_max": 120.0},
+        "segments": roads::RoadLayout::straight(0.0, 40.0, 4.0, 8).segments,
+        "regions": [{"name": "west", "segments": [0, 3]}, {"name": "east", "segments": [4, 7]}],
+        "uavs": uavs_json,
+    });
+    let path = dir.join("crazyflies.json");
+    std::fs::write(&path, scenario.to_string()).unwrap();
+    let scenario = path.to_str().unwrap();
+    let endpoint = free_endpoint();
+    let (_west, west, _) = serve(&["--scenario", scenario, "--region", "west", "--zenoh-listen", &endpoint]);
+    let (_east, east, _) = serve(&["--scenario", scenario, "--region", "east", "--zenoh-connect", &endpoint]);
+    let started = Instant::now();
+    while truth.lock().unwrap().airborne < 3 {
+        assert!(started.elapsed() < Duration::from_secs(30), "not all took off");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    truth.lock().unwrap().watching = true;
+    let mut arrived = 0;
+    while started.elapsed() < Duration::from_secs(100) {
+        let asked = Instant::now();
+        let (sw, se) = tokio::join!(get(west, "/api/state"), get(east, "/api/state"));
+        let skew = asked.elapsed().as_secs_f64() + 2.0 * TICK_S;
+        let all: Vec<Value> = [&sw, &se].iter().flat_map(|s| s["uavs"].as_array().unwrap().clone()).collect();
+        for u in &all {
+            assert!(u["phase"] != "landed" && u["phase"] != "landing", "{}: {u}", u["id"]);
+        }
+        let listed: Vec<_> = uavs(&sw).into_iter().chain(uavs(&se)).collect();
+        for (i, x) in listed.iter().enumerate() {
+            for y in listed[i + 1..].iter().filter(|y| y.0 != x.0) {
+                let d = distance(x.1, y.1);
+                let slack = TOLERANCE_M + distance(x.2, y.2) * skew;
+                assert!(d >= D_C - slack, "{} and {} {d} m apart", x.0, y.0);
+            }
+        }
+        arrived = listed.iter().filter(|u| u.3).count();
+        if arrived == 3 {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    assert_eq!(arrived, 3, "every Crazyflie arrives");
+    let by_uav = ownership(&[("west", west), ("east", east)]).await;
+    let mut longest_gap = 0.0f64;
+    for (id, intervals) in &by_uav {
+        let path: Vec<&str> = intervals.iter().map(|i| i.2.as_str()).collect();
+        let expected = if id == "cf2" { ["east", "west"] } else { ["west", "east"] };
+        assert_eq!(path, expected, "{id}: {intervals:?}");
+        let gap = intervals[1].0 - intervals[0].1;
+        assert!(gap >= 0.0, "{id}: two owners at once: {intervals:?}");
+        assert!(gap <= MAX_UNOWNED_LINK_S, "{id}: unowned {gap} s: {intervals:?}");
+        longest_gap = longest_gap.max(gap);
+    }
+    assert_eq!(by_uav.len(), 3, "{by_uav:?}");
+    let t = truth.lock().unwrap();
+    eprintln!(
+        "longest unowned gap {longest_gap:.3} s; closest pair in flight {:.3} m",
+        t.closest_while_flying
+    );
+    assert!(!t.fell, "a Crazyflie came down during a handover");
+    assert!(t.closest_while_flying >= D_C - TOLERANCE_M, "closest pair {} m", t.closest_while_flying);
 }
 
 #[test]

@@ -5,7 +5,7 @@
 
 use crate::session;
 use links::{Link, LinkPhase};
-use std::sync::atomic::{AtomicU8, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
 use tokio::sync::{mpsc, watch};
@@ -130,6 +130,8 @@ pub struct Shared {
     error: Mutex<Option<String>>,
     /// Stops and landings given up on without the Crazyflie's confirmation.
     unconfirmed: AtomicU64,
+    /// The session closed the connection on a detach and ended.
+    detached: AtomicBool,
 }
 
 impl Shared {
@@ -173,6 +175,16 @@ impl Shared {
         self.unconfirmed.fetch_add(1, Ordering::AcqRel);
     }
 
+    /// Records that the connection was closed on a detach (the session has ended).
+    pub fn set_detached(&self) {
+        self.detached.store(true, Ordering::Release);
+    }
+
+    /// The connection was closed on a detach.
+    pub fn detached(&self) -> bool {
+        self.detached.load(Ordering::Acquire)
+    }
+
     /// How many emergency stops and landings were given up on without the Crazyflie's confirmation
     /// since the link was created.
     pub fn unconfirmed_commands(&self) -> u64 {
@@ -192,12 +204,13 @@ impl StopHandle {
 }
 
 /// The fleet's link to one Crazyflie (`radio://…` through a Crazyradio, `udp://HOST:PORT` to a
-/// simulator). Dropping it lands the Crazyflie.
+/// simulator). Dropping it lands the Crazyflie, unless it was detached first.
 pub struct CrazyflieLink {
     uri: String,
     config: RelayConfig,
     shared: Arc<Shared>,
     setpoints: watch::Sender<Option<Setpoint>>,
+    detach: watch::Sender<bool>,
     urgent: mpsc::UnboundedSender<Urgent>,
     external: mpsc::Sender<[f32; 3]>,
     last_seq: u64,
@@ -212,9 +225,15 @@ impl CrazyflieLink {
         let (urgent, urgent_rx) = mpsc::unbounded_channel();
         // Motion-capture poses: a short queue, the newest matter; full means drop (never block).
         let (external, external_rx) = mpsc::channel(8);
-        let channels = session::Channels { setpoints: setpoint_rx, urgent: urgent_rx, external: external_rx };
+        let (detach, detach_rx) = watch::channel(false);
+        let channels = session::Channels {
+            setpoints: setpoint_rx,
+            urgent: urgent_rx,
+            external: external_rx,
+            detach: detach_rx,
+        };
         runtime.spawn(session::supervise(uri.to_string(), config, shared.clone(), channels));
-        Self { uri: uri.to_string(), config, shared, setpoints, urgent, external, last_seq: 0 }
+        Self { uri: uri.to_string(), config, shared, setpoints, detach, urgent, external, last_seq: 0 }
     }
 
     /// The state shared with the session (phase, newest sample, last error).
@@ -276,6 +295,14 @@ impl Link for CrazyflieLink {
 
     fn describe(&self) -> &str {
         &self.uri
+    }
+
+    fn detach(&mut self) {
+        self.detach.send_replace(true);
+    }
+
+    fn detached(&self) -> bool {
+        self.shared.detached()
     }
 
     fn error(&self) -> Option<String> {

@@ -25,6 +25,9 @@ pub const STATE_VARIABLES: [&str; 6] = [
     "stateEstimate.vz",
 ];
 
+/// Longest wait for the client library's disconnect after a detach or the end of a session.
+const DISCONNECT_WAIT: Duration = Duration::from_millis(500);
+
 /// Identity attitude and no body rates for the full-state setpoint (the fleet does not steer yaw).
 const LEVEL: [f32; 4] = [0.0, 0.0, 0.0, 1.0];
 
@@ -36,6 +39,15 @@ pub struct Channels {
     pub urgent: mpsc::UnboundedReceiver<Urgent>,
     /// Motion-capture positions to forward.
     pub external: mpsc::Receiver<[f32; 3]>,
+    /// Becomes true when the link is to be closed without landing (`Link::detach`).
+    pub detach: watch::Receiver<bool>,
+}
+
+/// Resolves once a detach has been asked for (never, if the link is gone without one).
+async fn detach_asked(detach: &mut watch::Receiver<bool>) {
+    if detach.wait_for(|asked| *asked).await.is_err() {
+        std::future::pending::<()>().await;
+    }
 }
 
 /// How a session ended.
@@ -44,6 +56,8 @@ enum End {
     Done,
     /// The connection was lost or failed: reconnect.
     Lost(String),
+    /// The link asked to be closed without landing (a handover to another server): stop for good.
+    Detached,
 }
 
 /// What the operator asked for, kept across reconnections.
@@ -70,8 +84,19 @@ fn task_failure(uri: &str, e: tokio::task::JoinError) -> String {
     format!("the Crazyflie library failed on {uri}: {message}{hint}")
 }
 
-/// Runs sessions for `uri` until the link is dropped and the Crazyflie is down.
-pub async fn supervise(uri: String, config: RelayConfig, shared: Arc<Shared>, mut channels: Channels) {
+/// Runs sessions for `uri` until the link is dropped and the Crazyflie is down, or until the link
+/// is detached (then the connection is closed, whichever way the sessions ended, and
+/// [`Shared::detached`] says so).
+pub async fn supervise(uri: String, config: RelayConfig, shared: Arc<Shared>, channels: Channels) {
+    let detach = channels.detach.clone();
+    run_sessions(uri, config, shared.clone(), channels).await;
+    if *detach.borrow() {
+        shared.set_detached();
+    }
+}
+
+/// The sessions of [`supervise`], one after another.
+async fn run_sessions(uri: String, config: RelayConfig, shared: Arc<Shared>, mut channels: Channels) {
     let mut intent = Intent::Fly;
     let cache = MemoryTocCache::default();
     let mut connected_before = false;
@@ -101,12 +126,16 @@ pub async fn supervise(uri: String, config: RelayConfig, shared: Arc<Shared>, mu
         channels = back;
         match end {
             End::Done => return,
+            End::Detached => return,
             End::Lost(reason) => {
                 shared.set_error(Some(reason));
                 if channels.urgent.is_closed() && !shared.phase().airborne() {
                     return;
                 }
-                tokio::time::sleep(retry_delay(config.reconnect_after, failures)).await;
+                tokio::select! {
+                    () = tokio::time::sleep(retry_delay(config.reconnect_after, failures)) => {}
+                    () = detach_asked(&mut channels.detach) => return,
+                }
             }
         }
     }
@@ -134,13 +163,27 @@ async fn session(
         let link = open(&uri).await.map_err(|e| e.to_string())?;
         Crazyflie::connect_from_link(link, cache).await.map_err(|e| format!("connect: {e}"))
     };
-    let cf = match timeout(Duration::from_secs_f64(limit), connect).await {
+    let connected = tokio::select! {
+        biased;
+        () = detach_asked(&mut ch.detach) => return (End::Detached, ch, intent, false),
+        connected = timeout(Duration::from_secs_f64(limit), connect) => connected,
+    };
+    let cf = match connected {
         Ok(Ok(cf)) => cf,
         Ok(Err(e)) => return (End::Lost(e), ch, intent, false),
         Err(_) => return (End::Lost(format!("connect: timed out after {limit} s")), ch, intent, false),
     };
-    let end = fly(&cf, config, &shared, &mut ch, &mut intent).await;
-    cf.disconnect().await;
+    let mut detach = ch.detach.clone();
+    let end = tokio::select! {
+        // Detach first: a link detached and then dropped must not be taken for one dropped alone
+        // (which lands).
+        biased;
+        () = detach_asked(&mut detach) => End::Detached,
+        end = fly(&cf, config, &shared, &mut ch, &mut intent) => end,
+    };
+    // Bounded: a closed link is what the next owner waits for, and the socket closes when `cf`
+    // is dropped in any case.
+    let _ = timeout(DISCONNECT_WAIT, cf.disconnect()).await;
     (end, ch, intent, true)
 }
 

@@ -233,6 +233,38 @@ async fn dropping_the_link_lands_the_crazyflie() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_detached_link_closes_without_landing_and_another_link_flies_on() {
+    // A handover between two regions: the old owner detaches, the new owner opens its own link.
+    let sim = sim_at(0.0, 0.0);
+    let mut old = airborne_link(&sim).await;
+    assert!(!old.detached(), "a flying link is not detached");
+    old.detach();
+    until("the connection closed", PATIENCE, || old.detached()).await;
+    drop(old);
+    // Closed for good: no reconnection, no landing; the firmware holds its last setpoint.
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let held = sim.truth();
+    assert!(held.motors_on && held.position[2] > 0.8, "still in the air after the detach: {held:?}");
+    let config = RelayConfig { takeoff_s: 1.0, ..RelayConfig::default() };
+    let mut new = CrazyflieLink::spawn(&tokio::runtime::Handle::current(), &sim.uri(), config);
+    // Found in the air: flying without a take-off, and its commands move it.
+    until("the new link flying", PATIENCE, || {
+        assert_ne!(new.phase(), LinkPhase::TakingOff, "the new owner took off again");
+        new.phase() == LinkPhase::Flying
+    })
+    .await;
+    let start = sim.truth().position;
+    fly(&mut new, 1.0, |_| Vec2::new(1.0, 0.0)).await;
+    fly(&mut new, 1.0, |s| s.map_or(Vec2::zeros(), |s| -s.v * 2.0)).await;
+    let moved = sim.truth().position[0] - start[0];
+    assert!(moved > 0.3, "the new owner's commands moved it {moved} m");
+    assert!(sim.truth().motors_on, "never came down");
+    new.land();
+    until_phase(&new, &sim, LinkPhase::Landed).await;
+    sim.shutdown().await;
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_unreachable_crazyflie_stays_connecting_and_never_blocks() {
     // Nothing listens on this port: the session keeps retrying; the fleet side never waits.
     let socket = std::net::UdpSocket::bind("127.0.0.1:0").unwrap();

@@ -255,6 +255,24 @@ impl Fleet {
         });
     }
 
+    /// Adds a UAV known to be in the air (taken over from another server): until its link reports,
+    /// e.g. while it connects, it is avoided as lost (its reach disk), never taken for grounded.
+    pub fn add_airborne(
+        &mut self,
+        id: String,
+        policy: String,
+        link: Box<dyn Link>,
+        state: UavState,
+        goal: Option<Vec2>,
+    ) {
+        self.add(id, policy, link, state, goal);
+        // `add` has just pushed it.
+        if let Some(uav) = self.uavs.last_mut() {
+            uav.was_airborne = true;
+            uav.condition = Condition::of(uav.phase, true, 0, false);
+        }
+    }
+
     /// Runs one tick ([`TickPipeline`]) and returns the number of UAVs that have arrived.
     pub fn tick(&mut self) -> usize {
         let mut pipeline = std::mem::take(&mut self.pipeline);

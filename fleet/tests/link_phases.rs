@@ -68,3 +68,44 @@ fn a_uav_confirmed_down_is_out_of_the_airspace() {
         assert!(!b.condition.in_the_air() && !b.condition.flying(), "{phase:?} is on the ground");
     }
 }
+
+/// A link that is still connecting: no state yet, commands go nowhere.
+struct Connecting;
+
+impl Link for Connecting {
+    fn state(&mut self) -> Option<UavState> {
+        None
+    }
+
+    fn send(&mut self, _u: Vec2) {}
+
+    fn phase(&self) -> LinkPhase {
+        LinkPhase::Connecting
+    }
+}
+
+#[test]
+fn a_uav_taken_over_in_the_air_is_avoided_as_lost_while_its_new_link_connects() {
+    // Another server flew it to x = 20 and handed it over: its new link has not connected yet.
+    let road = Road::new(RoadLayout::straight(0.0, 40.0, 6.0, 4)).unwrap();
+    let config = FleetConfig::default();
+    let (dt, d_c) = (config.params.dt, config.params.d_c);
+    let mut fleet = Fleet::new(config, road, PolicyRegistry::with_pd(config.params.delta));
+    let a = UavState::at_rest(Vec2::new(10.0, 0.0));
+    let b = UavState::at_rest(Vec2::new(20.0, 0.0));
+    fleet.add("a".into(), "pd".into(), Box::new(SimLink::new(a, dt)), a, Some(Vec2::new(30.0, 0.0)));
+    fleet.add_airborne("b".into(), "pd".into(), Box::new(Connecting), b, None);
+    assert_eq!(fleet.uavs()[1].condition, fleet::Condition::Lost, "lost from the start");
+    let mut min_distance = f64::INFINITY;
+    for _ in 0..400 {
+        fleet.tick();
+        assert_eq!(fleet.uavs()[1].condition, fleet::Condition::Lost);
+        min_distance = min_distance.min((fleet.uavs()[0].state.p - b.p).norm());
+    }
+    assert!(min_distance >= d_c, "a came {min_distance} m close to where b may be, less than D_c {d_c}");
+    // Added as new (a UAV never flown), a connecting link is on the ground: no obstacle.
+    let road = Road::new(RoadLayout::straight(0.0, 40.0, 6.0, 4)).unwrap();
+    let mut fresh = Fleet::new(config, road, PolicyRegistry::with_pd(config.params.delta));
+    fresh.add("b".into(), "pd".into(), Box::new(Connecting), b, None);
+    assert_eq!(fresh.uavs()[0].condition, fleet::Condition::Grounded);
+}

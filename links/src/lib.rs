@@ -71,6 +71,11 @@ impl LinkPhase {
         }
     }
 
+    /// The phase called `name` ([`LinkPhase::name`]), if any.
+    pub fn from_name(name: &str) -> Option<Self> {
+        Self::ALL.into_iter().find(|p| p.name() == name)
+    }
+
     /// The UAV is in the air at the fleet's altitude (or on its way there or down, or not yet
     /// confirmed down after an emergency stop): an obstacle.
     pub fn airborne(&self) -> bool {
@@ -94,6 +99,13 @@ pub trait Link: Send {
     fn land(&mut self) {}
     /// Cuts the motors at once (emergency stop), ahead of any queued command.
     fn emergency_stop(&mut self) {}
+    /// Closes the connection without landing, so that another server can open it (a handover
+    /// between regions); the UAV holds its last setpoint meanwhile. In-process links have none.
+    fn detach(&mut self) {}
+    /// The connection is closed after [`Link::detach`] (at once for in-process links).
+    fn detached(&self) -> bool {
+        true
+    }
     /// What the link is, e.g. `sim` or the Crazyflie URI (shown in the snapshot).
     fn describe(&self) -> &str {
         SIM_LINK

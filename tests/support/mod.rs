@@ -3,6 +3,7 @@
 
 #![allow(dead_code)]
 
+pub mod crazyflies;
 pub mod procs;
 
 use airroads::serve::{ServeConfig, Server};

@@ -190,6 +190,7 @@ fn a_uav_from_another_server_gets_only_a_link_this_server_may_open() {
         goal: None,
         policy: "pd".into(),
         link: Some(link.into()),
+        airborne: true,
     };
     // A simulator on another host: refused by default, as over REST, and allowed by the rules.
     assert!(!rig.engine.adopt("far", record("udp://10.0.0.5:19850"), &log, "failover"));

@@ -140,6 +140,8 @@ pub struct Engine {
     /// Which Crazyflie links this server may open (`--allow-link-host`), for UAVs that come from
     /// another server (a handover or a takeover).
     pub(crate) link_rules: Arc<links::LinkRules>,
+    /// Crazyflies released to another region whose links are closing (`region/detach.rs`).
+    pub(crate) detaching: Vec<super::region::detach::Detaching>,
 }
 
 impl Engine {
@@ -172,6 +174,7 @@ impl Engine {
             handover: None,
             owns_region: false,
             link_rules: Arc::default(),
+            detaching: Vec::new(),
         }
     }
 
@@ -284,6 +287,7 @@ impl Engine {
                 snapshot: snapshot.clone(),
                 read_at: started,
                 owned: self.owns_region,
+                unheard: self.unheard(Instant::now()),
             };
             region.published.send_replace(Some(published));
         }

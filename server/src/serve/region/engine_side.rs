@@ -2,7 +2,7 @@
 //! releases the UAVs another region accepted, adopts the UAVs released to this one, and makes new
 //! offers. Only plain data moves here; nothing waits.
 
-use super::handover::{FleetChange, UavRecord, record};
+use super::handover::{FleetChange, UavRecord};
 use super::ownership::{OwnershipLog, wall_now};
 use crate::serve::engine::Engine;
 use std::sync::PoisonError;
@@ -22,17 +22,14 @@ impl Engine {
             return;
         }
         handover.expire(now);
-        for change in handover.receive(&self.fleet, self.max_uavs, now) {
+        self.release_detached(&mut handover);
+        let rules = self.link_rules.clone();
+        for change in handover.receive(&self.fleet, self.max_uavs, &rules, now) {
             match change {
                 FleetChange::Release { id, to, seq } => {
-                    let Ok(mut uav) = self.fleet.remove(&id) else { continue };
-                    // Its last command went out in the last tick: the link's state now is where
-                    // the new owner takes it on.
-                    let state = uav.link.state().filter(|s| s.is_finite()).unwrap_or(uav.state);
-                    uav.state = state;
-                    let rec = record(&uav);
+                    let Ok(uav) = self.fleet.remove(&id) else { continue };
                     handover.ownership.close(&id, wall_now(), "handover");
-                    handover.released(id, to, seq, rec, now);
+                    self.release(&mut handover, uav, to, seq);
                 }
                 FleetChange::Adopt { id, uav } => {
                     if self.adopt(&id, uav, &handover.ownership, "handover") {
@@ -46,6 +43,18 @@ impl Engine {
             *region.handover_counts.lock().unwrap_or_else(PoisonError::into_inner) = handover.counts;
         }
         self.handover = Some(handover);
+    }
+
+    /// What this region's message adds to the snapshot: how long each silent UAV has not been
+    /// heard from (its neighbours' reach disks grow with it, as this fleet's do) and the ghosts.
+    pub(crate) fn unheard(&self, now: Instant) -> super::wire::Unheard {
+        let dt = self.fleet.config.params.dt;
+        let silent = (self.fleet.uavs().iter().enumerate())
+            .filter(|(_, u)| u.stale_ticks > 0)
+            .map(|(k, u)| (k as u32, super::wire::saturating_ms(f64::from(u.stale_ticks) * dt)))
+            .collect();
+        let ghosts = self.handover.as_ref().map(|h| h.ghost_records(now)).unwrap_or_default();
+        super::wire::Unheard { silent, ghosts }
     }
 
     /// Adds UAV `id` from its record (a handover or a takeover; `came` says which) and opens its
@@ -65,7 +74,12 @@ impl Engine {
         let goal =
             uav.goal.map(|g| Vec2::new(g[0], g[1])).filter(|g| self.fleet.check_goal(*g, "goal").is_ok());
         let link = self.links.make(id, uav.link.as_deref(), state, self.fleet.config.params.dt);
-        self.fleet.add(id.to_string(), policy, link, state, goal);
+        if uav.airborne {
+            // A Crazyflie's new link connects first: meanwhile it is avoided as lost.
+            self.fleet.add_airborne(id.to_string(), policy, link, state, goal);
+        } else {
+            self.fleet.add(id.to_string(), policy, link, state, goal);
+        }
         log.open(id, wall_now(), came);
         true
     }

@@ -92,7 +92,8 @@ fn only_a_newer_mirror_replaces_the_kept_one() {
 fn releases_from_this_region_are_remembered_for_a_while() {
     let f = Failover::new();
     let now = Instant::now();
-    let record = UavRecord { p: [0.0; 2], v: [0.0; 2], goal: None, policy: "pd".into(), link: None };
+    let record =
+        UavRecord { p: [0.0; 2], v: [0.0; 2], goal: None, policy: "pd".into(), link: None, airborne: true };
     let release = |from: &str, id: &str| Message::Release {
         from: from.into(),
         to: "east".into(),
@@ -108,8 +109,14 @@ fn releases_from_this_region_are_remembered_for_a_while() {
 
 #[test]
 fn a_mirror_round_trips_through_json_and_refuses_unknown_fields() {
-    let record =
-        UavRecord { p: [1.0, 2.0], v: [0.5, 0.0], goal: Some([9.0, 0.0]), policy: "rl".into(), link: None };
+    let record = UavRecord {
+        p: [1.0, 2.0],
+        v: [0.5, 0.0],
+        goal: Some([9.0, 0.0]),
+        policy: "rl".into(),
+        link: None,
+        airborne: true,
+    };
     let m = Mirror { uavs: vec![MirrorUav { id: "u1".into(), uav: record }], ..mirror(3, 7) };
     let json = serde_json::to_string(&m).unwrap();
     assert_eq!(serde_json::from_str::<Mirror>(&json).unwrap(), m);

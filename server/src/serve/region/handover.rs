@@ -18,7 +18,8 @@
 
 pub use super::messages::{Message, UavRecord};
 use super::ownership::OwnershipLog;
-use fleet::{Fleet, ForeignUav};
+use fleet::{Condition, Fleet, ForeignUav};
+use links::LinkRules;
 use serde::Serialize;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -29,6 +30,9 @@ use uav::UavState;
 /// The bound on a UAV's unowned time during a handover (s): one tick and the transit (stated in
 /// README and ARCHITECTURE.md; `tests/server_regions.rs` checks it on loopback).
 pub const MAX_UNOWNED_S: f64 = 0.25;
+/// The bound on a Crazyflie's unowned time in a handover (s): the close of its old link (at most
+/// the session's 0.5 s disconnect wait), then one tick and the transit, as for [`MAX_UNOWNED_S`].
+pub const MAX_UNOWNED_LINK_S: f64 = 1.0;
 /// An offer not answered in this time is dropped (and made again later).
 pub const OFFER_TIMEOUT: Duration = Duration::from_secs(1);
 /// An accepted offer whose release has not come in this time is forgotten. Longer than
@@ -161,9 +165,21 @@ impl Handover {
         }
     }
 
+    /// A message can be queued now (only the loop sends, so the room stays until it does).
+    pub fn can_send(&self) -> bool {
+        self.outbox.capacity() > 0
+    }
+
     /// Reads up to [`MAX_MESSAGES_PER_GAP`] messages: answers offers (checked against `fleet`, which
-    /// may hold at most `max_uavs`), and returns what the loop must do to the fleet now.
-    pub fn receive(&mut self, fleet: &Fleet, max_uavs: usize, now: Instant) -> Vec<FleetChange> {
+    /// may hold at most `max_uavs`, and the links this server may open, `rules`), and returns what
+    /// the loop must do to the fleet now.
+    pub fn receive(
+        &mut self,
+        fleet: &Fleet,
+        max_uavs: usize,
+        rules: &LinkRules,
+        now: Instant,
+    ) -> Vec<FleetChange> {
         let mut changes = Vec::new();
         for _ in 0..MAX_MESSAGES_PER_GAP {
             let Ok(message) = self.inbox.try_recv() else { break };
@@ -173,7 +189,7 @@ impl Handover {
             }
             match message {
                 Message::Offer { from, id, seq, uav, .. } => {
-                    let answer = match self.check_offer(fleet, max_uavs, &from, &id, &uav) {
+                    let answer = match self.check_offer(fleet, max_uavs, rules, &from, &id, &uav) {
                         Ok(()) => {
                             self.reservations
                                 .insert(id.clone(), Reservation { from: from.clone(), accepted: now });
@@ -221,6 +237,7 @@ impl Handover {
         &self,
         fleet: &Fleet,
         max_uavs: usize,
+        rules: &LinkRules,
         from: &str,
         id: &str,
         uav: &UavRecord,
@@ -238,8 +255,8 @@ impl Handover {
         if !fleet.policy_names().any(|n| n == uav.policy) {
             return Err(format!("policy `{}` is not loaded here", uav.policy));
         }
-        if uav.link.is_some() {
-            return Err("only simulated UAVs are handed over".into());
+        if let Some(Err(e)) = uav.link.as_deref().map(|l| links::check_link_with(l, rules)) {
+            return Err(format!("link: {e}"));
         }
         if fleet.uavs().len() + self.reservations.len() >= max_uavs {
             return Err(format!("this region flies its maximum of {max_uavs} UAVs"));
@@ -249,7 +266,8 @@ impl Handover {
 
     /// Offers every UAV of `fleet` whose tracked segment lies in a neighbouring region to that
     /// region (one offer at a time per UAV); `road_version` tells when to recompute the segments'
-    /// regions. Only simulated UAVs are offered (a Crazyflie's link is not handed over yet).
+    /// regions. Only UAVs flying their policy on a fresh state are offered (a Crazyflie taking off,
+    /// landing or lost stays with its owner until it flies again).
     pub fn offer(&mut self, fleet: &Fleet, road_version: u64, now: Instant) {
         if self.road_version != Some(road_version) {
             self.road_version = Some(road_version);
@@ -265,7 +283,7 @@ impl Handover {
             };
             if self.offers.contains_key(&u.id)
                 || self.retry_at.get(&u.id).is_some_and(|t| now < *t)
-                || u.link.describe() != links::SIM_LINK
+                || u.condition != Condition::Cooperating
                 || !u.state.is_finite()
             {
                 continue;
@@ -285,11 +303,19 @@ impl Handover {
         }
     }
 
-    /// UAV `id` has left the fleet as `uav`: releases it to `to` and keeps it as a ghost.
+    /// UAV `id` has left the fleet in `state` and its link is closing (a Crazyflie, released once
+    /// the link is closed): it is kept as a ghost from now on.
+    pub fn detaching(&mut self, id: &str, state: UavState, now: Instant) {
+        self.adopted.remove(id);
+        self.ghosts.insert(id.to_string(), Ghost { state, released: now });
+    }
+
+    /// UAV `id` has left the fleet as `uav` (and its link is closed): releases it to `to` and keeps
+    /// it as a ghost (aged from when it left, if it was detaching).
     pub fn released(&mut self, id: String, to: String, seq: u64, uav: UavRecord, now: Instant) {
         self.counts.released += 1;
         self.adopted.remove(&id);
-        self.ghosts.insert(id.clone(), Ghost { state: uav.state(), released: now });
+        self.ghosts.entry(id.clone()).or_insert(Ghost { state: uav.state(), released: now });
         self.send(Message::Release { from: self.own.clone(), to, id, seq, uav });
     }
 
@@ -346,6 +372,13 @@ impl Handover {
         self.adopted.retain(|_, t| now.saturating_duration_since(*t) < GHOST_TTL);
     }
 
+    /// The ghosts, for this region's messages: id, last state, ms since they left.
+    pub fn ghost_records(&self, now: Instant) -> Vec<(String, UavState, u16)> {
+        let ms =
+            |g: &Ghost| super::wire::saturating_ms(now.saturating_duration_since(g.released).as_secs_f64());
+        self.ghosts.iter().map(|(id, g)| (id.clone(), g.state, ms(g))).collect()
+    }
+
     /// Corrects the foreign UAVs of the next tick: leaves out the UAVs this region has just adopted
     /// (their old owner's last messages may still list them) and adds the ghosts their new owner
     /// does not list yet, aged from their release.
@@ -365,14 +398,16 @@ impl Handover {
     }
 }
 
-/// The record of a UAV flown here (its link is simulated).
+/// The record of a UAV flown here.
 pub fn record(u: &fleet::Uav) -> UavRecord {
+    let link = u.link.describe();
     UavRecord {
         p: [u.state.p.x, u.state.p.y],
         v: [u.state.v.x, u.state.v.y],
         goal: u.nav.goal().map(|g| [g.x, g.y]),
         policy: u.policy.clone(),
-        link: None,
+        link: (link != links::SIM_LINK).then(|| link.to_string()),
+        airborne: u.condition.in_the_air(),
     }
 }
 

@@ -50,7 +50,7 @@ impl Side {
     /// One gap: receives, applies the changes as the engine does, offers.
     fn gap(&mut self, now: Instant) {
         self.handover.expire(now);
-        for change in self.handover.receive(&self.fleet, 100, now) {
+        for change in self.handover.receive(&self.fleet, 100, &links::LinkRules::default(), now) {
             match change {
                 FleetChange::Release { id, to, seq } => {
                     let uav = self.fleet.remove(&id).unwrap(); // receive() checked it is here
@@ -161,6 +161,7 @@ fn offers_of_unknown_policies_and_bad_states_are_refused_and_releases_of_owned_u
         goal: None,
         policy: policy.into(),
         link: None,
+        airborne: true,
     };
     let offer =
         |id: &str, uav| Message::Offer { from: "west".into(), to: "east".into(), id: id.into(), seq: 1, uav };
@@ -196,6 +197,40 @@ fn offers_of_unknown_policies_and_bad_states_are_refused_and_releases_of_owned_u
 }
 
 #[test]
+fn a_crazyflie_is_accepted_only_on_a_link_this_server_may_open() {
+    let mut east = side("east");
+    let record = |link: &str| UavRecord {
+        p: [21.0, 0.0],
+        v: [0.0, 0.0],
+        goal: None,
+        policy: "pd".into(),
+        link: Some(link.into()),
+        airborne: true,
+    };
+    let offer = |id: &str, link| Message::Offer {
+        from: "west".into(),
+        to: "east".into(),
+        id: id.into(),
+        seq: 1,
+        uav: record(link),
+    };
+    // On loopback (the default rules) it is taken; another host needs `--allow-link-host`.
+    east.inbox.send(offer("near", "udp://127.0.0.1:19850")).unwrap();
+    east.inbox.send(offer("far", "udp://10.0.0.5:19850")).unwrap();
+    east.inbox.send(offer("typo", "radio://0/80/2M/E7E7E7E7")).unwrap();
+    east.gap(Instant::now());
+    let answers: Vec<Message> = std::iter::from_fn(|| east.sent()).collect();
+    assert!(matches!(&answers[0], Message::Accept { id, .. } if id == "near"), "{answers:?}");
+    for (answer, id) in answers[1..].iter().zip(["far", "typo"]) {
+        assert!(
+            matches!(answer, Message::Refuse { id: i, reason, .. } if i == id && reason.starts_with("link: ")),
+            "{answer:?}"
+        );
+    }
+    assert_eq!(answers.len(), 3);
+}
+
+#[test]
 fn messages_round_trip_as_json_and_unknown_fields_are_refused() {
     let m = Message::Release {
         from: "west".into(),
@@ -208,6 +243,7 @@ fn messages_round_trip_as_json_and_unknown_fields_are_refused() {
             goal: Some([3.0, 0.0]),
             policy: "rl".into(),
             link: None,
+            airborne: true,
         },
     };
     let text = serde_json::to_string(&m).unwrap();

@@ -19,6 +19,9 @@ pub struct UavRecord {
     pub policy: String,
     /// Its link (None: simulated in the owner's process).
     pub link: Option<String>,
+    /// It was in the air when recorded: its new owner avoids it as lost until its link reports.
+    #[serde(default)]
+    pub airborne: bool,
 }
 
 impl UavRecord {
@@ -30,6 +33,7 @@ impl UavRecord {
             goal: u.goal,
             policy: u.policy.clone(),
             link: (u.link != links::SIM_LINK).then(|| u.link.clone()),
+            airborne: u.lost || links::LinkPhase::from_name(u.phase).is_some_and(|p| p.airborne()),
         }
     }
 

@@ -8,6 +8,7 @@
 //! the foreign UAVs out of a [`ForeignTable`] that the subscriber's callback fills.
 
 pub mod ages;
+pub(crate) mod detach;
 mod engine_side;
 pub mod failover;
 pub mod handover;
@@ -131,6 +132,8 @@ pub struct Published {
     pub read_at: Instant,
     /// The loop flew the region in that tick (a standby's empty fleet is never published).
     pub owned: bool,
+    /// The silent UAVs' unheard times and the ghosts, sent with the states.
+    pub unheard: wire::Unheard,
 }
 
 /// What the fleet loop and `GET /api/metrics` share with the region's Zenoh side.

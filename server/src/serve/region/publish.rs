@@ -29,7 +29,7 @@ pub(super) async fn publish(
             continue;
         }
         let age = published.read_at.elapsed().as_secs_f32();
-        let payload = wire::encode(&region, &published.snapshot, age);
+        let payload = wire::encode(&region, &published.snapshot, age, &published.unheard);
         publishers.bytes.fetch_add(payload.len() as u64, Relaxed);
         if let Err(e) = publishers.states.put(payload).await {
             tracing::warn!("region {region}: publishing: {e}");

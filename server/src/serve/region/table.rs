@@ -23,8 +23,19 @@ struct Heard {
     received: Instant,
     /// How old its states were when sent (the sender's measure).
     age_at_send_s: f64,
-    /// Its UAVs: id and state.
-    uavs: Vec<(String, UavState)>,
+    /// Its UAVs.
+    uavs: Vec<HeardUav>,
+}
+
+/// One UAV of a region's last message.
+#[derive(Debug)]
+struct HeardUav {
+    id: String,
+    state: UavState,
+    /// How long before the message's tick it was last heard (s).
+    unheard_s: f64,
+    /// Released by that region, which no longer commands it.
+    ghost: bool,
 }
 
 /// The latest message per neighbouring region, and counters for `GET /api/metrics`.
@@ -71,7 +82,8 @@ impl ForeignTable {
                     Vec2::new(f64::from(u.p[0]), f64::from(u.p[1])),
                     Vec2::new(f64::from(u.v[0]), f64::from(u.v[1])),
                 );
-                (u.id, UavState { p, v })
+                let (unheard_s, ghost) = (f64::from(u.unheard_ms) / 1000.0, u.ghost());
+                HeardUav { id: u.id, state: UavState { p, v }, unheard_s, ghost }
             })
             .collect();
         let heard = Heard { received: at, age_at_send_s: f64::from(states.age_at_send_s), uavs };
@@ -85,8 +97,9 @@ impl ForeignTable {
         self.refused.fetch_add(1, Relaxed);
     }
 
-    /// Every foreign UAV into `out` with its age at `now`: the sender's age at sending, plus the
-    /// time since it arrived, plus [`TRANSIT_ALLOWANCE_S`]. Reuses `out`'s strings.
+    /// Every foreign UAV into `out` with its age at `now`: how long before its message's tick it
+    /// was last heard, plus the sender's age at sending, plus the time since the message arrived,
+    /// plus [`TRANSIT_ALLOWANCE_S`]. Reuses `out`'s strings.
     pub fn copy_into(&self, now: Instant, out: &mut Vec<ForeignUav>) {
         let regions = self.lock();
         let mut n = 0;
@@ -94,17 +107,24 @@ impl ForeignTable {
             let age_s = heard.age_at_send_s
                 + now.saturating_duration_since(heard.received).as_secs_f64()
                 + TRANSIT_ALLOWANCE_S;
-            for (id, state) in &heard.uavs {
+            for u in &heard.uavs {
+                let age_s = age_s + u.unheard_s;
                 if let Some(slot) = out.get_mut(n) {
-                    slot.id.clone_from(id);
-                    (slot.state, slot.age_s) = (*state, age_s);
+                    slot.id.clone_from(&u.id);
+                    (slot.state, slot.age_s) = (u.state, age_s);
                 } else {
-                    out.push(ForeignUav { id: id.clone(), state: *state, age_s });
+                    out.push(ForeignUav { id: u.id.clone(), state: u.state, age_s });
                 }
                 n += 1;
             }
         }
         out.truncate(n);
+    }
+
+    /// The UAVs the neighbours command now (their last messages' records that are not ghosts).
+    pub fn commanded_ids(&self) -> std::collections::HashSet<String> {
+        let regions = self.lock();
+        regions.values().flat_map(|h| h.uavs.iter().filter(|u| !u.ghost).map(|u| u.id.clone())).collect()
     }
 
     /// `GET /api/metrics` `region`: its name, the foreign UAVs known (`foreign_uavs`), per
@@ -132,7 +152,7 @@ impl ForeignTable {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::serve::region::wire::WireUav;
+    use crate::serve::region::wire::{self, WireUav};
     use std::time::Duration;
 
     fn states(region: &str, ids: &[&str]) -> RegionStates {
@@ -144,6 +164,7 @@ mod tests {
             target: [0.0; 2],
             status: 0,
             flags: 0,
+            unheard_ms: 0,
         };
         RegionStates {
             region: region.into(),
@@ -169,6 +190,24 @@ mod tests {
         table.copy_into(t0 + Duration::from_millis(150), &mut out);
         assert_eq!(out.iter().map(|f| f.id.as_str()).collect::<Vec<_>>(), ["b"]);
         assert_eq!(table.report(t0)["foreign_uavs"], 1);
+    }
+
+    #[test]
+    fn a_silent_uav_or_a_ghost_is_older_by_its_unheard_time_and_ghosts_are_not_commanded() {
+        let table = ForeignTable::new("west");
+        let t0 = Instant::now();
+        let mut message = states("east", &["a", "lost", "ghost"]);
+        message.uavs[1].unheard_ms = 400;
+        (message.uavs[2].unheard_ms, message.uavs[2].flags) = (150, wire::UAV_GHOST);
+        assert!(table.accept("east", message, t0));
+        let mut out = Vec::new();
+        table.copy_into(t0, &mut out);
+        let base = 0.02 + TRANSIT_ALLOWANCE_S;
+        let ages: Vec<f64> = out.iter().map(|f| f.age_s - base).collect();
+        assert!((ages[0]).abs() < 1e-9 && (ages[1] - 0.4).abs() < 1e-9 && (ages[2] - 0.15).abs() < 1e-9);
+        let mut commanded: Vec<String> = table.commanded_ids().into_iter().collect();
+        commanded.sort();
+        assert_eq!(commanded, ["a", "lost"]);
     }
 
     #[test]

@@ -25,10 +25,12 @@ impl Engine {
         false
     }
 
-    /// Another owner is ahead: this server stops commanding every UAV at once.
+    /// Another owner is ahead: this server stops commanding every UAV at once and closes their
+    /// links without landing them (the new owner flies them on).
     fn give_way(&mut self, handover: &mut Handover) {
         let at = wall_now();
-        for uav in self.fleet.take_all() {
+        for mut uav in self.fleet.take_all() {
+            uav.link.detach();
             handover.ownership.close(&uav.id, at, "gave_way");
         }
         handover.forget_all();
@@ -42,7 +44,8 @@ impl Engine {
             .map(|(mirror, _)| mirror.uavs.iter().map(|u| (u.id.clone(), u.uav.clone())).collect())
             .unwrap_or_default();
         records.extend(handover.take_held());
-        let listed: HashSet<String> = self.foreign.iter().map(|f| f.id.clone()).collect();
+        // The neighbours' ghosts are not theirs: a ghost is a UAV released (here, maybe).
+        let listed = self.region.as_ref().map(|r| r.foreign.commanded_ids()).unwrap_or_default();
         let mut flown: HashSet<String> = self.fleet.uavs().iter().map(|u| u.id.clone()).collect();
         let (mut adopted, mut skipped) = (0usize, 0usize);
         for (id, uav) in records {

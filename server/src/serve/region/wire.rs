@@ -2,7 +2,10 @@
 //! then one record per UAV. A record is the binary stream's 40-byte record (`super::super::binary`)
 //! with its roster index replaced by the UAV's id (a region's receivers have no roster): `u16` id
 //! length, the id (UTF-8), then `f32` p, v, u and target (x, y each), `u8` status (the stream's
-//! codes), `u8` flags (1 arrived, 2 lost), `u16` reserved.
+//! codes), `u8` flags (1 arrived, 2 lost, 4 ghost), `u16` unheard: how long before the message's
+//! tick the state was last heard (ms, saturating; 0 for a fresh state). A lost UAV's record has the
+//! time since its link last spoke; a *ghost* is a UAV this region released (or is releasing) and
+//! commands no more, listed until its new owner lists it, with the time since it left.
 //!
 //! Decoding never panics: truncated, oversized or garbage input, an unknown version or kind, ids or
 //! a region name that are not valid, and positions or velocities that are not finite are errors.
@@ -10,6 +13,10 @@
 use super::super::binary::{UAV_ARRIVED, UAV_LOST, status_code};
 use super::super::snapshot::Snapshot;
 use thiserror::Error;
+use uav::UavState;
+
+/// A record's flag: a ghost (released by the sender, not commanded by it).
+pub const UAV_GHOST: u8 = 4;
 
 /// The format's version, the first byte.
 pub const WIRE_VERSION: u8 = 1;
@@ -37,8 +44,32 @@ pub struct WireUav {
     pub target: [f32; 2],
     /// Status code (README "Binary stream").
     pub status: u8,
-    /// 1 arrived, 2 lost.
+    /// 1 arrived, 2 lost, 4 ghost.
     pub flags: u8,
+    /// How long before the message's tick its state was last heard (ms).
+    pub unheard_ms: u16,
+}
+
+impl WireUav {
+    /// A ghost: released by its sender, who no longer commands it.
+    pub fn ghost(&self) -> bool {
+        self.flags & UAV_GHOST != 0
+    }
+}
+
+/// What a region adds to its snapshot's records: how long each silent UAV has not been heard from,
+/// and its ghosts.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Unheard {
+    /// (index in the snapshot, ms since its state was last heard), by increasing index.
+    pub silent: Vec<(u32, u16)>,
+    /// Released UAVs whose new owner does not list them yet: id, last state, ms since they left.
+    pub ghosts: Vec<(String, UavState, u16)>,
+}
+
+/// Milliseconds in `seconds`, saturating at `u16::MAX` (a negative or NaN time is 0).
+pub fn saturating_ms(seconds: f64) -> u16 {
+    (seconds * 1000.0).clamp(0.0, f64::from(u16::MAX)) as u16
 }
 
 /// A region's states at one of its ticks.
@@ -82,29 +113,44 @@ pub enum WireError {
     Trailing(usize),
 }
 
-/// The payload of `snapshot` from `region`, its states read `age_at_send_s` before now.
-pub fn encode(region: &str, snapshot: &Snapshot, age_at_send_s: f32) -> Vec<u8> {
+/// The payload of `snapshot` from `region`, its states read `age_at_send_s` before now, with the
+/// silent UAVs' ages and the ghosts of `unheard`.
+pub fn encode(region: &str, snapshot: &Snapshot, age_at_send_s: f32, unheard: &Unheard) -> Vec<u8> {
     let uavs = &snapshot.uavs;
-    let mut out = Vec::with_capacity(HEADER_BYTES + region.len() + uavs.len() * (RECORD_TAIL_BYTES + 16));
+    let count = uavs.len() + unheard.ghosts.len();
+    let mut out = Vec::with_capacity(HEADER_BYTES + region.len() + count * (RECORD_TAIL_BYTES + 16));
     let name = &region.as_bytes()[..region.len().min(MAX_NAME_BYTES)];
     out.extend_from_slice(&[WIRE_VERSION, KIND_REGION_STATES]);
     out.extend_from_slice(&(name.len() as u16).to_le_bytes());
-    out.extend_from_slice(&(u32::try_from(uavs.len()).unwrap_or(u32::MAX)).to_le_bytes());
+    out.extend_from_slice(&(u32::try_from(count).unwrap_or(u32::MAX)).to_le_bytes());
     out.extend_from_slice(&snapshot.tick.to_le_bytes());
     out.extend_from_slice(&snapshot.time.to_le_bytes());
     out.extend_from_slice(&age_at_send_s.to_le_bytes());
     out.extend_from_slice(name);
-    for u in uavs {
-        let id = &u.id.as_bytes()[..u.id.len().min(MAX_NAME_BYTES)];
-        out.extend_from_slice(&(id.len() as u16).to_le_bytes());
-        out.extend_from_slice(id);
-        for x in [u.p, u.v, u.u, u.target].iter().flatten() {
-            out.extend_from_slice(&(*x as f32).to_le_bytes());
-        }
+    let mut silent = unheard.silent.iter().peekable();
+    for (k, u) in uavs.iter().enumerate() {
+        let unheard_ms = silent.next_if(|(i, _)| *i as usize == k).map_or(0, |(_, ms)| *ms);
         let flags = if u.arrived { UAV_ARRIVED } else { 0 } | if u.lost { UAV_LOST } else { 0 };
-        out.extend_from_slice(&[status_code(u.status), flags, 0, 0]);
+        let tail = [status_code(u.status), flags];
+        put_record(&mut out, &u.id, [u.p, u.v, u.u, u.target], tail, unheard_ms);
+    }
+    for (id, state, unheard_ms) in &unheard.ghosts {
+        let (p, v) = ([state.p.x, state.p.y], [state.v.x, state.v.y]);
+        put_record(&mut out, id, [p, v, [0.0; 2], p], [0, UAV_GHOST | UAV_LOST], *unheard_ms);
     }
     out
+}
+
+/// Appends one record: id, the four vectors, status and flags, unheard time.
+fn put_record(out: &mut Vec<u8>, id: &str, vectors: [[f64; 2]; 4], status_flags: [u8; 2], unheard_ms: u16) {
+    let id = &id.as_bytes()[..id.len().min(MAX_NAME_BYTES)];
+    out.extend_from_slice(&(id.len() as u16).to_le_bytes());
+    out.extend_from_slice(id);
+    for x in vectors.iter().flatten() {
+        out.extend_from_slice(&(*x as f32).to_le_bytes());
+    }
+    out.extend_from_slice(&status_flags);
+    out.extend_from_slice(&unheard_ms.to_le_bytes());
 }
 
 /// Reads little-endian fields from the front of a byte slice.
@@ -169,11 +215,12 @@ pub fn decode(bytes: &[u8]) -> Result<RegionStates, WireError> {
         let id = r.name(id_len, "UAV id")?;
         let (p, v) = (r.f32_pair("record")?, r.f32_pair("record")?);
         let (u, target) = (r.f32_pair("record")?, r.f32_pair("record")?);
-        let [status, flags, _, _] = r.array::<4>("record")?;
+        let [status, flags, ms0, ms1] = r.array::<4>("record")?;
         if !p.iter().chain(&v).all(|x| x.is_finite()) {
             return Err(WireError::NotFinite(id));
         }
-        uavs.push(WireUav { id, p, v, u, target, status, flags });
+        let unheard_ms = u16::from_le_bytes([ms0, ms1]);
+        uavs.push(WireUav { id, p, v, u, target, status, flags, unheard_ms });
     }
     if !r.0.is_empty() {
         return Err(WireError::Trailing(r.0.len()));

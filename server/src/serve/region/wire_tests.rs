@@ -44,7 +44,8 @@ fn snapshot(uavs: Vec<UavSnapshot>) -> Snapshot {
 
 #[test]
 fn a_payload_has_the_documented_layout() {
-    let bytes = encode("west", &snapshot(vec![uav("a1", [1.5, -2.0], [0.25, 0.0])]), 0.01);
+    let bytes =
+        encode("west", &snapshot(vec![uav("a1", [1.5, -2.0], [0.25, 0.0])]), 0.01, &Unheard::default());
     assert_eq!(bytes.len(), HEADER_BYTES + 4 + 2 + 2 + RECORD_TAIL_BYTES);
     assert_eq!(&bytes[..8], &[1, 4, 4, 0, 1, 0, 0, 0]);
     assert_eq!(u64::from_le_bytes(bytes[8..16].try_into().unwrap()), 7);
@@ -61,12 +62,26 @@ fn a_payload_has_the_documented_layout() {
 }
 
 #[test]
+fn silent_uavs_carry_their_unheard_time_and_ghosts_follow_the_fleet() {
+    let uavs = vec![uav("a", [0.0, 0.0], [0.0, 0.0]), uav("b", [1.0, 0.0], [0.0, 0.0])];
+    let ghost = UavState { p: uav::Vec2::new(5.0, 1.0), v: uav::Vec2::new(1.0, 0.0) };
+    let unheard = Unheard { silent: vec![(1, 350)], ghosts: vec![("g".into(), ghost, 120)] };
+    let decoded = decode(&encode("west", &snapshot(uavs), 0.01, &unheard)).unwrap();
+    let seen: Vec<(&str, u16, bool)> =
+        decoded.uavs.iter().map(|u| (u.id.as_str(), u.unheard_ms, u.ghost())).collect();
+    assert_eq!(seen, [("a", 0, false), ("b", 350, false), ("g", 120, true)]);
+    assert_eq!((decoded.uavs[2].p, decoded.uavs[2].v), ([5.0, 1.0], [1.0, 0.0]));
+    assert_eq!((saturating_ms(0.25), saturating_ms(1e9), saturating_ms(f64::NAN)), (250, u16::MAX, 0));
+}
+
+#[test]
 fn bad_payloads_are_refused_with_their_reason() {
-    let good = encode("west", &snapshot(vec![uav("a", [0.0, 0.0], [0.0, 0.0])]), 0.0);
+    let good = encode("west", &snapshot(vec![uav("a", [0.0, 0.0], [0.0, 0.0])]), 0.0, &Unheard::default());
     assert_eq!(decode(&good[..10]), Err(WireError::Truncated("header")));
     // Fewer bytes than the count's smallest records, or a record cut short.
     assert_eq!(decode(&good[..good.len() - 1]), Err(WireError::Truncated("records")));
-    let long_id = encode("west", &snapshot(vec![uav("abcdef", [0.0, 0.0], [0.0, 0.0])]), 0.0);
+    let long_id =
+        encode("west", &snapshot(vec![uav("abcdef", [0.0, 0.0], [0.0, 0.0])]), 0.0, &Unheard::default());
     assert_eq!(decode(&long_id[..long_id.len() - 1]), Err(WireError::Truncated("record")));
     let mut bad = good.clone();
     bad[0] = 2;
@@ -87,13 +102,18 @@ fn bad_payloads_are_refused_with_their_reason() {
     bad[24..28].copy_from_slice(&(-1.0f32).to_le_bytes());
     assert_eq!(decode(&bad), Err(WireError::Age));
     for p in [[f64::NAN, 0.0], [0.0, f64::INFINITY]] {
-        let bytes = encode("west", &snapshot(vec![uav("a", p, [0.0, 0.0])]), 0.0);
+        let bytes = encode("west", &snapshot(vec![uav("a", p, [0.0, 0.0])]), 0.0, &Unheard::default());
         assert_eq!(decode(&bytes), Err(WireError::NotFinite("a".into())));
     }
-    let bytes = encode("west", &snapshot(vec![uav("a", [0.0, 0.0], [f64::NEG_INFINITY, 0.0])]), 0.0);
+    let bytes = encode(
+        "west",
+        &snapshot(vec![uav("a", [0.0, 0.0], [f64::NEG_INFINITY, 0.0])]),
+        0.0,
+        &Unheard::default(),
+    );
     assert_eq!(decode(&bytes), Err(WireError::NotFinite("a".into())));
     // An f64 beyond f32's range is not finite once sent.
-    let bytes = encode("west", &snapshot(vec![uav("a", [1e300, 0.0], [0.0, 0.0])]), 0.0);
+    let bytes = encode("west", &snapshot(vec![uav("a", [1e300, 0.0], [0.0, 0.0])]), 0.0, &Unheard::default());
     assert_eq!(decode(&bytes), Err(WireError::NotFinite("a".into())));
 }
 
@@ -111,7 +131,7 @@ proptest! {
         let list: Vec<UavSnapshot> = uavs.iter().map(|(id, x)| uav(id, [x[0], x[1]], [x[2], x[3]])).collect();
         let mut snap = snapshot(list);
         snap.tick = tick;
-        let decoded = decode(&encode(&region, &snap, age)).unwrap();
+        let decoded = decode(&encode(&region, &snap, age, &Unheard::default())).unwrap();
         prop_assert_eq!(&decoded.region, &region);
         prop_assert_eq!(decoded.tick, tick);
         prop_assert_eq!(decoded.age_at_send_s, age);
@@ -134,7 +154,7 @@ proptest! {
         let mut valid = noise.clone();
         valid.splice(0..0, [WIRE_VERSION, KIND_REGION_STATES]);
         let _ = decode(&valid);
-        let mut bytes = encode("east", &snapshot(vec![uav("a", [1.0, 2.0], [0.0, 0.0]), uav("b", [3.0, 4.0], [1.0, 0.0])]), 0.02);
+        let mut bytes = encode("east", &snapshot(vec![uav("a", [1.0, 2.0], [0.0, 0.0]), uav("b", [3.0, 4.0], [1.0, 0.0])]), 0.02, &Unheard::default());
         for (at, value) in flips {
             let at = at % bytes.len();
             bytes[at] = value;

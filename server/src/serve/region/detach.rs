@@ -1,0 +1,64 @@
+//! Crazyflies leaving the region (`handover`): a UAV whose link is a real connection leaves the
+//! fleet as soon as its new owner accepted it (nothing commands it after that), its link is
+//! detached (closed without landing; the Crazyflie holds its last setpoint), and the release goes
+//! out only once the link is closed, so the new owner never opens a link the old one still holds.
+//! Meanwhile the UAV is a ghost of this fleet: a reach disk growing from when it left.
+
+use super::Handover;
+use super::handover::record;
+use crate::serve::engine::Engine;
+use std::time::{Duration, Instant};
+
+/// A detach that takes longer than this is logged (the session closes within 0.5 s).
+const SLOW_DETACH: Duration = Duration::from_secs(1);
+
+/// A UAV released to another region whose link is still closing.
+pub(crate) struct Detaching {
+    uav: fleet::Uav,
+    to: String,
+    seq: u64,
+    since: Instant,
+    warned: bool,
+}
+
+impl Engine {
+    /// UAV `uav` has left the fleet for region `to` (offer `seq`): released at once if its link is
+    /// closed (a simulated one), else detached and released by [`Engine::release_detached`].
+    pub(crate) fn release(&mut self, handover: &mut Handover, mut uav: fleet::Uav, to: String, seq: u64) {
+        let now = Instant::now();
+        // Its last command went out in the last tick: the link's state now is where the new owner
+        // takes it on.
+        uav.state = uav.link.state().filter(|s| s.is_finite()).unwrap_or(uav.state);
+        if uav.link.detached() {
+            handover.released(uav.id.clone(), to, seq, record(&uav), now);
+            return;
+        }
+        uav.link.detach();
+        handover.detaching(&uav.id, uav.state, now);
+        self.detaching.push(Detaching { uav, to, seq, since: now, warned: false });
+    }
+
+    /// Releases the UAVs whose links have closed since the last gap (while the handover queue has
+    /// room for their releases).
+    pub(crate) fn release_detached(&mut self, handover: &mut Handover) {
+        if self.detaching.is_empty() {
+            return;
+        }
+        let now = Instant::now();
+        let mut waiting = Vec::with_capacity(self.detaching.len());
+        for mut d in std::mem::take(&mut self.detaching) {
+            if !d.uav.link.detached() || !handover.can_send() {
+                if !d.warned && now.saturating_duration_since(d.since) > SLOW_DETACH {
+                    d.warned = true;
+                    tracing::warn!("UAV `{}`: its link has not closed after {SLOW_DETACH:?}", d.uav.id);
+                }
+                waiting.push(d);
+                continue;
+            }
+            let uav = &mut d.uav;
+            uav.state = uav.link.state().filter(|s| s.is_finite()).unwrap_or(uav.state);
+            handover.released(uav.id.clone(), d.to, d.seq, record(uav), now);
+        }
+        self.detaching = waiting;
+    }
+}
