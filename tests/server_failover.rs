@@ -139,7 +139,7 @@ async fn fly_until_arrived(a: SocketAddr, b: SocketAddr, n: usize, until: Instan
     let (mut arrived, mut closest) = (0, f64::INFINITY);
     while Instant::now() < until {
         let asked = Instant::now();
-        let (sa, sb) = tokio::join!(get(a, "/api/state"), get(b, "/api/state"));
+        let (sa, sb) = tokio::join!(get(a, "/api/state?scope=region"), get(b, "/api/state?scope=region"));
         closest = closest.min(check_pairs(&[&sa, &sb], asked.elapsed().as_secs_f64() + 2.0 * TICK_S));
         arrived = uavs(&sa).iter().chain(uavs(&sb).iter()).filter(|u| u.3).count();
         if arrived == n {
@@ -177,7 +177,7 @@ async fn a_standby_takes_over_a_killed_primary_within_a_second() {
     let standby_args = region_args(scenario, "--standby-for", "west", &ports[2], &[&ports[0], &ports[1]]);
     let (_standby, s, banner) = serve(&standby_args);
     // The standby flies nothing, refuses changes, and mirrors the primary.
-    assert!(get(s, "/api/state").await["uavs"].as_array().unwrap().is_empty());
+    assert!(get(s, "/api/state?scope=region").await["uavs"].as_array().unwrap().is_empty());
     let add = r#"{"id": "intruder", "position": [5.0, 0.0]}"#;
     let (status, body) =
         support::raw(s, "POST", "/api/uavs", Some(add), &[("content-type", "application/json")]).await;
@@ -197,7 +197,7 @@ async fn a_standby_takes_over_a_killed_primary_within_a_second() {
     let started = Instant::now();
     while started.elapsed() < Duration::from_secs(4) {
         let asked = Instant::now();
-        let (sp, se) = tokio::join!(get(p, "/api/state"), get(e, "/api/state"));
+        let (sp, se) = tokio::join!(get(p, "/api/state?scope=region"), get(e, "/api/state?scope=region"));
         check_pairs(&[&sp, &se], asked.elapsed().as_secs_f64() + 2.0 * TICK_S);
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
@@ -225,7 +225,7 @@ async fn a_standby_takes_over_a_killed_primary_within_a_second() {
     // Started again, the old primary finds an owner and joins as its standby.
     let (_again, a, banner) =
         serve(&["--scenario", scenario, "--region", "west", "--zenoh-connect", &ports[1]]);
-    assert!(get(a, "/api/state").await["uavs"].as_array().unwrap().is_empty());
+    assert!(get(a, "/api/state?scope=region").await["uavs"].as_array().unwrap().is_empty());
     assert_eq!(get(a, "/api/metrics").await["region"]["failover"]["role"], "standby");
     assert!(banner_has(&banner, "joins as its standby"), "{:?}", banner.lock().unwrap());
     assert_eq!(get(s, "/api/metrics").await["region"]["failover"]["role"], "owner");
@@ -244,7 +244,7 @@ async fn a_stopped_region_is_avoided_and_keeps_one_owner_per_uav_after_sigcont()
     let mut last_west = Value::Null;
     while started.elapsed() < Duration::from_secs(30) {
         let asked = Instant::now();
-        let (sw, se) = tokio::join!(get(w, "/api/state"), get(e, "/api/state"));
+        let (sw, se) = tokio::join!(get(w, "/api/state?scope=region"), get(e, "/api/state?scope=region"));
         check_pairs(&[&sw, &se], asked.elapsed().as_secs_f64() + 2.0 * TICK_S);
         let near = uavs(&se).iter().any(|u| u.1[0] < 24.0) || uavs(&sw).iter().any(|u| u.1[0] > 16.0);
         last_west = sw;
@@ -260,7 +260,7 @@ async fn a_stopped_region_is_avoided_and_keeps_one_owner_per_uav_after_sigcont()
     // disks, keeps D_c from them.
     let mut closest = f64::INFINITY;
     while stopped.elapsed() < Duration::from_secs(2) {
-        let se = get(e, "/api/state").await;
+        let se = get(e, "/api/state?scope=region").await;
         closest = closest.min(check_pairs(&[&last_west, &se], 2.0 * TICK_S));
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
@@ -271,7 +271,7 @@ async fn a_stopped_region_is_avoided_and_keeps_one_owner_per_uav_after_sigcont()
     let by_uav = ownership(&[("west", w), ("east", e)]).await;
     assert_eq!(by_uav.len(), 10, "{by_uav:?}");
     check_one_owner(&by_uav);
-    let (sw, se) = tokio::join!(get(w, "/api/state"), get(e, "/api/state"));
+    let (sw, se) = tokio::join!(get(w, "/api/state?scope=region"), get(e, "/api/state?scope=region"));
     let mut ids: Vec<String> = uavs(&sw).into_iter().chain(uavs(&se)).map(|u| u.0).collect();
     ids.sort();
     let before = ids.len();
@@ -310,7 +310,7 @@ async fn a_standby_flies_on_the_crazyflies_of_a_killed_primary() {
     // Airborne and on their way (take-off takes 2 s), then kill the primary.
     let started = Instant::now();
     loop {
-        let state = get(p, "/api/state").await;
+        let state = get(p, "/api/state?scope=region").await;
         let flying = state["uavs"].as_array().unwrap().iter().filter(|u| u["phase"] == "flying").count();
         let moving = uavs(&state).iter().filter(|u| distance(u.2, [0.0, 0.0]) > 0.2).count();
         let mirrored = get(s, "/api/metrics").await["region"]["failover"]["mirror_uavs"] == N;
@@ -327,7 +327,7 @@ async fn a_standby_flies_on_the_crazyflies_of_a_killed_primary() {
     assert!(owner_at - killed_at <= TAKEOVER_S, "took over {:.3} s after the kill", owner_at - killed_at);
     let mut arrived = 0;
     while started.elapsed() < Duration::from_secs(90) {
-        let state = get(s, "/api/state").await;
+        let state = get(s, "/api/state?scope=region").await;
         check_pairs(&[&state], 2.0 * TICK_S);
         for u in state["uavs"].as_array().unwrap() {
             assert!(u["phase"] != "landed" && u["phase"] != "landing", "{}: {u}", u["id"]);

@@ -57,15 +57,15 @@ async fn two_regions_see_each_other_and_keep_d_c_across_the_border() {
     let (_east, east, _) = serve(&["--scenario", scenario, "--region", "east", "--zenoh-connect", &endpoint]);
     // Each region flies only the UAVs that start in it.
     let ids = |state: &Value| uavs(state).into_iter().map(|u| u.0).collect::<Vec<_>>();
-    assert_eq!(ids(&get(west, "/api/state").await), ["w1", "w2"]);
-    assert_eq!(ids(&get(east, "/api/state").await), ["e1", "e2"]);
+    assert_eq!(ids(&get(west, "/api/state?scope=region").await), ["w1", "w2"]);
+    assert_eq!(ids(&get(east, "/api/state?scope=region").await), ["e1", "e2"]);
     let started = Instant::now();
     let (mut seen_west, mut seen_east) = (false, false);
     let mut closest = f64::INFINITY;
     let mut crossed = false;
     while started.elapsed() < Duration::from_secs(20) {
         let asked = Instant::now();
-        let (w, e) = tokio::join!(get(west, "/api/state"), get(east, "/api/state"));
+        let (w, e) = tokio::join!(get(west, "/api/state?scope=region"), get(east, "/api/state?scope=region"));
         let skew = asked.elapsed().as_secs_f64() + 2.0 * TICK_S;
         let (w, e) = (uavs(&w), uavs(&e));
         for (list, name) in [(&w, "west"), (&e, "east")] {
@@ -187,7 +187,11 @@ async fn three_regions_hand_uavs_over_with_one_owner_at_every_moment() {
     let mut arrived = Vec::new();
     while started.elapsed() < Duration::from_secs(110) {
         let asked = Instant::now();
-        let (sa, sb, sc) = tokio::join!(get(a, "/api/state"), get(b, "/api/state"), get(c, "/api/state"));
+        let (sa, sb, sc) = tokio::join!(
+            get(a, "/api/state?scope=region"),
+            get(b, "/api/state?scope=region"),
+            get(c, "/api/state?scope=region")
+        );
         let skew = asked.elapsed().as_secs_f64() + 2.0 * TICK_S;
         let states = [&sa, &sb, &sc];
         let all: Vec<_> = states.iter().flat_map(|s| uavs(s)).collect();
@@ -274,7 +278,8 @@ async fn crazyflies_are_handed_over_with_their_links() {
     let mut arrived = 0;
     while started.elapsed() < Duration::from_secs(100) {
         let asked = Instant::now();
-        let (sw, se) = tokio::join!(get(west, "/api/state"), get(east, "/api/state"));
+        let (sw, se) =
+            tokio::join!(get(west, "/api/state?scope=region"), get(east, "/api/state?scope=region"));
         let skew = asked.elapsed().as_secs_f64() + 2.0 * TICK_S;
         let all: Vec<Value> = [&sw, &se].iter().flat_map(|s| s["uavs"].as_array().unwrap().clone()).collect();
         for u in &all {

@@ -284,12 +284,16 @@ async fn start_region(
     claim: serve::region::tokens::Claim,
     shared: &serve::region::RegionShared,
     app: &serve::state::AppState,
-) -> anyhow::Result<serve::region::RegionLink> {
+) -> anyhow::Result<(serve::region::RegionLink, zenoh::query::Queryable<()>)> {
     let options = zenoh_options(args);
     let road = app.road.borrow().layout.clone();
     let road = roads::Road::new(road).context("the served road")?;
     let neighbours = serve::region::neighbours_of(&road, &shared.name).map_err(anyhow::Error::msg)?;
-    let link = serve::region::start(session, &options, shared, &neighbours, claim).await?;
+    let link = serve::region::start(session.clone(), &options, shared, &neighbours, claim).await?;
+    let federation =
+        serve::region::federation::Federation::new(session.clone(), &options.prefix, &shared.name);
+    let queryable = serve::federate::answer_queries(&federation, &session, app.clone()).await?;
+    let _ = shared.federation.set(federation);
     let key = serve::region::state_key(&options.prefix, &shared.name);
     let role = if shared.failover.is_owner() { "owner" } else { "standby" };
     say!(
@@ -301,7 +305,7 @@ async fn start_region(
     if args.region.is_some() && !shared.failover.is_owner() {
         say!("  standby    region {}'s owner is alive: this server joins as its standby", shared.name);
     }
-    Ok(link)
+    Ok((link, queryable))
 }
 
 /// Completes on Ctrl-C or SIGTERM.

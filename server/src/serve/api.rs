@@ -166,7 +166,7 @@ async fn get_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<
 
 /// Where UAV `id` is in `snapshot`: from the roster index of the latest frame, without a scan of the
 /// fleet; only while the serialiser is still a tick behind and the roster changed does it scan.
-fn position_of(app: &AppState, snapshot: &Snapshot, id: &str) -> Option<usize> {
+pub(crate) fn position_of(app: &AppState, snapshot: &Snapshot, id: &str) -> Option<usize> {
     let frame = app.frames.borrow();
     let indexed = frame.binary.index.get(id).copied();
     if frame.tick() == snapshot.tick {

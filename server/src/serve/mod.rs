@@ -12,6 +12,8 @@ pub mod command;
 pub mod durable;
 pub mod engine;
 pub mod error;
+pub mod federate;
+mod federate_merge;
 pub mod guard;
 pub mod linking;
 pub mod listener;
@@ -310,6 +312,7 @@ impl Server {
             .merge(web::router())
             .route("/ws", axum::routing::get(ws::handler))
             .fallback(not_found)
+            .layer(axum::middleware::from_fn_with_state(app.clone(), federate::forward))
             .layer(axum::middleware::from_fn_with_state(app.clone(), auth::require_token))
             .layer(axum::middleware::from_fn_with_state(app.clone(), guard::check))
             .layer(axum::middleware::from_fn_with_state(app.clone(), audit::record))

@@ -11,6 +11,7 @@ pub mod ages;
 pub(crate) mod detach;
 mod engine_side;
 pub mod failover;
+pub mod federation;
 pub mod handover;
 pub mod messages;
 pub mod ownership;
@@ -155,6 +156,8 @@ pub struct RegionShared {
     pub failover: Arc<Failover>,
     /// The handover counters, as the loop last wrote them.
     pub handover_counts: Arc<Mutex<handover::HandoverCounts>>,
+    /// How this region asks the others (set once the Zenoh side started; `serve::federate`).
+    pub federation: Arc<std::sync::OnceLock<federation::Federation>>,
     /// Handover messages received, for the loop.
     inbox: SyncSender<handover::Message>,
     /// Handover messages received that the loop's queue had no room for.
@@ -181,6 +184,7 @@ impl RegionShared {
             published_bytes: Arc::default(),
             failover: Arc::new(Failover::new()),
             handover_counts: Arc::default(),
+            federation: Arc::default(),
             inbox,
             inbox_dropped: Arc::default(),
             handover: Arc::new(Mutex::new(Some(handover))),

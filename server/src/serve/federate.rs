@@ -1,0 +1,305 @@
+//! One fleet to the operator (`--region`; README "Regions over Zenoh", One fleet): any region's REST
+//! API answers for every UAV of the deployment. A middleware, after the token check, looks at each
+//! request: a request about a UAV this region does not fly goes to the region that does (its owner
+//! answers; the status and body come back unchanged); `POST /api/uavs` goes to the region of the
+//! new UAV's position; `GET /api/state` and `GET /api/uavs` merge every region's answer; the
+//! fleet-wide commands (`/api/fleet/pause|resume|land|stop`) are applied here first, then in every
+//! other region. `?scope=region` keeps a read to this region alone.
+//!
+//! The other side: requests from other regions arrive on this region's queryable and are run
+//! through the same API handlers (without this middleware, so nothing is forwarded twice); only
+//! the region's owner answers. Zenoh peers are trusted like the fleet loop's own messages: secure
+//! the Zenoh network (`--zenoh-config`: TLS, access control) where other hosts can reach it.
+
+use super::api;
+use super::error::{ApiError, MAX_BODY_BYTES};
+use super::region::federation::{Answer, ApiQuery, ApiReply, Federation, MAX_CARRIED_BYTES};
+use super::state::AppState;
+use axum::body::{Body, Bytes};
+use axum::extract::{Request, State};
+use axum::http::{Method, StatusCode, header};
+use axum::middleware::Next;
+use axum::response::{IntoResponse, Response};
+use serde_json::{Value, json};
+use std::sync::Arc;
+use std::time::Duration;
+use tokio::sync::Semaphore;
+
+/// Requests from other regions run at once at most (more are answered 503 `busy`).
+pub const MAX_CONCURRENT_QUERIES: usize = 16;
+/// A request about a UAV nobody answered for is asked again once after this long (it may have
+/// been between two regions, released and not yet adopted).
+const RETRY_AFTER: Duration = Duration::from_millis(150);
+
+/// What the middleware does with a request.
+#[derive(Debug, PartialEq)]
+enum Route {
+    /// About UAV `id`: here if flown here, else at its owner.
+    Uav(String),
+    /// `GET /api/state`: merged.
+    State,
+    /// `GET /api/uavs`: merged.
+    List,
+    /// `POST /api/uavs`: at the region of the position.
+    Add,
+    /// `POST /api/fleet/...`: here, then everywhere.
+    Fleet,
+    /// Here only.
+    Local,
+}
+
+fn route(method: &Method, path: &str) -> Route {
+    let rest = path.strip_prefix("/api/uavs/");
+    if let Some(id) = rest.map(|r| r.split('/').next().unwrap_or_default()).filter(|id| !id.is_empty()) {
+        return Route::Uav(id.to_string());
+    }
+    match (method.as_str(), path) {
+        ("GET", "/api/state") => Route::State,
+        ("GET", "/api/uavs") => Route::List,
+        ("POST", "/api/uavs") => Route::Add,
+        ("POST", "/api/fleet/pause" | "/api/fleet/resume" | "/api/fleet/land" | "/api/fleet/stop") => {
+            Route::Fleet
+        }
+        _ => Route::Local,
+    }
+}
+
+/// `scope` of the query string: `fleet` (the default) or `region`.
+fn scope_is_region(query: Option<&str>) -> Result<bool, ApiError> {
+    let value = query.unwrap_or_default().split('&').find_map(|kv| kv.strip_prefix("scope="));
+    match value {
+        None | Some("fleet") => Ok(false),
+        Some("region") => Ok(true),
+        Some(other) => Err(ApiError::invalid("scope", format!("`{other}`: expected `fleet` or `region`"))),
+    }
+}
+
+/// The middleware (a pass-through without `--region` or before the Zenoh side started).
+pub async fn forward(State(app): State<AppState>, request: Request, next: Next) -> Response {
+    let Some(federation) = app.region.as_ref().and_then(|r| r.federation.get()).cloned() else {
+        return next.run(request).await;
+    };
+    let local = match scope_is_region(request.uri().query()) {
+        Ok(local) => local,
+        Err(e) => return e.into_response(),
+    };
+    let route = route(request.method(), request.uri().path());
+    // A standby flies nothing and refuses changes (409 `standby`); its reads ask every region,
+    // its own included (whose owner answers).
+    let owner = app.region.as_ref().is_some_and(|r| r.failover.is_owner());
+    let read = request.method() == Method::GET;
+    if local || route == Route::Local || !(owner || read) {
+        return next.run(request).await;
+    }
+    let (parts, body) = request.into_parts();
+    let Ok(bytes) = axum::body::to_bytes(body, MAX_BODY_BYTES).await else {
+        return ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, "body_too_large", "the body is too large")
+            .into_response();
+    };
+    let query = ApiQuery {
+        method: parts.method.to_string(),
+        uri: parts.uri.path_and_query().map_or_else(|| parts.uri.path().to_string(), |p| p.to_string()),
+        body: String::from_utf8_lossy(&bytes).into_owned(),
+        uav: None,
+    };
+    let mut regions = region_names(&app);
+    if owner {
+        regions.retain(|r| *r != federation.own);
+    }
+    let uri = parts.uri.clone();
+    let here = |bytes: Bytes| next.run(Request::from_parts(parts, Body::from(bytes)));
+    match route {
+        Route::Uav(id) => {
+            let mut silent = Vec::new();
+            for attempt in 0..2 {
+                if flown_here(&app, &id) {
+                    return here(bytes).await;
+                }
+                let asked = ApiQuery { uav: Some(id.clone()), ..query.clone() };
+                silent.clear();
+                for (region, answer) in federation.ask_all(&regions, &asked).await {
+                    match answer {
+                        // Every owner answers: 404 `unknown_uav` when it does not fly the UAV.
+                        Answer::Replied(reply) if reply.status != 404 => return replied(reply),
+                        Answer::Replied(_) => {}
+                        Answer::Silent => silent.push(region),
+                    }
+                }
+                if attempt == 0 {
+                    // Between two regions (released, not yet adopted), or a region restarting.
+                    tokio::time::sleep(RETRY_AFTER).await;
+                }
+            }
+            match silent.first() {
+                Some(region) => unanswered(region),
+                None => here(bytes).await,
+            }
+        }
+        Route::Add => match region_of_position(&app, &federation, &bytes) {
+            Some(region) if region != federation.own => match federation.ask(&region, &query).await {
+                Answer::Replied(reply) => replied(reply),
+                Answer::Silent => unanswered(&region),
+            },
+            _ => here(bytes).await,
+        },
+        Route::Fleet => {
+            let response = here(bytes).await;
+            if !response.status().is_success() {
+                return response;
+            }
+            let answers = federation.ask_all(&regions, &query).await;
+            super::federate_merge::fleet_command(response, &federation.own, answers).await
+        }
+        Route::State | Route::List => {
+            // Each region gives all its UAVs; pages and boxes apply to the merged list.
+            let whole = ApiQuery { uri: uri.path().to_string(), ..query };
+            let answers = federation.ask_all(&regions, &whole).await;
+            let merged = if route == Route::State {
+                super::federate_merge::state(&app, &federation.own, &region_names(&app), answers)
+            } else {
+                let snapshot = app.snapshots.borrow().clone();
+                let order = region_names(&app);
+                super::federate_merge::list(&uri, snapshot, &federation.own, &order, answers)
+            };
+            merged.unwrap_or_else(IntoResponse::into_response)
+        }
+        Route::Local => here(bytes).await,
+    }
+}
+
+/// The road's regions, in its order.
+fn region_names(app: &AppState) -> Vec<String> {
+    let road = app.road.borrow();
+    road.layout.regions.iter().flatten().map(|r| r.name.clone()).collect()
+}
+
+/// This region flies UAV `id` now (by the latest snapshot).
+fn flown_here(app: &AppState, id: &str) -> bool {
+    let snapshot = app.snapshots.borrow().clone();
+    api::position_of(app, &snapshot, id).is_some()
+}
+
+/// The region of a new UAV's `position` (None: not a JSON body with a position, or on no region).
+fn region_of_position(app: &AppState, federation: &Federation, body: &[u8]) -> Option<String> {
+    let doc: Value = serde_json::from_slice(body).ok()?;
+    let p = doc.get("position")?.as_array()?;
+    let (x, y) = (p.first()?.as_f64()?, p.get(1)?.as_f64()?);
+    let view = app.road.borrow().clone();
+    let road = federation.road(&view)?;
+    let segment = road.locate(&uav::Vec2::new(x, y), None);
+    road.region_of(segment).map(|r| r.name.clone())
+}
+
+/// Another region's answer, as it gave it.
+fn replied(reply: ApiReply) -> Response {
+    let status = StatusCode::from_u16(reply.status).unwrap_or(StatusCode::BAD_GATEWAY);
+    (status, [(header::CONTENT_TYPE, "application/json")], reply.body).into_response()
+}
+
+/// 503 `region_unavailable`: a region that may fly the UAV, or must apply the change, did not
+/// answer (no owner, or unreachable); nothing was changed there.
+pub fn unanswered(region: &str) -> Response {
+    let message = format!("region `{region}` did not answer; nothing was changed there");
+    let mut error = ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "region_unavailable", message);
+    error.extra = Some(serde_json::Map::from_iter([("region".to_string(), json!(region))]));
+    error.into_response()
+}
+
+/// Answers other regions' requests on this region's queryable until the session closes; returns
+/// the queryable (undeclared when dropped).
+pub async fn answer_queries(
+    federation: &Federation,
+    session: &zenoh::Session,
+    app: AppState,
+) -> anyhow::Result<zenoh::query::Queryable<()>> {
+    let key = federation.own_key();
+    let runtime = tokio::runtime::Handle::current();
+    let permits = Arc::new(Semaphore::new(MAX_CONCURRENT_QUERIES));
+    session
+        .declare_queryable(key.as_str())
+        .callback(move |query| {
+            let (app, permits) = (app.clone(), permits.clone());
+            runtime.spawn(async move {
+                let Ok(_permit) = permits.try_acquire() else {
+                    let body = ApiError::busy("too many requests from other regions").into_response();
+                    reply(&query, body).await;
+                    return;
+                };
+                if let Some(response) = run_query(&app, &query).await {
+                    reply(&query, response).await;
+                }
+            });
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("declaring the queryable {key}: {e}"))
+}
+
+/// Runs one request from another region through the API handlers; None: this server does not
+/// answer it (a standby). A request about a UAV not flown here is answered 404 `unknown_uav`.
+async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Response> {
+    let owner = app.region.as_ref().is_some_and(|r| r.failover.is_owner());
+    if !owner {
+        return None;
+    }
+    let payload = query.payload()?;
+    if payload.len() > MAX_CARRIED_BYTES {
+        return Some(
+            ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, "body_too_large", "too large").into_response(),
+        );
+    }
+    let asked: ApiQuery = match serde_json::from_slice(&payload.to_bytes()) {
+        Ok(q) => q,
+        Err(e) => return Some(ApiError::invalid("query", e.to_string()).into_response()),
+    };
+    if let Some(id) = asked.uav.as_deref().filter(|id| !flown_here(app, id)) {
+        return Some(ApiError::unknown_uav(id).into_response());
+    }
+    let request = Request::builder()
+        .method(asked.method.as_str())
+        .uri(asked.uri.as_str())
+        .header(header::CONTENT_TYPE, "application/json")
+        .body(Body::from(asked.body));
+    let Ok(request) = request else {
+        return Some(ApiError::invalid("query", "not a request").into_response());
+    };
+    let router = api::router().with_state(app.clone());
+    // The router's error type is Infallible.
+    Some(tower::ServiceExt::oneshot(router, request).await.unwrap_or_else(|e| match e {}))
+}
+
+/// Sends `response` back as an [`ApiReply`].
+async fn reply(query: &zenoh::query::Query, response: Response) {
+    let status = response.status().as_u16();
+    let body = axum::body::to_bytes(response.into_body(), MAX_CARRIED_BYTES).await.unwrap_or_default();
+    let answer = ApiReply { status, body: String::from_utf8_lossy(&body).into_owned() };
+    let Ok(payload) = serde_json::to_vec(&answer) else { return };
+    if let Err(e) = query.reply(query.key_expr().clone(), payload).await {
+        tracing::warn!("answering another region: {e}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn requests_are_routed_by_method_and_path() {
+        assert_eq!(route(&Method::PUT, "/api/uavs/u1/goal"), Route::Uav("u1".into()));
+        assert_eq!(route(&Method::GET, "/api/uavs/u1"), Route::Uav("u1".into()));
+        assert_eq!(route(&Method::DELETE, "/api/uavs/u1"), Route::Uav("u1".into()));
+        assert_eq!(route(&Method::GET, "/api/uavs"), Route::List);
+        assert_eq!(route(&Method::POST, "/api/uavs"), Route::Add);
+        assert_eq!(route(&Method::GET, "/api/state"), Route::State);
+        assert_eq!(route(&Method::POST, "/api/fleet/stop"), Route::Fleet);
+        assert_eq!(route(&Method::GET, "/api/metrics"), Route::Local);
+        assert_eq!(route(&Method::PUT, "/api/road"), Route::Local);
+    }
+
+    #[test]
+    fn scope_is_fleet_by_default_and_anything_else_is_refused() {
+        assert_eq!(scope_is_region(None), Ok(false));
+        assert_eq!(scope_is_region(Some("limit=5&scope=region")), Ok(true));
+        assert_eq!(scope_is_region(Some("scope=fleet")), Ok(false));
+        assert_eq!(scope_is_region(Some("scope=all")).unwrap_err().field.as_deref(), Some("scope"));
+    }
+}

@@ -1,0 +1,202 @@
+//! How `federate` puts the regions' answers together: `GET /api/state` and `GET /api/uavs` over
+//! the whole deployment (each UAV tagged with its `region`), and a fleet-wide command's outcome in
+//! every region. A region that did not answer is named, never silently left out.
+
+use super::error::ApiError;
+use super::region::federation::Answer;
+use super::snapshot::Snapshot;
+use super::state::AppState;
+use axum::Json;
+use axum::http::{StatusCode, Uri, header};
+use axum::response::{IntoResponse, Response};
+use serde::Deserialize;
+use serde_json::{Value, json};
+
+/// The header of a merged `GET /api/uavs` naming the regions that did not answer (comma-separated).
+pub const UNANSWERED_HEADER: &str = "x-airroads-unanswered-regions";
+
+/// Every UAV of one region's answer, tagged with the region.
+fn tagged(mut uavs: Value, region: &str) -> Vec<Value> {
+    let Some(list) = uavs.as_array_mut() else { return Vec::new() };
+    for u in list.iter_mut() {
+        if let Some(object) = u.as_object_mut() {
+            object.insert("region".into(), json!(region));
+        }
+    }
+    std::mem::take(list)
+}
+
+/// A region's answer as JSON when it answered 200.
+fn answered_json(answer: &Answer) -> Option<Value> {
+    match answer {
+        Answer::Replied(reply) if reply.status == 200 => serde_json::from_str(&reply.body).ok(),
+        _ => None,
+    }
+}
+
+/// The report of one region that gave `doc` (None: no usable answer, `answer` says why).
+fn region_report(name: &str, doc: Option<&Value>, answer: &Answer) -> Value {
+    match (doc, answer) {
+        (Some(doc), _) => json!({"name": name, "answered": true, "tick": doc["tick"], "uavs": doc["uavs"]
+            .as_array()
+            .map_or(0, Vec::len)}),
+        (None, Answer::Replied(reply)) => json!({"name": name, "answered": false, "status": reply.status}),
+        (None, Answer::Silent) => json!({"name": name, "answered": false}),
+    }
+}
+
+/// The smaller of two optional margins.
+fn min_margin(a: &Value, b: &Value) -> Value {
+    match (a.as_f64(), b.as_f64()) {
+        (Some(x), Some(y)) => json!(x.min(y)),
+        (Some(x), None) | (None, Some(x)) => json!(x),
+        (None, None) => Value::Null,
+    }
+}
+
+/// `GET /api/state` over every region: this region's snapshot with the others' UAVs and
+/// reservations added, the smallest margins of all, and `regions` (per region of the road:
+/// `name`, `answered`, `tick`, `uavs`).
+pub fn state(
+    app: &AppState,
+    own: &str,
+    regions: &[String],
+    answers: Vec<(String, Answer)>,
+) -> Result<Response, ApiError> {
+    let snapshot: std::sync::Arc<Snapshot> = app.snapshots.borrow().clone();
+    let mut doc = serde_json::to_value(&*snapshot)
+        .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string()))?;
+    // A standby asked its own region's owner: its own empty fleet is not the region's.
+    let standby = answers.iter().any(|(name, _)| name == own);
+    let own_doc = json!({"tick": snapshot.tick, "uavs": vec![Value::Null; snapshot.uavs.len()]});
+    let mut reports = Vec::new();
+    if !standby {
+        reports.push((own.to_string(), region_report(own, Some(&own_doc), &Answer::Silent)));
+    }
+    let mut uavs = tagged(doc["uavs"].take(), own);
+    for (name, answer) in answers {
+        let mut other = answered_json(&answer);
+        reports.push((name.clone(), region_report(&name, other.as_ref(), &answer)));
+        let Some(other) = other.as_mut() else { continue };
+        uavs.extend(tagged(other["uavs"].take(), &name));
+        if let (Some(mine), Some(theirs)) =
+            (doc["reservations"].as_array_mut(), other["reservations"].as_array_mut())
+        {
+            mine.append(theirs);
+        }
+        for key in ["min_collision_margin_m", "min_road_margin_m"] {
+            doc[key] = min_margin(&doc[key], &other[key]);
+        }
+    }
+    doc["uavs"] = Value::Array(uavs);
+    reports.sort_by_key(|(name, _)| regions.iter().position(|r| r == name).unwrap_or(usize::MAX));
+    doc["regions"] = Value::Array(reports.into_iter().map(|(_, r)| r).collect());
+    Ok(Json(doc).into_response())
+}
+
+/// The query of `GET /api/uavs` (as `api::list_uavs` reads it).
+#[derive(Debug, Deserialize)]
+struct ListQuery {
+    bbox: Option<String>,
+    limit: Option<usize>,
+    after: Option<String>,
+}
+
+/// `GET /api/uavs` over every region: the regions' UAVs in the road's region order, each tagged
+/// with its `region`, then `bbox`, `after` and `limit` as for one region; the regions that did not
+/// answer are named in [`UNANSWERED_HEADER`].
+pub fn list(
+    uri: &Uri,
+    snapshot: std::sync::Arc<Snapshot>,
+    own: &str,
+    regions: &[String],
+    answers: Vec<(String, Answer)>,
+) -> Result<Response, ApiError> {
+    let q = axum::extract::Query::<ListQuery>::try_from_uri(uri)
+        .map_err(|e| ApiError::invalid("limit", e.body_text()))?
+        .0;
+    let own_uavs = serde_json::to_value(&snapshot.uavs).unwrap_or(Value::Null);
+    let standby = answers.iter().any(|(name, _)| name == own);
+    let mut by_region = Vec::new();
+    if !standby {
+        by_region.push((own.to_string(), tagged(own_uavs, own)));
+    }
+    let mut unanswered = Vec::new();
+    for (name, answer) in answers {
+        match answered_json(&answer) {
+            Some(list) => by_region.push((name.clone(), tagged(list, &name))),
+            None => unanswered.push(name),
+        }
+    }
+    by_region.sort_by_key(|(name, _)| regions.iter().position(|r| r == name).unwrap_or(usize::MAX));
+    let all: Vec<Value> = by_region.into_iter().flat_map(|(_, list)| list).collect();
+    let paged = q.bbox.is_some() || q.limit.is_some() || q.after.is_some();
+    let limit = q.limit.unwrap_or(if paged { super::api::MAX_PAGE } else { usize::MAX });
+    if paged && !(1..=super::api::MAX_PAGE).contains(&limit) {
+        return Err(ApiError::invalid("limit", format!("must be between 1 and {}", super::api::MAX_PAGE)));
+    }
+    let bbox = q
+        .bbox
+        .as_deref()
+        .map(super::binary::parse_bbox)
+        .transpose()
+        .map_err(|e| ApiError::invalid("bbox", e))?;
+    let start = match &q.after {
+        None => 0,
+        Some(id) => match all.iter().position(|u| u["id"] == *id) {
+            Some(k) => k + 1,
+            None => return Err(ApiError::invalid("after", format!("no UAV `{id}`"))),
+        },
+    };
+    let inside = |u: &&Value| {
+        bbox.is_none_or(|[x0, y0, x1, y1]| {
+            let (x, y) = (
+                u["p"][0].as_f64().unwrap_or(f64::NAN) as f32,
+                u["p"][1].as_f64().unwrap_or(f64::NAN) as f32,
+            );
+            x >= x0 && x <= x1 && y >= y0 && y <= y1
+        })
+    };
+    let page: Vec<Value> = all[start..].iter().filter(inside).take(limit).cloned().collect();
+    let mut response = Json(page).into_response();
+    if let Ok(value) = header::HeaderValue::from_str(&unanswered.join(",")) {
+        response.headers_mut().insert(UNANSWERED_HEADER, value);
+    }
+    Ok(response)
+}
+
+/// A fleet-wide command applied here (`local`, a success) and sent to the other regions: the local
+/// body with `regions` (per region: `status`, or `answered: false`); 502 `regions_failed` when
+/// any other region refused it or did not answer (it was applied here and in those that said so).
+pub async fn fleet_command(local: Response, own: &str, answers: Vec<(String, Answer)>) -> Response {
+    let status = local.status();
+    let body = axum::body::to_bytes(local.into_body(), 1 << 20).await.unwrap_or_default();
+    let mut doc: Value = serde_json::from_slice(&body).unwrap_or_else(|_| json!({}));
+    let mut report = serde_json::Map::new();
+    report.insert(own.into(), json!({"status": status.as_u16()}));
+    let mut failed = Vec::new();
+    for (name, answer) in answers {
+        let entry = match &answer {
+            Answer::Replied(reply) => {
+                if !(200..300).contains(&reply.status) {
+                    failed.push(name.clone());
+                }
+                let body: Value = serde_json::from_str(&reply.body).unwrap_or(Value::Null);
+                json!({"status": reply.status, "body": body})
+            }
+            Answer::Silent => {
+                failed.push(name.clone());
+                json!({"answered": false})
+            }
+        };
+        report.insert(name, entry);
+    }
+    if failed.is_empty() {
+        doc["regions"] = Value::Object(report);
+        return (status, Json(doc)).into_response();
+    }
+    let message = format!("applied in region `{own}`, not confirmed by {}", failed.join(", "));
+    let mut error = ApiError::new(StatusCode::BAD_GATEWAY, "regions_failed", message);
+    error.extra = Some(serde_json::Map::from_iter([("regions".to_string(), Value::Object(report))]));
+    error.into_response()
+}

@@ -1,0 +1,156 @@
+//! The Zenoh side of "one fleet to the operator" (README "Regions over Zenoh", One fleet): every
+//! region answers REST requests from the other regions on its queryable `PREFIX/region/NAME/api`
+//! (only the region's owner answers; a standby stays silent), and asks them with [`Federation`].
+//! The HTTP side (what is forwarded, how reads are merged) is `serve::federate`.
+
+use crate::serve::engine::RoadView;
+use roads::Road;
+use serde::{Deserialize, Serialize};
+use std::sync::{Arc, Mutex, PoisonError};
+use std::time::Duration;
+
+/// How long a request to another region may take before it counts as unanswered.
+pub const ASK_TIMEOUT: Duration = Duration::from_secs(2);
+/// Largest request or answer carried (bytes): a request body is at most 4 MiB, a region's
+/// `GET /api/state` at 10,000 UAVs about 6 MB.
+pub const MAX_CARRIED_BYTES: usize = 64 << 20;
+
+/// The key of region `region`'s queryable: `<prefix>/region/<name>/api`.
+pub fn api_key(prefix: &str, region: &str) -> String {
+    format!("{prefix}/region/{region}/api")
+}
+
+/// A REST request carried to another region (JSON).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ApiQuery {
+    /// `GET`, `PUT`, `POST` or `DELETE`.
+    pub method: String,
+    /// Path and query, e.g. `/api/uavs/u1/goal`.
+    pub uri: String,
+    /// The JSON body (empty: none).
+    #[serde(default)]
+    pub body: String,
+    /// Answer only if this UAV is flown there (a change forwarded to its owner).
+    #[serde(default)]
+    pub uav: Option<String>,
+}
+
+/// A region's answer: the HTTP status and body its API gave.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ApiReply {
+    /// HTTP status.
+    pub status: u16,
+    /// The body (JSON).
+    pub body: String,
+}
+
+/// What a region said to a request.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Answer {
+    /// It answered.
+    Replied(ApiReply),
+    /// Nobody answered within [`ASK_TIMEOUT`] (no owner, not flying that UAV, or unreachable).
+    Silent,
+}
+
+/// A road with the version it was served at.
+type VersionedRoad = (u64, Arc<Road>);
+
+/// Asks the other regions over the region's Zenoh session.
+#[derive(Clone)]
+pub struct Federation {
+    session: zenoh::Session,
+    prefix: String,
+    /// This server's region.
+    pub own: String,
+    /// The served road, built once per version (to find the region of a new UAV's position).
+    road: Arc<Mutex<Option<VersionedRoad>>>,
+}
+
+impl std::fmt::Debug for Federation {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Federation").field("prefix", &self.prefix).field("own", &self.own).finish()
+    }
+}
+
+impl Federation {
+    /// Asks over `session` under `prefix`, as region `own`.
+    pub fn new(session: zenoh::Session, prefix: &str, own: &str) -> Self {
+        Self { session, prefix: prefix.into(), own: own.into(), road: Arc::default() }
+    }
+
+    /// The road of `view` (built at its first use per version; None if it does not build).
+    pub fn road(&self, view: &RoadView) -> Option<Arc<Road>> {
+        let mut cached = self.road.lock().unwrap_or_else(PoisonError::into_inner);
+        if let Some((version, road)) = cached.as_ref()
+            && *version == view.version
+        {
+            return Some(road.clone());
+        }
+        let road = Arc::new(Road::new(view.layout.clone()).ok()?);
+        *cached = Some((view.version, road.clone()));
+        Some(road)
+    }
+
+    /// The key this region answers on.
+    pub fn own_key(&self) -> String {
+        api_key(&self.prefix, &self.own)
+    }
+
+    /// Sends `query` to region `region` and returns its owner's answer (the first; there is one).
+    pub async fn ask(&self, region: &str, query: &ApiQuery) -> Answer {
+        let Ok(payload) = serde_json::to_vec(query) else { return Answer::Silent };
+        let key = api_key(&self.prefix, region);
+        let asked = self
+            .session
+            .get(key.as_str())
+            .payload(payload)
+            .target(zenoh::query::QueryTarget::All)
+            .consolidation(zenoh::query::ConsolidationMode::None)
+            .timeout(ASK_TIMEOUT)
+            .await;
+        let replies = match asked {
+            Ok(replies) => replies,
+            Err(e) => {
+                tracing::warn!("asking region {region}: {e}");
+                return Answer::Silent;
+            }
+        };
+        while let Ok(reply) = replies.recv_async().await {
+            let Ok(sample) = reply.result() else { continue };
+            let payload = sample.payload();
+            if payload.len() > MAX_CARRIED_BYTES {
+                continue;
+            }
+            if let Ok(answer) = serde_json::from_slice::<ApiReply>(&payload.to_bytes()) {
+                return Answer::Replied(answer);
+            }
+        }
+        Answer::Silent
+    }
+
+    /// Sends `query` to every region of `regions` at once; their answers in that order.
+    pub async fn ask_all(&self, regions: &[String], query: &ApiQuery) -> Vec<(String, Answer)> {
+        let answers = futures_util::future::join_all(regions.iter().map(|r| self.ask(r, query))).await;
+        regions.iter().cloned().zip(answers).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn queries_and_replies_are_plain_json_and_refuse_unknown_fields() {
+        let q =
+            ApiQuery { method: "PUT".into(), uri: "/api/uavs/u1/goal".into(), body: "{}".into(), uav: None };
+        let text = serde_json::to_string(&q).unwrap();
+        assert_eq!(serde_json::from_str::<ApiQuery>(&text).unwrap(), q);
+        let bare: ApiQuery = serde_json::from_str(r#"{"method": "GET", "uri": "/api/state"}"#).unwrap();
+        assert_eq!((bare.body.as_str(), bare.uav), ("", None));
+        assert!(serde_json::from_str::<ApiReply>(r#"{"status": 200, "body": "", "x": 1}"#).is_err());
+        assert_eq!(api_key("airroads", "west"), "airroads/region/west/api");
+    }
+}
