@@ -302,6 +302,11 @@ async fn the_uav_list_comes_in_pages_and_by_viewport() {
     let server = start(config(&scenario)).await;
     let all = server.get("/api/uavs").await;
     assert_eq!(all.as_array().unwrap().len(), 25, "without parameters: the whole fleet, as before");
+    // Without regions both scopes are this server's fleet; any other scope is refused.
+    assert_eq!(server.get("/api/uavs?scope=region").await, all);
+    assert_eq!(server.get("/api/uavs?scope=fleet").await, all);
+    let (status, body) = support::raw(server.addr, "GET", "/api/uavs?scope=world", None, &[]).await;
+    assert!(status == 422 && body.contains("\"scope\""), "{status} {body}");
     let mut walked = Vec::new();
     let mut after = String::new();
     loop {

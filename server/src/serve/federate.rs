@@ -76,12 +76,13 @@ fn scope_is_region(query: Option<&str>) -> Result<bool, ApiError> {
 
 /// The middleware (a pass-through without `--region` or before the Zenoh side started).
 pub async fn forward(State(app): State<AppState>, request: Request, next: Next) -> Response {
-    let Some(federation) = app.region.as_ref().and_then(|r| r.federation.get()).cloned() else {
-        return next.run(request).await;
-    };
+    // Checked with or without regions: a script gets the same answer from every server.
     let local = match scope_is_region(request.uri().query()) {
         Ok(local) => local,
         Err(e) => return e.into_response(),
+    };
+    let Some(federation) = app.region.as_ref().and_then(|r| r.federation.get()).cloned() else {
+        return next.run(request).await;
     };
     let route = route(request.method(), request.uri().path());
     // A standby flies nothing and refuses changes (409 `standby`); its reads ask every region,
