@@ -24,18 +24,44 @@ import urllib.parse
 import urllib.request
 
 VERSION = 1
-KIND_TICK, KIND_ROSTER, KIND_RESERVATIONS = 1, 2, 3
+KIND_TICK, KIND_ROSTER, KIND_RESERVATIONS, KIND_REGION = 1, 2, 3, 4
+REGION_HEADER = struct.Struct("<BBHIQdf")  # 28 bytes
+REGION_RECORD = struct.Struct("<8fBBH")  # 36 bytes after the id
 TICK_HEADER = struct.Struct("<BBHIQdIIIffff")  # 52 bytes
 RECORD = struct.Struct("<I8fBBH")  # 40 bytes
 STATUSES = ["flying", "arrived", "braking", "failed", "stale", "lost", "connecting", "taking_off",
             "landing", "landed", "stopped", "stopping", "waiting"]
 FLAG_PAUSED, FLAG_FILTERED = 1, 2
-UAV_ARRIVED, UAV_LOST = 1, 2
+UAV_ARRIVED, UAV_LOST, UAV_GHOST = 1, 2, 4
+
+
+def decode_region(message):
+    """A region frame (kind 4, `serve --region`: another region's state message) as
+    {"kind": "region", "region", "tick", "time", "age_at_send_s", "uavs": [{"id", "p", "v", "u",
+    "target", "status", "arrived", "lost", "ghost", "unheard_ms"}]}."""
+    _, _, name_length, count, tick, time, age = REGION_HEADER.unpack_from(message, 0)
+    at = REGION_HEADER.size + name_length
+    region = message[REGION_HEADER.size:at].decode("utf-8")
+    uavs = []
+    for _ in range(count):
+        (id_length,) = struct.unpack_from("<H", message, at)
+        uav_id = message[at + 2:at + 2 + id_length].decode("utf-8")
+        at += 2 + id_length
+        px, py, vx, vy, ux, uy, tx, ty, status, flags, unheard = REGION_RECORD.unpack_from(message, at)
+        at += REGION_RECORD.size
+        uavs.append({"id": uav_id, "p": [px, py], "v": [vx, vy], "u": [ux, uy], "target": [tx, ty],
+                     "status": STATUSES[status] if status < len(STATUSES) else "flying",
+                     "arrived": bool(flags & UAV_ARRIVED), "lost": bool(flags & UAV_LOST),
+                     "ghost": bool(flags & UAV_GHOST), "unheard_ms": unheard})
+    if at != len(message):
+        raise ValueError(f"{len(message) - at} bytes after the last record")
+    return {"kind": "region", "region": region, "tick": tick, "time": time, "age_at_send_s": age,
+            "uavs": uavs}
 
 
 def decode(message):
     """One binary message as a dict: {"kind": "roster", "roster_version", "uavs"},
-    {"kind": "reservations", "version", "reservations"} or
+    {"kind": "reservations", "version", "reservations"}, a region frame (`decode_region`) or
     {"kind": "tick", "roster_version", "tick", "time", "paused", "filtered", "fleet", "road_version",
     "min_collision_margin_m", "min_road_margin_m", "d_c", "d_s", "uavs": [{"index", "p", "v", "u",
     "target", "status", "arrived", "lost"}]} (margins None when NaN)."""
@@ -49,6 +75,8 @@ def decode(message):
         (version,) = struct.unpack_from("<I", message, 4)
         body = json.loads(message[8:].decode("utf-8"))
         return {"kind": "reservations", "version": version, "reservations": body["reservations"]}
+    if message[1] == KIND_REGION:
+        return decode_region(message)
     if message[1] != KIND_TICK:
         raise ValueError(f"unknown frame kind {message[1]}")
     (_, _, flags, roster_version, tick, time, fleet, count, road_version,
@@ -201,6 +229,8 @@ def main(argv):
             print(f"roster {frame['roster_version']}: {len(frame['uavs'])} UAVs, {size} bytes")
         elif frame["kind"] == "reservations":
             print(f"reservations {frame['version']}: {len(frame['reservations'])} single-file sections, {size} bytes")
+        elif frame["kind"] == "region":
+            print(f"region {frame['region']} tick {frame['tick']}: {len(frame['uavs'])} UAVs, {size} bytes")
         else:
             print(f"tick {frame['tick']} t={frame['time']:.2f} s: {len(frame['uavs'])} of {frame['fleet']} UAVs, {size} bytes")
     stream.close()

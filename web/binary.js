@@ -6,6 +6,8 @@ export const VERSION = 1;
 export const KIND_TICK = 1;
 export const KIND_ROSTER = 2;
 export const KIND_RESERVATIONS = 3;
+/** Another region's states (`serve --region`; README "Regions over Zenoh", payload). */
+export const KIND_REGION = 4;
 const HEADER = 52;
 const RECORD = 40;
 /** Status byte → name, in the server's order. */
@@ -76,4 +78,39 @@ export function decodeTick(buffer, roster, reservations, pool = []) {
     d_c: decimal(view.getFloat32(44, true)), d_s: decimal(view.getFloat32(48, true)),
     uavs, reservations,
   };
+}
+
+/** The region name of a kind 4 message (its header only). */
+export function regionName(buffer) {
+  const length = new DataView(buffer).getUint16(2, true);
+  return text.decode(new Uint8Array(buffer, 28, length));
+}
+
+/**
+ * Another region's state message (kind 4: a 28-byte header, the region's name, then per UAV its id
+ * and a 36-byte record) as `{region, tick, uavs}`, each UAV tagged with `region`. Ghosts (UAVs the
+ * region released and no longer flies; flag 4) and the ids in `skip` (flown here) are left out.
+ */
+export function decodeRegion(buffer, skip) {
+  const view = new DataView(buffer);
+  const bytes = new Uint8Array(buffer);
+  const nameLength = view.getUint16(2, true);
+  const count = view.getUint32(4, true);
+  const region = text.decode(bytes.subarray(28, 28 + nameLength));
+  const uavs = [];
+  let at = 28 + nameLength;
+  for (let k = 0; k < count; k++) {
+    const idLength = view.getUint16(at, true);
+    const id = text.decode(bytes.subarray(at + 2, at + 2 + idLength));
+    at += 2 + idLength;
+    const f = (i) => view.getFloat32(at + 4 * i, true);
+    const flags = view.getUint8(at + 33);
+    if ((flags & 4) === 0 && !skip.has(id)) {
+      uavs.push({ id, region, policy: "", goal: null, link: "", p: [f(0), f(1)], v: [f(2), f(3)], u: [f(4), f(5)],
+        target: [f(6), f(7)], status: STATUSES[view.getUint8(at + 32)] || "flying", arrived: (flags & 1) !== 0,
+        lost: (flags & 2) !== 0 });
+    }
+    at += 36;
+  }
+  return { region, tick: Number(view.getBigUint64(8, true)), uavs };
 }

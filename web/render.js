@@ -72,7 +72,34 @@ export function drawRoad(ctx, cam, geometry, dim) {
   ctx.beginPath();
   for (const [a, b] of geometry.walls) line(ctx, cam, a, b);
   ctx.stroke();
+  drawRegions(ctx, cam, segs, geometry.layout.regions);
   ctx.globalAlpha = 1;
+}
+
+/** The borders between regions (`serve --region`): a dashed line across the road, and each name. */
+function drawRegions(ctx, cam, segs, regions) {
+  if (!regions || regions.length === 0) return;
+  ctx.strokeStyle = "#c2410c";
+  ctx.lineWidth = 2;
+  ctx.setLineDash([10, 6]);
+  ctx.beginPath();
+  for (const r of regions) {
+    const last = segs[r.segments[1]];
+    if (last && r.segments[1] + 1 < segs.length) line(ctx, cam, last[0], last[2]);
+  }
+  ctx.stroke();
+  ctx.setLineDash([]);
+  ctx.font = "bold 12px system-ui, sans-serif";
+  ctx.textAlign = "center";
+  ctx.textBaseline = "middle";
+  ctx.fillStyle = "#c2410c";
+  for (const r of regions) {
+    const middle = segs[Math.floor((r.segments[0] + r.segments[1]) / 2)];
+    if (!middle) continue;
+    const [x, y] = centroid(quadPolygon(middle));
+    const [sx, sy] = cam.toScreen(x, y);
+    ctx.fillText(r.name, sx, sy);
+  }
 }
 
 /** The editor's draft road with handles, segment numbers and the server's error. */
@@ -268,6 +295,17 @@ export function drawFleet(ctx, cam, snapshot, trails, selection) {
     }
     ctx.fill();
   }
+
+  // Another region's UAVs (`serve --region`): a grey ring around each.
+  ctx.strokeStyle = "rgba(60,70,85,0.8)";
+  ctx.lineWidth = 1.5;
+  ctx.beginPath();
+  for (const [u, x, y] of visible) {
+    if (!u.region) continue;
+    ctx.moveTo(x + r + 1.5, y);
+    ctx.arc(x, y, r + 1.5, 0, 2 * Math.PI);
+  }
+  ctx.stroke();
 
   if (selection.size) {
     ctx.strokeStyle = "#7a3fd1";

@@ -2,7 +2,12 @@
 // roster and reservations as they change and only the latest tick frame (decoded lazily, once per
 // animation frame), reconnects with backoff, and reports the connection state.
 
-import { KIND_RESERVATIONS, KIND_ROSTER, KIND_TICK, decodeJson, decodeTick, kindOf } from "./binary.js";
+import {
+  KIND_REGION, KIND_RESERVATIONS, KIND_ROSTER, KIND_TICK, decodeJson, decodeRegion, decodeTick, kindOf, regionName,
+} from "./binary.js";
+
+/** Another region's UAVs are drawn until its messages stop for this long (ms). */
+const REGION_SHOWN_MS = 2000;
 
 export class Stream {
   /** @param {(connected: boolean) => void} onState */
@@ -13,6 +18,9 @@ export class Stream {
     this.rosterVersion = 0;
     this.reservations = [];
     this.frames = 0; // tick frames received
+    /** Other regions (`serve --region`): name → {at, buffer} of its newest message. */
+    this.elsewhere = new Map();
+    this.ownIds = new Set();
     /** Two pools of UAV objects, used in turn: the snapshot before the latest stays intact. */
     this.pools = [[], []];
     this.turn = 0;
@@ -37,8 +45,11 @@ export class Stream {
       } else if (kind === KIND_ROSTER) {
         const { version, body } = decodeJson(ev.data);
         [this.roster, this.rosterVersion] = [body.uavs, version];
+        this.ownIds = new Set(body.uavs.map((u) => u.id));
       } else if (kind === KIND_RESERVATIONS) {
         this.reservations = decodeJson(ev.data).body.reservations;
+      } else if (kind === KIND_REGION) {
+        this.elsewhere.set(regionName(ev.data), { at: performance.now(), buffer: ev.data });
       }
     };
     ws.onclose = () => {
@@ -57,6 +68,19 @@ export class Stream {
     // A tick of an older roster (one arrived in between): the next tick will match.
     if (new DataView(buffer).getUint32(4, true) !== this.rosterVersion) return null;
     this.turn ^= 1;
-    return decodeTick(buffer, this.roster, this.reservations, this.pools[this.turn]);
+    const snapshot = decodeTick(buffer, this.roster, this.reservations, this.pools[this.turn]);
+    // The whole fleet: the other regions' UAVs after this region's own (tagged with `region`).
+    const now = performance.now();
+    snapshot.regions = [];
+    for (const [name, latest] of this.elsewhere) {
+      if (now - latest.at > REGION_SHOWN_MS) {
+        this.elsewhere.delete(name);
+        continue;
+      }
+      const other = decodeRegion(latest.buffer, this.ownIds);
+      snapshot.regions.push({ name, tick: other.tick, uavs: other.uavs.length });
+      for (const u of other.uavs) snapshot.uavs.push(u);
+    }
+    return snapshot;
   }
 }

@@ -4,9 +4,10 @@
 import { after, before, test } from "node:test";
 import assert from "node:assert/strict";
 import { execFileSync } from "node:child_process";
-import { mkdtempSync, readFileSync } from "node:fs";
+import { mkdtempSync, readFileSync, writeFileSync } from "node:fs";
 import { tmpdir } from "node:os";
 import { createServer } from "node:http";
+import { createServer as createNetServer } from "node:net";
 import { join } from "node:path";
 import { ARTIFACTS, BIN, api, clickWorld, launchBrowser, openDashboard, pagePoint, screenshot, startServer, until } from "./harness.mjs";
 
@@ -550,5 +551,81 @@ test("the dashboard cannot be framed by another origin", async () => {
     await page.close();
     site.close();
     await server.stop();
+  }
+});
+
+test("with regions, one region's dashboard shows every region's UAVs and the border, and commands them all", async () => {
+  // Two regions over Zenoh on loopback; the dashboard is opened on the west's server only.
+  const dir = mkdtempSync(join(tmpdir(), "airroads-regions-"));
+  const scenario = join(dir, "regions.json");
+  // A straight road x = 0..40, 6 m wide, in 8 segments: the west 0-3, the east 4-7.
+  const n = 8;
+  const segments = Array.from({ length: n }, (_, k) => [[5 * k + 5, -3], [5 * k, -3], [5 * k + 5, 3], [5 * k, 3]]);
+  const half = Math.floor(n / 2);
+  const centre = (k) => {
+    const s = segments[k];
+    return [(s[0][0] + s[1][0] + s[2][0] + s[3][0]) / 4, (s[0][1] + s[1][1] + s[2][1] + s[3][1]) / 4];
+  };
+  const [w, e] = [centre(0), centre(n - 1)];
+  writeFileSync(scenario, JSON.stringify({
+    name: "regions", segments,
+    regions: [{ name: "west", segments: [0, half - 1] }, { name: "east", segments: [half, n - 1] }],
+    uavs: [{ id: "w1", start: w, goal: w }, { id: "e1", start: e, goal: e }],
+  }));
+  const port = await new Promise((resolve) => {
+    const probe = createNetServer().listen(0, "127.0.0.1", () => {
+      const { port } = probe.address();
+      probe.close(() => resolve(port));
+    });
+  });
+  const endpoint = `tcp/127.0.0.1:${port}`;
+  const west = await startServer(["--scenario", scenario, "--region", "west", "--zenoh-listen", endpoint]);
+  const east = await startServer(["--scenario", scenario, "--region", "east", "--zenoh-connect", endpoint]);
+  const page = await openDashboard(browser, west.url);
+  try {
+    const s = await until("the east's UAV on the west's dashboard", async () => {
+      const s = await snapshot(page);
+      return s.uavs.some((u) => u.id === "e1" && u.region === "east") && s;
+    });
+    assert.deepEqual(s.uavs.map((u) => u.id).sort(), ["e1", "w1"]);
+    assert.deepEqual(s.regions.map((r) => r.name), ["east"]);
+    // The border between the regions is drawn across the road (dashed, in the regions' colour).
+    const border = segments[half - 1];
+    const [a, b] = [await pagePoint(page, ...border[0]), await pagePoint(page, ...border[2])];
+    const drawn = await page.evaluate(([a, b]) => {
+      const canvas = document.getElementById("view");
+      const r = canvas.getBoundingClientRect();
+      const ctx = canvas.getContext("2d");
+      const k = canvas.width / r.width;
+      let hits = 0;
+      for (let t = 0.05; t <= 0.95; t += 0.01) {
+        const x = (a[0] + (b[0] - a[0]) * t - r.left) * k, y = (a[1] + (b[1] - a[1]) * t - r.top) * k;
+        const [red, green, blue] = ctx.getImageData(Math.round(x), Math.round(y), 1, 1).data;
+        if (red > 150 && green < 110 && blue < 60) hits++;
+      }
+      return hits;
+    }, [a, b]);
+    assert.ok(drawn >= 10, `the border is drawn (${drawn} orange samples along it)`);
+    await screenshot(page, "regions");
+    // Select the east's UAV by clicking it and send it to a goal: the east applies it.
+    await api(west.url, "POST", "/api/fleet/pause");
+    const e1 = (await snapshot(page)).uavs.find((u) => u.id === "e1");
+    await clickWorld(page, e1.p[0], e1.p[1]);
+    assert.deepEqual(await page.evaluate(() => window.__airroads.selection), ["e1"]);
+    const goal = centre(n - 2);
+    await clickWorld(page, goal[0], goal[1]);
+    const set = await until("the east to have e1's new goal", async () => {
+      const u = await api(east.url, "GET", "/api/uavs/e1?scope=region");
+      return u.goal && near(u.goal, goal, 0.1) && u;
+    });
+    assert.ok(set.goal);
+    assert.deepEqual(page.jsErrors, [], "no JavaScript errors in the page");
+  } catch (err) {
+    await screenshot(page, "regions-failed").catch(() => {});
+    throw err;
+  } finally {
+    await page.close();
+    await east.stop();
+    await west.stop();
   }
 });

@@ -110,12 +110,14 @@ async fn send(socket: &mut WebSocket, message: Message) -> Result<(), bool> {
 }
 
 /// Sends the roster and reservations frames of `b` whose versions the client has not `seen`, then
-/// its tick frame (only the records inside `bbox`, if given).
+/// its tick frame (only the records inside `bbox`, if given), then (with `--region`) the other
+/// regions' newest state messages it has not seen (`region::elsewhere`; never cut by `bbox`).
 async fn send_binary(
     socket: &mut WebSocket,
     b: BinaryFrame,
     bbox: Option<Bbox>,
-    seen: &mut (u32, u32),
+    seen: &mut Seen,
+    elsewhere: Option<&super::region::elsewhere::Elsewhere>,
 ) -> Result<(), bool> {
     if b.roster_version != seen.0 {
         send(socket, Message::Binary(b.roster)).await?;
@@ -129,8 +131,17 @@ async fn send_binary(
         None => b.body,
         Some(bbox) => filter_bbox(&b.body, bbox).into(),
     };
-    send(socket, Message::Binary(body)).await
+    send(socket, Message::Binary(body)).await?;
+    let others = elsewhere.map(|e| e.unseen(&mut seen.2, Instant::now())).unwrap_or_default();
+    for payload in others {
+        send(socket, Message::Binary(payload)).await?;
+    }
+    Ok(())
 }
+
+/// What a binary client has: the roster and reservations versions, and each other region's
+/// message number.
+type Seen = (u32, u32, std::collections::HashMap<String, u64>);
 
 /// One count held in [`StreamCounters`] while a client streams, given back when dropped (when the
 /// stream ends, panics, or the upgrade never completes).
@@ -196,8 +207,9 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
     frames.mark_changed();
     let mut last_sent: Option<Instant> = None;
     let mut last_tick = 0u64;
-    // The roster and reservations versions this client has.
-    let mut seen = (0u32, 0u32);
+    // The roster and reservations versions this client has, and the other regions' messages.
+    let mut seen: Seen = (0, 0, Default::default());
+    let elsewhere = app.region.as_ref().map(|r| r.elsewhere.clone());
     loop {
         tokio::select! {
             changed = frames.changed() => {
@@ -214,7 +226,9 @@ async fn stream(app: AppState, mut socket: WebSocket, min_interval: Duration, fo
                 last_tick = frame.tick();
                 let sent = match format {
                     Format::Json => send(&mut socket, Message::Text(frame.json())).await,
-                    Format::Binary(bbox) => send_binary(&mut socket, frame.binary, bbox, &mut seen).await,
+                    Format::Binary(bbox) => {
+                        send_binary(&mut socket, frame.binary, bbox, &mut seen, elsewhere.as_deref()).await
+                    },
                 };
                 match sent {
                     Ok(()) => {

@@ -9,6 +9,7 @@
 
 pub mod ages;
 pub(crate) mod detach;
+pub mod elsewhere;
 mod engine_side;
 pub mod failover;
 pub mod federation;
@@ -156,6 +157,8 @@ pub struct RegionShared {
     pub failover: Arc<Failover>,
     /// The handover counters, as the loop last wrote them.
     pub handover_counts: Arc<Mutex<handover::HandoverCounts>>,
+    /// The other regions' newest state messages, for the dashboard's stream.
+    pub elsewhere: Arc<elsewhere::Elsewhere>,
     /// How this region asks the others (set once the Zenoh side started; `serve::federate`).
     pub federation: Arc<std::sync::OnceLock<federation::Federation>>,
     /// Handover messages received, for the loop.
@@ -185,6 +188,7 @@ impl RegionShared {
             failover: Arc::new(Failover::new()),
             handover_counts: Arc::default(),
             federation: Arc::default(),
+            elsewhere: Arc::default(),
             inbox,
             inbox_dropped: Arc::default(),
             handover: Arc::new(Mutex::new(Some(handover))),
@@ -247,6 +251,25 @@ pub async fn start(
             .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?;
         subscribers.push(subscriber);
     }
+    // Every other region's states, kept as received for the dashboard (`elsewhere`).
+    let key = format!("{}/region/*/state", options.prefix);
+    let (elsewhere, prefix, own) = (shared.elsewhere.clone(), options.prefix.clone(), shared.name.clone());
+    let subscriber = session
+        .declare_subscriber(key.as_str())
+        .callback(move |sample| {
+            let name = elsewhere::region_of_key(&prefix, sample.key_expr().as_str());
+            let payload = sample.payload();
+            let plain = payload.len() <= MAX_PAYLOAD_BYTES && payload.len() >= wire::HEADER_BYTES;
+            if let Some(name) = name.filter(|n| *n != own && plain) {
+                let bytes = axum::body::Bytes::from(payload.to_bytes().into_owned());
+                if bytes[..2] == [wire::WIRE_VERSION, wire::KIND_REGION_STATES] {
+                    elsewhere.put(name, bytes, Instant::now());
+                }
+            }
+        })
+        .await
+        .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?;
+    subscribers.push(subscriber);
     let key = handover_key(&options.prefix, &shared.name);
     let (inbox, dropped) = (shared.inbox.clone(), shared.inbox_dropped.clone());
     let subscriber = session
