@@ -118,3 +118,83 @@ async fn any_region_answers_for_the_whole_fleet() {
         "{body}"
     );
 }
+
+/// A straight road x ∈ [0, 40] of 8 segments, `width` wide, in the regions west (0–3) and east (4–7).
+fn road(width: f64) -> Value {
+    json!({
+        "segments": roads::RoadLayout::straight(0.0, 40.0, width, 8).segments,
+        "regions": [{"name": "west", "segments": [0, 3]}, {"name": "east", "segments": [4, 7]}]
+    })
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_road_or_a_scenario_sent_to_any_region_switches_every_region_or_none() {
+    let dir = procs::scratch("federation", "deploy");
+    let mut scenario = road(4.0);
+    scenario["name"] = json!("deploy");
+    scenario["uavs"] = json!([
+        {"id": "w1", "start": [5.0, 0.0], "goal": [5.0, 0.0]},
+        {"id": "w2", "start": [10.0, 0.5], "goal": [10.0, 0.5]},
+        {"id": "e1", "start": [30.0, 0.0], "goal": [30.0, 0.0]},
+        {"id": "e2", "start": [35.0, -1.5], "goal": [35.0, -1.5]}
+    ]);
+    let path = dir.join("deploy.json");
+    std::fs::write(&path, scenario.to_string()).unwrap();
+    let scenario = path.to_str().unwrap();
+    let endpoint = free_endpoint();
+    let (_west, w, _) = serve(&["--scenario", scenario, "--region", "west", "--zenoh-listen", &endpoint]);
+    let (_east, e, _) = serve(&["--scenario", scenario, "--region", "east", "--zenoh-connect", &endpoint]);
+    let started = Instant::now();
+    while get(w, "/api/state").await["uavs"].as_array().unwrap().len() < 4 {
+        assert!(started.elapsed() < Duration::from_secs(15), "the regions never met");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let version = |doc: &Value| doc["version"].as_u64().unwrap();
+    let segments = |doc: &Value| doc["segments"].clone();
+    let before = (version(&get(w, "/api/road/geometry").await), version(&get(e, "/api/road/geometry").await));
+    // A wider road sent to the west: both regions switch, at one instant announced in the answer.
+    let (status, body) = send(w, "PUT", "/api/road", Some(road(6.0))).await;
+    assert_eq!(status, 200, "{body}");
+    assert!(body["switch_at_ms"].as_u64().is_some(), "{body}");
+    assert_eq!(
+        (body["regions"]["west"]["status"].clone(), body["regions"]["east"]["status"].clone()),
+        (json!(200), json!(200))
+    );
+    for addr in [w, e] {
+        assert_eq!(segments(&get(addr, "/api/road").await), road(6.0)["segments"], "switched");
+    }
+    let after = (version(&get(w, "/api/road/geometry").await), version(&get(e, "/api/road/geometry").await));
+    assert!(after.0 > before.0 && after.1 > before.1, "{before:?} → {after:?}");
+    // A road that e2 (y = -1.5) would be outside of: the east refuses, so neither switches.
+    let (status, body) = send(w, "PUT", "/api/road", Some(road(2.4))).await;
+    assert_eq!((status, &body["error"]["region"]), (409, &json!("east")), "{body}");
+    for addr in [w, e] {
+        assert_eq!(segments(&get(addr, "/api/road").await), road(6.0)["segments"], "unchanged");
+        assert_eq!(
+            version(&get(addr, "/api/road/geometry").await),
+            if addr == w { after.0 } else { after.1 }
+        );
+    }
+    // A road without the deployment's regions is refused before anyone is asked.
+    let plain = json!({"segments": roads::RoadLayout::straight(0.0, 40.0, 6.0, 8).segments});
+    let (status, body) = send(e, "PUT", "/api/road", Some(plain)).await;
+    assert_eq!((status, &body["error"]["field"]), (422, &json!("regions")), "{body}");
+    // A scenario sent to the east: each region takes the UAVs that start in it.
+    let mut next = road(4.0);
+    next["name"] = json!("next");
+    next["uavs"] = json!([
+        {"id": "a1", "start": [8.0, 0.0], "goal": [8.0, 0.0]},
+        {"id": "b1", "start": [28.0, 0.0], "goal": [28.0, 0.0]},
+        {"id": "b2", "start": [32.0, 0.0], "goal": [32.0, 0.0]}
+    ]);
+    let (status, body) = send(e, "POST", "/api/scenario", Some(next)).await;
+    assert_eq!(status, 200, "{body}");
+    assert_eq!(
+        (body["name"].clone(), body["uavs"].clone()),
+        (json!("next"), json!(2)),
+        "the east's share: {body}"
+    );
+    assert_eq!(ids(&get(w, "/api/uavs?scope=region").await), ["a1"]);
+    assert_eq!(ids(&get(e, "/api/uavs?scope=region").await), ["b1", "b2"]);
+    assert_eq!(segments(&get(w, "/api/road").await), road(4.0)["segments"]);
+}

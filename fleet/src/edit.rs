@@ -206,22 +206,11 @@ impl Fleet {
     /// against the walls, with its current velocity). Goals outside the new road are cleared (those
     /// UAVs hover); their ids are returned.
     pub fn replace_road(&mut self, road: Road) -> Result<Vec<String>, EditError> {
-        let p = self.config.params;
-        // UAVs on the ground (landed, stopped, not yet taken off) are not in the road's airspace.
-        for uav in self.uavs.iter().filter(|u| u.condition.in_the_air()) {
-            let margin = road_margin(&road, &uav.state, p.delta);
-            if below(margin, p.d_s) {
-                let reason = format!(
-                    "UAV `{}` at [{:.3}, {:.3}] would be {margin:.3} m from the new road's boundary \
-                     (braking margin), less than D_s = {} m",
-                    uav.id, uav.state.p.x, uav.state.p.y, p.d_s
-                );
-                return Err(EditError::RoadConflict(reason));
-            }
-        }
+        self.check_road(&road)?;
+        let d_s = self.config.params.d_s;
         let mut cleared = Vec::new();
         for uav in &mut self.uavs {
-            let goal = uav.nav.goal().filter(|g| check_goal_on(&road, *g, "goal", p.d_s).is_ok());
+            let goal = uav.nav.goal().filter(|g| check_goal_on(&road, *g, "goal", d_s).is_ok());
             if goal.is_none() && uav.nav.goal().is_some() {
                 cleared.push(uav.id.clone());
             }
@@ -232,6 +221,25 @@ impl Fleet {
         }
         self.road = road;
         Ok(cleared)
+    }
+
+    /// Whether every UAV in the air would be safe on `road` now (what [`Fleet::replace_road`]
+    /// checks first); changes nothing.
+    pub fn check_road(&self, road: &Road) -> Result<(), EditError> {
+        let p = self.config.params;
+        // UAVs on the ground (landed, stopped, not yet taken off) are not in the road's airspace.
+        for uav in self.uavs.iter().filter(|u| u.condition.in_the_air()) {
+            let margin = road_margin(road, &uav.state, p.delta);
+            if below(margin, p.d_s) {
+                let reason = format!(
+                    "UAV `{}` at [{:.3}, {:.3}] would be {margin:.3} m from the new road's boundary \
+                     (braking margin), less than D_s = {} m",
+                    uav.id, uav.state.p.x, uav.state.p.y, p.d_s
+                );
+                return Err(EditError::RoadConflict(reason));
+            }
+        }
+        Ok(())
     }
 }
 

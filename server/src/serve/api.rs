@@ -97,7 +97,7 @@ async fn put_road(
 }
 
 /// A validated road, or the 422 naming the field (`segments[i]`, `regions[i].segments`, ...) and the rule.
-fn road_of(layout: RoadLayout) -> Result<Road, ApiError> {
+pub(crate) fn road_of(layout: RoadLayout) -> Result<Road, ApiError> {
     Road::new(layout).map_err(|e| {
         let mut err = ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_road", e.message.clone())
             .field(e.field.clone());

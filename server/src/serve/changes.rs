@@ -94,6 +94,10 @@ impl Engine {
                 }
                 Applied::new(Outcome::RoadReplaced { cleared_goals }, undo, writes)
             }
+            Command::CheckRoad(road) => {
+                self.fleet.check_road(&road)?;
+                Applied::urgent()
+            }
             Command::AddUav { id, position, policy, goal, link } => {
                 let count = self.fleet.uavs().len();
                 if count >= self.max_uavs {

@@ -14,6 +14,9 @@ use uav::Vec2;
 pub enum Command {
     /// Replace the road (already validated).
     SetRoad(Box<Road>),
+    /// Check that every UAV in the air would be safe on this road, changing nothing (the prepare
+    /// step of a deployment-wide road, `serve::deploy`).
+    CheckRoad(Box<Road>),
     /// Add a simulated UAV at rest at `position`.
     AddUav {
         /// Unique id.
@@ -57,6 +60,7 @@ impl Command {
     pub fn describe(&self) -> String {
         match self {
             Command::SetRoad(road) => format!("road of {} segments", road.quads().len()),
+            Command::CheckRoad(road) => format!("check of a road of {} segments", road.quads().len()),
             Command::AddUav { id, position, .. } => {
                 format!("added `{id}` at [{}, {}]", position.x, position.y)
             }

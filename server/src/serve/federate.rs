@@ -44,6 +44,8 @@ enum Route {
     Add,
     /// `POST /api/fleet/...`: here, then everywhere.
     Fleet,
+    /// `PUT /api/road` or `POST /api/scenario`: every region at once, or none (`deploy`).
+    Deploy(super::deploy::Kind),
     /// Here only.
     Local,
 }
@@ -57,6 +59,8 @@ fn route(method: &Method, path: &str) -> Route {
         ("GET", "/api/state") => Route::State,
         ("GET", "/api/uavs") => Route::List,
         ("POST", "/api/uavs") => Route::Add,
+        ("PUT", "/api/road") => Route::Deploy(super::deploy::Kind::Road),
+        ("POST", "/api/scenario") => Route::Deploy(super::deploy::Kind::Scenario),
         ("POST", "/api/fleet/pause" | "/api/fleet/resume" | "/api/fleet/land" | "/api/fleet/stop") => {
             Route::Fleet
         }
@@ -102,6 +106,7 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
         uri: parts.uri.path_and_query().map_or_else(|| parts.uri.path().to_string(), |p| p.to_string()),
         body: String::from_utf8_lossy(&bytes).into_owned(),
         uav: None,
+        deploy: None,
     };
     let mut regions = region_names(&app);
     if owner {
@@ -164,6 +169,7 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
             };
             merged.unwrap_or_else(IntoResponse::into_response)
         }
+        Route::Deploy(kind) => super::deploy::coordinate(&app, &federation, kind, query.body).await,
         Route::Local => here(bytes).await,
     }
 }
@@ -252,6 +258,10 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
         Ok(q) => q,
         Err(e) => return Some(ApiError::invalid("query", e.to_string()).into_response()),
     };
+    if let Some(step) = asked.deploy {
+        let own = app.region.as_ref().map(|r| r.name.clone()).unwrap_or_default();
+        return Some(super::deploy::answer(app, &own, step).await);
+    }
     if let Some(id) = asked.uav.as_deref().filter(|id| !flown_here(app, id)) {
         return Some(ApiError::unknown_uav(id).into_response());
     }
@@ -268,11 +278,16 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
     Some(tower::ServiceExt::oneshot(router, request).await.unwrap_or_else(|e| match e {}))
 }
 
-/// Sends `response` back as an [`ApiReply`].
-async fn reply(query: &zenoh::query::Query, response: Response) {
+/// A response as an [`ApiReply`] (its status and body).
+pub async fn reply_of(response: Response) -> ApiReply {
     let status = response.status().as_u16();
     let body = axum::body::to_bytes(response.into_body(), MAX_CARRIED_BYTES).await.unwrap_or_default();
-    let answer = ApiReply { status, body: String::from_utf8_lossy(&body).into_owned() };
+    ApiReply { status, body: String::from_utf8_lossy(&body).into_owned() }
+}
+
+/// Sends `response` back as an [`ApiReply`].
+async fn reply(query: &zenoh::query::Query, response: Response) {
+    let answer = reply_of(response).await;
     let Ok(payload) = serde_json::to_vec(&answer) else { return };
     if let Err(e) = query.reply(query.key_expr().clone(), payload).await {
         tracing::warn!("answering another region: {e}");
@@ -293,7 +308,8 @@ mod tests {
         assert_eq!(route(&Method::GET, "/api/state"), Route::State);
         assert_eq!(route(&Method::POST, "/api/fleet/stop"), Route::Fleet);
         assert_eq!(route(&Method::GET, "/api/metrics"), Route::Local);
-        assert_eq!(route(&Method::PUT, "/api/road"), Route::Local);
+        assert_eq!(route(&Method::PUT, "/api/road"), Route::Deploy(super::super::deploy::Kind::Road));
+        assert_eq!(route(&Method::GET, "/api/road"), Route::Local);
     }
 
     #[test]

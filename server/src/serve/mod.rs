@@ -9,6 +9,7 @@ pub mod binary;
 mod changes;
 pub mod client;
 pub mod command;
+pub mod deploy;
 pub mod durable;
 pub mod engine;
 pub mod error;

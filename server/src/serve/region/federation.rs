@@ -34,6 +34,9 @@ pub struct ApiQuery {
     /// Answer only if this UAV is flown there (a change forwarded to its owner).
     #[serde(default)]
     pub uav: Option<String>,
+    /// A step of a deployment-wide road or scenario (`serve::deploy`) instead of a request.
+    #[serde(default)]
+    pub deploy: Option<crate::serve::deploy::Step>,
 }
 
 /// A region's answer: the HTTP status and body its API gave.
@@ -101,6 +104,11 @@ impl Federation {
 
     /// Sends `query` to region `region` and returns its owner's answer (the first; there is one).
     pub async fn ask(&self, region: &str, query: &ApiQuery) -> Answer {
+        self.ask_within(region, query, ASK_TIMEOUT).await
+    }
+
+    /// [`Federation::ask`], waiting at most `timeout`.
+    pub async fn ask_within(&self, region: &str, query: &ApiQuery, timeout: Duration) -> Answer {
         let Ok(payload) = serde_json::to_vec(query) else { return Answer::Silent };
         let key = api_key(&self.prefix, region);
         let asked = self
@@ -109,7 +117,7 @@ impl Federation {
             .payload(payload)
             .target(zenoh::query::QueryTarget::All)
             .consolidation(zenoh::query::ConsolidationMode::None)
-            .timeout(ASK_TIMEOUT)
+            .timeout(timeout)
             .await;
         let replies = match asked {
             Ok(replies) => replies,
@@ -144,8 +152,13 @@ mod tests {
 
     #[test]
     fn queries_and_replies_are_plain_json_and_refuse_unknown_fields() {
-        let q =
-            ApiQuery { method: "PUT".into(), uri: "/api/uavs/u1/goal".into(), body: "{}".into(), uav: None };
+        let q = ApiQuery {
+            method: "PUT".into(),
+            uri: "/api/uavs/u1/goal".into(),
+            body: "{}".into(),
+            uav: None,
+            deploy: None,
+        };
         let text = serde_json::to_string(&q).unwrap();
         assert_eq!(serde_json::from_str::<ApiQuery>(&text).unwrap(), q);
         let bare: ApiQuery = serde_json::from_str(r#"{"method": "GET", "uri": "/api/state"}"#).unwrap();

@@ -1,0 +1,284 @@
+//! A road or a scenario for the whole deployment (`--region`; README "Regions over Zenoh", One
+//! fleet): `PUT /api/road` and `POST /api/scenario` sent to any region's owner apply to every region
+//! at the same instant, or to none.
+//!
+//! Two steps over the regions' queryables. *Prepare*: every region validates the change against its
+//! own fleet (a road: every UAV in the air safe on it, `Command::CheckRoad`; a scenario: its share of
+//! the UAVs, those starting in its region, fits under `--max-uavs`) and says yes or why not. Any
+//! refusal, or a region that does not answer, ends it: nothing was changed anywhere, and the answer
+//! is that region's, with its name. *Commit*: every region gets the change with one wall-clock
+//! instant, [`SWITCH_DELAY`] ahead, and applies it at its first tick boundary after that instant
+//! (so the regions switch within one tick of each other, with clocks in sync), then answers once it
+//! is applied and on disk. If a region fails at the commit (its fleet moved into a conflict since the
+//! prepare, or it died), the regions that switched to the new road are switched back to the old one
+//! and the answer is 502 `deployment_failed`; a scenario cannot be taken back (its fleet replaced the
+//! old one) and the answer names the regions that loaded it.
+
+use super::command::{Command, Outcome};
+use super::error::ApiError;
+use super::region::federation::{Answer, ApiQuery, ApiReply, Federation};
+use super::state::AppState;
+use axum::Json;
+use axum::http::StatusCode;
+use axum::response::{IntoResponse, Response};
+use fleet::{Scenario, ValidScenario};
+use roads::{Road, RoadLayout};
+use serde::{Deserialize, Serialize};
+use serde_json::{Value, json};
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+/// How far ahead of the commit the regions switch: room for every region to receive it.
+pub const SWITCH_DELAY: Duration = Duration::from_millis(500);
+/// How long a region may take to answer a commit (the delay, one tick, the disk).
+pub const COMMIT_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// What is deployed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kind {
+    /// A road layout (`PUT /api/road`'s body).
+    Road,
+    /// A scenario (`POST /api/scenario`'s body).
+    Scenario,
+}
+
+/// One step of a deployment, carried in [`ApiQuery::deploy`].
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Step {
+    /// `prepare` (check only) or `commit` (switch at `at_ms`).
+    pub commit: bool,
+    /// What is deployed.
+    pub kind: Kind,
+    /// The request's body as sent by the operator.
+    pub body: String,
+    /// The instant to switch at (ms since the Unix epoch; a commit only).
+    #[serde(default)]
+    pub at_ms: u64,
+}
+
+fn now_ms() -> u64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64)
+}
+
+/// The region names of a layout, in order.
+fn names(layout: &RoadLayout) -> Vec<String> {
+    layout.regions.iter().flatten().map(|r| r.name.clone()).collect()
+}
+
+/// The layout of a step's body (a road, or a scenario's road).
+fn layout_of(kind: Kind, body: &str) -> Result<RoadLayout, ApiError> {
+    match kind {
+        Kind::Road => super::error::parse::<RoadLayout>(body.as_bytes()),
+        Kind::Scenario => {
+            let scenario = super::error::parse::<Scenario>(body.as_bytes())?;
+            Ok(RoadLayout { regions: scenario.regions.clone(), ..RoadLayout::new(scenario.segments.clone()) })
+        }
+    }
+}
+
+/// 422 unless `new` keeps the regions of `old` and their neighbours (each region's server
+/// subscribes to its neighbours once, at its start).
+fn check_same_regions(old: &Road, new: &Road) -> Result<(), ApiError> {
+    let (before, after) = (names(old.layout()), names(new.layout()));
+    let mut sorted = (before.clone(), after.clone());
+    sorted.0.sort();
+    sorted.1.sort();
+    if sorted.0 != sorted.1 {
+        let message = format!(
+            "a road for the whole deployment keeps its regions ({}); this one has ({})",
+            before.join(", "),
+            after.join(", ")
+        );
+        return Err(ApiError::invalid("regions", message));
+    }
+    for name in &before {
+        let (a, b) = (super::region::neighbours_of(old, name), super::region::neighbours_of(new, name));
+        if a != b {
+            let message = format!(
+                "the neighbours of region `{name}` would change ({} → {}): restart its servers for that",
+                a.unwrap_or_default().join(", "),
+                b.unwrap_or_default().join(", ")
+            );
+            return Err(ApiError::invalid("regions", message));
+        }
+    }
+    Ok(())
+}
+
+/// The scenario of `body`, validated, with only the UAVs that start in region `own`.
+fn scenario_for(app: &AppState, body: &str, own: &str) -> Result<ValidScenario, ApiError> {
+    let scenario = super::error::parse::<Scenario>(body.as_bytes())?;
+    let mut valid = scenario.validate_with(&app.link_rules).map_err(|e| match e {
+        fleet::ScenarioError::Invalid { field, reason } => ApiError::invalid(field, reason),
+        other => ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", other.to_string()),
+    })?;
+    let road = &valid.road;
+    valid.uavs.retain(|u| road.region_of(road.locate(&u.start, None)).is_some_and(|r| r.name == own));
+    Ok(valid)
+}
+
+/// This region's side of `step` (asked by the coordinator, which may be this server).
+pub async fn answer(app: &AppState, own: &str, step: Step) -> Response {
+    match run_step(app, own, step).await {
+        Ok(body) => Json(body).into_response(),
+        Err(e) => e.into_response(),
+    }
+}
+
+async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiError> {
+    let current = app.road.borrow().layout.clone();
+    let (kind, body) = (step.kind, step.body.clone());
+    let own_name = own.to_string();
+    let rules_app = app.clone();
+    // Validated on the blocking pool, one large input at a time, as over REST.
+    let (road, scenario) = app
+        .validate(move || {
+            let layout = layout_of(kind, &body)?;
+            let road = super::api::road_of(layout)?;
+            let old = Road::new(current).map_err(|e| ApiError::invalid("road", e.message))?;
+            check_same_regions(&old, &road)?;
+            let scenario =
+                (kind == Kind::Scenario).then(|| scenario_for(&rules_app, &body, &own_name)).transpose()?;
+            Ok((road, scenario))
+        })
+        .await?;
+    if let Some(s) = &scenario
+        && s.uavs.len() > app.max_uavs
+    {
+        return Err(super::command::ChangeError::FleetFull { wanted: s.uavs.len(), max: app.max_uavs }.into());
+    }
+    if !step.commit {
+        if kind == Kind::Road {
+            app.apply(Command::CheckRoad(Box::new(road))).await?;
+        }
+        return Ok(json!({"ready": true}));
+    }
+    let wait = step.at_ms.saturating_sub(now_ms()).min(COMMIT_TIMEOUT.as_millis() as u64);
+    tokio::time::sleep(Duration::from_millis(wait)).await;
+    match scenario {
+        None => match app.apply(Command::SetRoad(Box::new(road))).await? {
+            Outcome::RoadReplaced { cleared_goals } => {
+                Ok(json!({"version": app.road.borrow().version, "cleared_goals": cleared_goals}))
+            }
+            _ => Ok(json!({"version": app.road.borrow().version})),
+        },
+        Some(valid) => {
+            let (name, count) = (valid.name.clone(), valid.uavs.len());
+            let tick = match app.apply(Command::LoadScenario(Box::new(valid))).await? {
+                Outcome::ScenarioLoaded { tick } => tick,
+                _ => app.snapshots.borrow().tick,
+            };
+            Ok(json!({"name": name, "uavs": count, "loaded_after_tick": tick}))
+        }
+    }
+}
+
+/// Runs `step` in every region of `regions` (this one directly, the others over Zenoh).
+async fn everywhere(
+    app: &AppState,
+    federation: &Federation,
+    regions: &[String],
+    step: &Step,
+    timeout: Duration,
+) -> Vec<(String, Answer)> {
+    let query = ApiQuery {
+        method: "POST".into(),
+        uri: "/deploy".into(),
+        body: String::new(),
+        uav: None,
+        deploy: Some(step.clone()),
+    };
+    let asks = regions.iter().map(|region| {
+        let query = &query;
+        async move {
+            if *region == federation.own {
+                let response = answer(app, region, step.clone()).await;
+                (region.clone(), Answer::Replied(super::federate::reply_of(response).await))
+            } else {
+                (region.clone(), federation.ask_within(region, query, timeout).await)
+            }
+        }
+    });
+    futures_util::future::join_all(asks).await
+}
+
+/// A region's refusal or silence as the answer: its status and body, the error naming the region.
+fn refused(region: &str, answer: Answer) -> Response {
+    let Answer::Replied(ApiReply { status, body }) = answer else {
+        return super::federate::unanswered(region);
+    };
+    let mut doc: Value = serde_json::from_str(&body).unwrap_or_else(|_| json!({"error": {}}));
+    if let Some(error) = doc.get_mut("error").and_then(Value::as_object_mut) {
+        error.insert("region".into(), json!(region));
+    }
+    let status = StatusCode::from_u16(status).unwrap_or(StatusCode::BAD_GATEWAY);
+    (status, Json(doc)).into_response()
+}
+
+/// Deploys `body` (a `kind`) to every region of the served road, as the coordinator.
+pub async fn coordinate(app: &AppState, federation: &Federation, kind: Kind, body: String) -> Response {
+    let old_layout = app.road.borrow().layout.clone();
+    let regions = names(&old_layout);
+    let prepare = Step { commit: false, kind, body: body.clone(), at_ms: 0 };
+    for (region, answer) in
+        everywhere(app, federation, &regions, &prepare, super::region::federation::ASK_TIMEOUT).await
+    {
+        let ok = matches!(&answer, Answer::Replied(r) if (200..300).contains(&r.status));
+        if !ok {
+            return refused(&region, answer);
+        }
+    }
+    let at_ms = now_ms() + SWITCH_DELAY.as_millis() as u64;
+    let commit = Step { commit: true, kind, body, at_ms };
+    let answers = everywhere(app, federation, &regions, &commit, COMMIT_TIMEOUT).await;
+    let mut report = serde_json::Map::new();
+    let (mut failed, mut switched) = (Vec::new(), Vec::new());
+    let mut own_body = json!({});
+    for (region, answer) in answers {
+        match answer {
+            Answer::Replied(reply) if (200..300).contains(&reply.status) => {
+                let doc: Value = serde_json::from_str(&reply.body).unwrap_or(Value::Null);
+                if region == federation.own {
+                    own_body = doc.clone();
+                }
+                report.insert(region.clone(), json!({"status": reply.status, "body": doc}));
+                switched.push(region);
+            }
+            Answer::Replied(reply) => {
+                let doc: Value = serde_json::from_str(&reply.body).unwrap_or(Value::Null);
+                report.insert(region.clone(), json!({"status": reply.status, "body": doc}));
+                failed.push(region);
+            }
+            Answer::Silent => {
+                report.insert(region.clone(), json!({"answered": false}));
+                failed.push(region);
+            }
+        }
+    }
+    if failed.is_empty() {
+        own_body["regions"] = Value::Object(report);
+        own_body["switch_at_ms"] = json!(at_ms);
+        return Json(own_body).into_response();
+    }
+    let mut message = format!("not applied in {}", failed.join(", "));
+    if kind == Kind::Road && !switched.is_empty() {
+        let old = serde_json::to_string(&old_layout).unwrap_or_default();
+        let back = Step { commit: true, kind, body: old, at_ms: now_ms() };
+        let undone = everywhere(app, federation, &switched, &back, COMMIT_TIMEOUT).await;
+        let ok: Vec<String> = undone
+            .into_iter()
+            .filter(|(_, a)| matches!(a, Answer::Replied(r) if (200..300).contains(&r.status)))
+            .map(|(r, _)| r)
+            .collect();
+        message = format!(
+            "{message}; the old road was put back in {}",
+            if ok.is_empty() { "none".into() } else { ok.join(", ") }
+        );
+    } else if !switched.is_empty() {
+        message = format!("{message}; loaded in {}", switched.join(", "));
+    }
+    let mut error = ApiError::new(StatusCode::BAD_GATEWAY, "deployment_failed", message);
+    error.extra = Some(serde_json::Map::from_iter([("regions".to_string(), Value::Object(report))]));
+    error.into_response()
+}
