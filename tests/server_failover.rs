@@ -193,6 +193,25 @@ async fn a_standby_takes_over_a_killed_primary_within_a_second() {
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
     assert!(banner_has(&banner, "west as standby"), "{:?}", banner.lock().unwrap());
+    // A wider road for the deployment, sent to the primary: the standby follows it.
+    let wider = json!({
+        "segments": roads::RoadLayout::straight(0.0, 40.0, 5.0, 8).segments,
+        "regions": [{"name": "west", "segments": [0, 3]}, {"name": "east", "segments": [4, 7]}],
+    });
+    let (status, body) = support::raw(
+        p,
+        "PUT",
+        "/api/road",
+        Some(&wider.to_string()),
+        &[("content-type", "application/json")],
+    )
+    .await;
+    assert_eq!(status, 200, "{body}");
+    let followed = Instant::now();
+    while get(s, "/api/road").await["segments"] != wider["segments"] {
+        assert!(followed.elapsed() < Duration::from_secs(5), "the standby never took the owner's road");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
     // Fly 4 s, checking D_c, then kill the primary mid-flight.
     let started = Instant::now();
     while started.elapsed() < Duration::from_secs(4) {
@@ -229,6 +248,7 @@ async fn a_standby_takes_over_a_killed_primary_within_a_second() {
     assert_eq!(get(a, "/api/metrics").await["region"]["failover"]["role"], "standby");
     assert!(banner_has(&banner, "joins as its standby"), "{:?}", banner.lock().unwrap());
     assert_eq!(get(s, "/api/metrics").await["region"]["failover"]["role"], "owner");
+    assert_eq!(get(s, "/api/road").await["segments"], wider["segments"], "it flew on with the owner's road");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

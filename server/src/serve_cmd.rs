@@ -294,6 +294,7 @@ async fn start_region(
         serve::region::federation::Federation::new(session.clone(), &options.prefix, &shared.name);
     let queryable = serve::federate::answer_queries(&federation, &session, app.clone()).await?;
     let _ = shared.federation.set(federation);
+    tokio::spawn(serve::road_follow::follow(app.clone()));
     let key = serve::region::state_key(&options.prefix, &shared.name);
     let role = if shared.failover.is_owner() { "owner" } else { "standby" };
     say!(

@@ -58,7 +58,9 @@ impl Engine {
             let _ = reply.send(Err(ChangeError::NotDurable(reason)));
             return;
         }
-        if let Some(region) = self.region.as_ref().filter(|r| !r.failover.is_owner()) {
+        // A standby takes only its owner's road (it flies nothing, so any road is safe for it).
+        let follows = matches!(command, Command::FollowRoad(_));
+        if let Some(region) = self.region.as_ref().filter(|r| !r.failover.is_owner() && !follows) {
             let _ = reply.send(Err(ChangeError::Standby(region.name.clone())));
             return;
         }
@@ -85,7 +87,7 @@ impl Engine {
     pub fn apply(&mut self, command: Command) -> Result<Applied, ChangeError> {
         let dt = self.fleet.config.params.dt;
         Ok(match command {
-            Command::SetRoad(road) => {
+            Command::SetRoad(road) | Command::FollowRoad(road) => {
                 let (cleared_goals, undo) = self.fleet.replace_road_undoable(*road)?;
                 self.road_changed();
                 let mut writes = vec![Write::Road(self.fleet.road().layout().clone())];

@@ -14,6 +14,9 @@ use uav::Vec2;
 pub enum Command {
     /// Replace the road (already validated).
     SetRoad(Box<Road>),
+    /// A standby takes its owner's road (`region::road_follow`); refused by an owner's loop
+    /// like nothing else, applied as [`Command::SetRoad`].
+    FollowRoad(Box<Road>),
     /// Check that every UAV in the air would be safe on this road, changing nothing (the prepare
     /// step of a deployment-wide road, `serve::deploy`).
     CheckRoad(Box<Road>),
@@ -60,6 +63,7 @@ impl Command {
     pub fn describe(&self) -> String {
         match self {
             Command::SetRoad(road) => format!("road of {} segments", road.quads().len()),
+            Command::FollowRoad(road) => format!("the owner's road of {} segments", road.quads().len()),
             Command::CheckRoad(road) => format!("check of a road of {} segments", road.quads().len()),
             Command::AddUav { id, position, .. } => {
                 format!("added `{id}` at [{}, {}]", position.x, position.y)

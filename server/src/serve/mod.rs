@@ -26,6 +26,7 @@ pub mod rerun_fleet;
 mod rerun_log;
 pub mod rerun_sink;
 mod rerun_viewer;
+pub mod road_follow;
 pub mod snapshot;
 pub mod state;
 pub mod stats;

@@ -117,6 +117,9 @@ pub struct Mirror {
     pub epoch: u64,
     /// The owner's tick.
     pub tick: u64,
+    /// The owner's road version (its own counter: a standby takes the road when it changes).
+    #[serde(default)]
+    pub road_version: u64,
     /// Its UAVs.
     pub uavs: Vec<MirrorUav>,
 }
@@ -139,7 +142,7 @@ impl Mirror {
             .iter()
             .map(|u| MirrorUav { id: u.id.clone(), uav: UavRecord::of_snapshot(u) })
             .collect();
-        Self { region: region.into(), epoch, tick: snapshot.tick, uavs }
+        Self { region: region.into(), epoch, tick: snapshot.tick, road_version: snapshot.road_version, uavs }
     }
 }
 

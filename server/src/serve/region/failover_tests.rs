@@ -71,7 +71,7 @@ fn the_flags_are_taken_once_and_the_role_switches_at_once() {
 }
 
 fn mirror(epoch: u64, tick: u64) -> Mirror {
-    Mirror { region: "west".into(), epoch, tick, uavs: Vec::new() }
+    Mirror { region: "west".into(), epoch, tick, road_version: 0, uavs: Vec::new() }
 }
 
 #[test]
