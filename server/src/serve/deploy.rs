@@ -282,3 +282,45 @@ pub async fn coordinate(app: &AppState, federation: &Federation, kind: Kind, bod
     error.extra = Some(serde_json::Map::from_iter([("regions".to_string(), Value::Object(report))]));
     error.into_response()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use roads::Region;
+
+    fn road(regions: &[(&str, usize, usize)]) -> Road {
+        let mut layout = RoadLayout::straight(0.0, 30.0, 4.0, 6);
+        let region = |&(name, first, last): &(&str, usize, usize)| Region {
+            name: name.into(),
+            segments: [first, last],
+        };
+        layout.regions = Some(regions.iter().map(region).collect());
+        Road::new(layout).unwrap() // the tests give ranges covering the six segments once
+    }
+
+    #[test]
+    fn a_deployed_road_keeps_the_regions_and_their_neighbours() {
+        let old = road(&[("a", 0, 1), ("b", 2, 3), ("c", 4, 5)]);
+        // Other ranges, the same neighbours: fine.
+        assert!(check_same_regions(&old, &road(&[("a", 0, 0), ("b", 1, 4), ("c", 5, 5)])).is_ok());
+        let renamed = check_same_regions(&old, &road(&[("a", 0, 1), ("b", 2, 3), ("d", 4, 5)])).unwrap_err();
+        assert_eq!(renamed.field.as_deref(), Some("regions"));
+        assert!(
+            renamed.message.contains("(a, b, c)") && renamed.message.contains("(a, b, d)"),
+            "{}",
+            renamed.message
+        );
+        let reordered =
+            check_same_regions(&old, &road(&[("b", 0, 1), ("a", 2, 3), ("c", 4, 5)])).unwrap_err();
+        assert!(reordered.message.contains("neighbours of region `a`"), "{}", reordered.message);
+    }
+
+    #[test]
+    fn steps_round_trip_as_json_and_unknown_fields_are_refused() {
+        let step = Step { commit: true, kind: Kind::Scenario, body: "{}".into(), at_ms: 17 };
+        let text = serde_json::to_string(&step).unwrap();
+        assert!(text.contains(r#""kind":"scenario""#), "{text}");
+        assert_eq!(serde_json::from_str::<Step>(&text).unwrap(), step);
+        assert!(serde_json::from_str::<Step>(&text.replacen('{', r#"{"x":1,"#, 1)).is_err());
+    }
+}
