@@ -114,10 +114,53 @@ pub const MAX_PAGE: usize = 1000;
 
 /// Query of `GET /api/uavs`: without any, the whole fleet (as before pages existed).
 #[derive(Debug, Deserialize)]
-struct ListQuery {
+pub(crate) struct ListQuery {
     bbox: Option<String>,
     limit: Option<usize>,
-    after: Option<String>,
+    /// Start after the UAV with this id.
+    pub(crate) after: Option<String>,
+}
+
+/// One page of `GET /api/uavs`: at most `limit` UAVs, only those inside `bbox` if given.
+pub(crate) struct Page {
+    /// Most UAVs.
+    pub(crate) limit: usize,
+    bbox: Option<super::binary::Bbox>,
+}
+
+impl ListQuery {
+    /// The page asked for (None: no parameter, the whole list), or the 422 naming the parameter.
+    pub(crate) fn page(&self) -> Result<Option<Page>, ApiError> {
+        if self.bbox.is_none() && self.limit.is_none() && self.after.is_none() {
+            return Ok(None);
+        }
+        let limit = self.limit.unwrap_or(MAX_PAGE);
+        if !(1..=MAX_PAGE).contains(&limit) {
+            return Err(ApiError::invalid("limit", format!("must be between 1 and {MAX_PAGE}")));
+        }
+        let bbox = self
+            .bbox
+            .as_deref()
+            .map(super::binary::parse_bbox)
+            .transpose()
+            .map_err(|e| ApiError::invalid("bbox", e))?;
+        Ok(Some(Page { limit, bbox }))
+    }
+}
+
+impl Page {
+    /// Whether position `p` is on this page's viewport (compared as the binary stream's f32).
+    pub(crate) fn shows(&self, p: [f64; 2]) -> bool {
+        self.bbox.is_none_or(|[x0, y0, x1, y1]| {
+            let (x, y) = (p[0] as f32, p[1] as f32);
+            x >= x0 && x <= x1 && y >= y0 && y <= y1
+        })
+    }
+}
+
+/// 422 for an `after` naming no UAV.
+pub(crate) fn no_uav_after(id: &str) -> ApiError {
+    ApiError::invalid("after", format!("no UAV `{id}`"))
 }
 
 /// `GET /api/uavs[?bbox=x0,y0,x1,y1][&limit=N][&after=ID]`: the UAVs in fleet order, those inside
@@ -129,33 +172,13 @@ async fn list_uavs(
 ) -> Result<Json<Vec<UavSnapshot>>, ApiError> {
     let axum::extract::Query(q) = query.map_err(|e| ApiError::invalid("limit", e.body_text()))?;
     let snapshot = app.snapshots.borrow().clone();
-    if q.bbox.is_none() && q.limit.is_none() && q.after.is_none() {
-        return Ok(Json(snapshot.uavs.clone()));
-    }
-    let limit = q.limit.unwrap_or(MAX_PAGE);
-    if !(1..=MAX_PAGE).contains(&limit) {
-        return Err(ApiError::invalid("limit", format!("must be between 1 and {MAX_PAGE}")));
-    }
-    let bbox = q
-        .bbox
-        .as_deref()
-        .map(super::binary::parse_bbox)
-        .transpose()
-        .map_err(|e| ApiError::invalid("bbox", e))?;
+    let Some(page) = q.page()? else { return Ok(Json(snapshot.uavs.clone())) };
     let start = match &q.after {
         None => 0,
-        Some(id) => match position_of(&app, &snapshot, id) {
-            Some(k) => k + 1,
-            None => return Err(ApiError::invalid("after", format!("no UAV `{id}`"))),
-        },
+        Some(id) => position_of(&app, &snapshot, id).ok_or_else(|| no_uav_after(id))? + 1,
     };
-    let inside = |u: &&UavSnapshot| {
-        bbox.is_none_or(|[x0, y0, x1, y1]| {
-            let (x, y) = (u.p[0] as f32, u.p[1] as f32);
-            x >= x0 && x <= x1 && y >= y0 && y <= y1
-        })
-    };
-    Ok(Json(snapshot.uavs[start..].iter().filter(inside).take(limit).cloned().collect()))
+    let shown = snapshot.uavs[start..].iter().filter(|u| page.shows(u.p));
+    Ok(Json(shown.take(page.limit).cloned().collect()))
 }
 
 async fn get_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<Json<UavSnapshot>, ApiError> {

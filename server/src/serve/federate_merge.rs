@@ -9,7 +9,6 @@ use super::state::AppState;
 use axum::Json;
 use axum::http::{StatusCode, Uri, header};
 use axum::response::{IntoResponse, Response};
-use serde::Deserialize;
 use serde_json::{Value, json};
 
 /// The header of a merged `GET /api/uavs` naming the regions that did not answer (comma-separated).
@@ -94,14 +93,6 @@ pub fn state(
     Ok(Json(doc).into_response())
 }
 
-/// The query of `GET /api/uavs` (as `api::list_uavs` reads it).
-#[derive(Debug, Deserialize)]
-struct ListQuery {
-    bbox: Option<String>,
-    limit: Option<usize>,
-    after: Option<String>,
-}
-
 /// `GET /api/uavs` over every region: the regions' UAVs in the road's region order, each tagged
 /// with its `region`, then `bbox`, `after` and `limit` as for one region; the regions that did not
 /// answer are named in [`UNANSWERED_HEADER`].
@@ -112,7 +103,7 @@ pub fn list(
     regions: &[String],
     answers: Vec<(String, Answer)>,
 ) -> Result<Response, ApiError> {
-    let q = axum::extract::Query::<ListQuery>::try_from_uri(uri)
+    let q = axum::extract::Query::<super::api::ListQuery>::try_from_uri(uri)
         .map_err(|e| ApiError::invalid("limit", e.body_text()))?
         .0;
     let own_uavs = serde_json::to_value(&snapshot.uavs).unwrap_or(Value::Null);
@@ -130,34 +121,20 @@ pub fn list(
     }
     by_region.sort_by_key(|(name, _)| regions.iter().position(|r| r == name).unwrap_or(usize::MAX));
     let all: Vec<Value> = by_region.into_iter().flat_map(|(_, list)| list).collect();
-    let paged = q.bbox.is_some() || q.limit.is_some() || q.after.is_some();
-    let limit = q.limit.unwrap_or(if paged { super::api::MAX_PAGE } else { usize::MAX });
-    if paged && !(1..=super::api::MAX_PAGE).contains(&limit) {
-        return Err(ApiError::invalid("limit", format!("must be between 1 and {}", super::api::MAX_PAGE)));
-    }
-    let bbox = q
-        .bbox
-        .as_deref()
-        .map(super::binary::parse_bbox)
-        .transpose()
-        .map_err(|e| ApiError::invalid("bbox", e))?;
-    let start = match &q.after {
-        None => 0,
-        Some(id) => match all.iter().position(|u| u["id"] == *id) {
-            Some(k) => k + 1,
-            None => return Err(ApiError::invalid("after", format!("no UAV `{id}`"))),
-        },
+    let page: Vec<Value> = match q.page()? {
+        None => all,
+        Some(page) => {
+            let start = match &q.after {
+                None => 0,
+                Some(id) => {
+                    all.iter().position(|u| u["id"] == *id).ok_or_else(|| super::api::no_uav_after(id))? + 1
+                }
+            };
+            let at =
+                |u: &Value| [u["p"][0].as_f64().unwrap_or(f64::NAN), u["p"][1].as_f64().unwrap_or(f64::NAN)];
+            all[start..].iter().filter(|u| page.shows(at(u))).take(page.limit).cloned().collect()
+        }
     };
-    let inside = |u: &&Value| {
-        bbox.is_none_or(|[x0, y0, x1, y1]| {
-            let (x, y) = (
-                u["p"][0].as_f64().unwrap_or(f64::NAN) as f32,
-                u["p"][1].as_f64().unwrap_or(f64::NAN) as f32,
-            );
-            x >= x0 && x <= x1 && y >= y0 && y <= y1
-        })
-    };
-    let page: Vec<Value> = all[start..].iter().filter(inside).take(limit).cloned().collect();
     let mut response = Json(page).into_response();
     if let Ok(value) = header::HeaderValue::from_str(&unanswered.join(",")) {
         response.headers_mut().insert(UNANSWERED_HEADER, value);
