@@ -155,7 +155,14 @@ async fn a_road_or_a_scenario_sent_to_any_region_switches_every_region_or_none()
     // A wider road sent to the west: both regions switch, at one instant announced in the answer.
     let (status, body) = send(w, "PUT", "/api/road", Some(road(6.0))).await;
     assert_eq!(status, 200, "{body}");
-    assert!(body["switch_at_ms"].as_u64().is_some(), "{body}");
+    // One tick boundary for all (a multiple of dt = 50 ms), and every region switched in its gap:
+    // within half a tick of it on this one machine's clock.
+    let at = body["switch_at_ms"].as_u64().unwrap();
+    assert_eq!(at % 50, 0, "{body}");
+    for region in ["west", "east"] {
+        let switched = body["regions"][region]["body"]["switched_at_ms"].as_u64().unwrap();
+        assert!(switched.abs_diff(at) < 25, "{region} switched at {switched}, the boundary is {at}");
+    }
     assert_eq!(
         (body["regions"]["west"]["status"].clone(), body["regions"]["east"]["status"].clone()),
         (json!(200), json!(200))

@@ -6,10 +6,11 @@
 //! own fleet (a road: every UAV in the air safe on it, `Command::CheckRoad`; a scenario: its share of
 //! the UAVs, those starting in its region, fits under `--max-uavs`) and says yes or why not. Any
 //! refusal, or a region that does not answer, ends it: nothing was changed anywhere, and the answer
-//! is that region's, with its name. *Commit*: every region gets the change with one wall-clock
-//! instant, [`SWITCH_DELAY`] ahead, and applies it at its first tick boundary after that instant
-//! (so the regions switch within one tick of each other, with clocks in sync), then answers once it
-//! is applied and on disk. If a region fails at the commit (its fleet moved into a conflict since the
+//! is that region's, with its name. *Commit*: every region gets the change with one tick boundary
+//! at least [`SWITCH_DELAY`] ahead (regions tick on the wall clock's multiples of dt, `engine.rs`),
+//! queues it half a tick before and so applies it in the gap at that boundary: every region
+//! switches at the same tick boundary (with clocks in sync), then answers once the change is
+//! applied and on disk. If a region fails at the commit (its fleet moved into a conflict since the
 //! prepare, or it died), the regions that switched to the new road are switched back to the old one
 //! and the answer is 502 `deployment_failed`; a scenario cannot be taken back (its fleet replaced the
 //! old one) and the answer names the regions that loaded it.
@@ -154,14 +155,17 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiErr
         }
         return Ok(json!({"ready": true}));
     }
-    let wait = step.at_ms.saturating_sub(now_ms()).min(COMMIT_TIMEOUT.as_millis() as u64);
+    // Queued half a tick before the boundary: the loop takes it in the gap at the boundary.
+    let half_tick = (app.metrics.borrow().dt * 500.0) as u64;
+    let wait =
+        step.at_ms.saturating_sub(half_tick).saturating_sub(now_ms()).min(COMMIT_TIMEOUT.as_millis() as u64);
     tokio::time::sleep(Duration::from_millis(wait)).await;
-    match scenario {
+    let mut done = match scenario {
         None => match app.apply(Command::SetRoad(Box::new(road))).await? {
             Outcome::RoadReplaced { cleared_goals } => {
-                Ok(json!({"version": app.road.borrow().version, "cleared_goals": cleared_goals}))
+                json!({"version": app.road.borrow().version, "cleared_goals": cleared_goals})
             }
-            _ => Ok(json!({"version": app.road.borrow().version})),
+            _ => json!({"version": app.road.borrow().version}),
         },
         Some(valid) => {
             let (name, count) = (valid.name.clone(), valid.uavs.len());
@@ -169,9 +173,12 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiErr
                 Outcome::ScenarioLoaded { tick } => tick,
                 _ => app.snapshots.borrow().tick,
             };
-            Ok(json!({"name": name, "uavs": count, "loaded_after_tick": tick}))
+            json!({"name": name, "uavs": count, "loaded_after_tick": tick})
         }
-    }
+    };
+    // When the loop put the new road in place (the gap at the boundary, on this server's clock).
+    done["switched_at_ms"] = json!(app.road.borrow().since_ms);
+    Ok(done)
 }
 
 /// Runs `step` in every region of `regions` (this one directly, the others over Zenoh).
@@ -229,7 +236,9 @@ pub async fn coordinate(app: &AppState, federation: &Federation, kind: Kind, bod
             return refused(&region, answer);
         }
     }
-    let at_ms = now_ms() + SWITCH_DELAY.as_millis() as u64;
+    // The first tick boundary (a multiple of dt on the wall clock) after the delay.
+    let dt_ms = ((app.metrics.borrow().dt * 1e3).round() as u64).max(1);
+    let at_ms = (now_ms() + SWITCH_DELAY.as_millis() as u64).div_ceil(dt_ms) * dt_ms;
     let commit = Step { commit: true, kind, body, at_ms };
     let answers = everywhere(app, federation, &regions, &commit, COMMIT_TIMEOUT).await;
     let mut report = serde_json::Map::new();

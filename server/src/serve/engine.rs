@@ -40,6 +40,8 @@ pub struct RoadView {
     pub walls: Vec<[[f64; 2]; 2]>,
     /// The centre line as a polyline.
     pub centerline: Vec<[f64; 2]>,
+    /// When this version was put in place, between two ticks (ms since the Unix epoch).
+    pub since_ms: u64,
 }
 
 impl RoadView {
@@ -50,8 +52,18 @@ impl RoadView {
             layout: road.layout().clone(),
             walls: road.walls().iter().map(|w| [[w.a.x, w.a.y], [w.b.x, w.b.y]]).collect(),
             centerline: road.centerline().points().iter().map(|p| [p.x, p.y]).collect(),
+            since_ms: (super::region::ownership::wall_now() * 1e3) as u64,
         }
     }
+}
+
+/// The next instant at which the wall clock is a whole multiple of `period` (since the Unix epoch).
+pub fn next_wall_boundary(period: Duration) -> Instant {
+    let now = Instant::now();
+    let wall = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
+    let period_ns = period.as_nanos().max(1);
+    let to_go = period_ns - wall.as_nanos() % period_ns;
+    now + Duration::from_nanos(u64::try_from(to_go).unwrap_or(u64::MAX))
 }
 
 /// When the loop last finished a tick, for `/healthz` (a stalled loop publishes nothing else).
@@ -214,6 +226,14 @@ impl Engine {
             self.tick(started);
             self.send_gap();
             next += period;
+            if self.region.is_some() {
+                // Regions tick on the wall clock's multiples of dt, so that a change deployed to
+                // every region for one instant is applied at the same tick boundary everywhere.
+                let aligned = next_wall_boundary(period);
+                let missed = aligned.saturating_duration_since(next).as_secs_f64() / period.as_secs_f64();
+                self.stats.missed(missed.round() as u64);
+                next = aligned;
+            }
         }
         // Answer what is still held; the writer commits what it has (and the last positions).
         self.read_writer();
