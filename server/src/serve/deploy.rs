@@ -16,6 +16,7 @@
 //! old one) and the answer names the regions that loaded it.
 
 use super::command::{Command, Outcome};
+use super::engine::now_ms;
 use super::error::ApiError;
 use super::region::federation::{Answer, ApiQuery, ApiReply, Federation};
 use super::state::AppState;
@@ -26,7 +27,7 @@ use fleet::{Scenario, ValidScenario};
 use roads::{Road, RoadLayout};
 use serde::{Deserialize, Serialize};
 use serde_json::{Value, json};
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 /// How far ahead of the commit the regions switch: room for every region to receive it.
 pub const SWITCH_DELAY: Duration = Duration::from_millis(500);
@@ -56,10 +57,6 @@ pub struct Step {
     /// The instant to switch at (ms since the Unix epoch; a commit only).
     #[serde(default)]
     pub at_ms: u64,
-}
-
-fn now_ms() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64)
 }
 
 /// The region names of a layout, in order.

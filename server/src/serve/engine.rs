@@ -40,7 +40,8 @@ pub struct RoadView {
     pub walls: Vec<[[f64; 2]; 2]>,
     /// The centre line as a polyline.
     pub centerline: Vec<[f64; 2]>,
-    /// When this version was put in place, between two ticks (ms since the Unix epoch).
+    /// The tick boundary at which this version was put in place (the instant the loop had
+    /// scheduled for that gap, ms since the Unix epoch).
     pub since_ms: u64,
 }
 
@@ -52,9 +53,14 @@ impl RoadView {
             layout: road.layout().clone(),
             walls: road.walls().iter().map(|w| [[w.a.x, w.a.y], [w.b.x, w.b.y]]).collect(),
             centerline: road.centerline().points().iter().map(|p| [p.x, p.y]).collect(),
-            since_ms: (super::region::ownership::wall_now() * 1e3) as u64,
+            since_ms: now_ms(),
         }
     }
+}
+
+/// The wall clock now (ms since the Unix epoch).
+pub fn now_ms() -> u64 {
+    (super::region::ownership::wall_now() * 1e3) as u64
 }
 
 /// The next instant at which the wall clock is a whole multiple of `period` (since the Unix epoch).
@@ -154,6 +160,8 @@ pub struct Engine {
     pub(crate) link_rules: Arc<links::LinkRules>,
     /// Crazyflies released to another region whose links are closing (`region/detach.rs`).
     pub(crate) detaching: Vec<super::region::detach::Detaching>,
+    /// The tick boundary of the current gap on the wall clock (ms; 0 before the first).
+    boundary_ms: u64,
 }
 
 impl Engine {
@@ -187,6 +195,7 @@ impl Engine {
             owns_region: false,
             link_rules: Arc::default(),
             detaching: Vec::new(),
+            boundary_ms: 0,
         }
     }
 
@@ -218,6 +227,9 @@ impl Engine {
                 self.stats.missed(u64::from(missed));
                 next += period * missed;
             }
+            // The boundary this gap belongs to, on the wall clock (the loop may wake a little late).
+            let late_ms = started.saturating_duration_since(next).as_millis() as u64;
+            self.boundary_ms = now_ms().saturating_sub(late_ms);
             self.read_writer();
             if !self.apply_commands() {
                 break;
@@ -332,6 +344,10 @@ impl Engine {
     }
 
     pub(crate) fn publish_road(&self) {
-        self.channels.road.send_replace(Arc::new(RoadView::of(self.fleet.road(), self.road_version)));
+        let mut view = RoadView::of(self.fleet.road(), self.road_version);
+        if self.boundary_ms > 0 {
+            view.since_ms = self.boundary_ms;
+        }
+        self.channels.road.send_replace(Arc::new(view));
     }
 }
