@@ -320,6 +320,7 @@ impl Engine {
                 read_at: started,
                 owned: self.owns_region,
                 unheard: self.unheard(Instant::now()),
+                leaving: self.leaving(),
             };
             region.published.send_replace(Some(published));
         }

@@ -38,6 +38,13 @@ impl Engine {
         self.detaching.push(Detaching { uav, to, seq, since: now, warned: false });
     }
 
+    /// The UAVs whose links are closing, as the mirror lists them (a standby that takes over
+    /// before their release flies them on; one that saw the release leaves them to the neighbour).
+    pub(crate) fn leaving(&self) -> Vec<super::failover::MirrorUav> {
+        let record = |d: &Detaching| super::failover::MirrorUav { id: d.uav.id.clone(), uav: record(&d.uav) };
+        self.detaching.iter().map(record).collect()
+    }
+
     /// Releases the UAVs whose links have closed since the last gap (while the handover queue has
     /// room for their releases).
     pub(crate) fn release_detached(&mut self, handover: &mut Handover) {

@@ -135,12 +135,14 @@ pub struct MirrorUav {
 }
 
 impl Mirror {
-    /// The mirror of `snapshot` for `region` at `epoch`.
-    pub fn of(region: &str, epoch: u64, snapshot: &Snapshot) -> Self {
+    /// The mirror of `snapshot` for `region` at `epoch`, with the UAVs `leaving` (released, their
+    /// links still closing: a standby that takes over before their release flies them on).
+    pub fn of(region: &str, epoch: u64, snapshot: &Snapshot, leaving: &[MirrorUav]) -> Self {
         let uavs = snapshot
             .uavs
             .iter()
             .map(|u| MirrorUav { id: u.id.clone(), uav: UavRecord::of_snapshot(u) })
+            .chain(leaving.iter().cloned())
             .collect();
         Self { region: region.into(), epoch, tick: snapshot.tick, road_version: snapshot.road_version, uavs }
     }

@@ -117,9 +117,34 @@ fn a_mirror_round_trips_through_json_and_refuses_unknown_fields() {
         link: None,
         airborne: true,
     };
-    let m = Mirror { uavs: vec![MirrorUav { id: "u1".into(), uav: record }], ..mirror(3, 7) };
+    let m = Mirror { uavs: vec![MirrorUav { id: "u1".into(), uav: record.clone() }], ..mirror(3, 7) };
     let json = serde_json::to_string(&m).unwrap();
     assert_eq!(serde_json::from_str::<Mirror>(&json).unwrap(), m);
     let extra = json.replacen('{', r#"{"x":1,"#, 1);
     assert!(serde_json::from_str::<Mirror>(&extra).is_err());
+}
+
+#[test]
+fn a_mirror_lists_the_uavs_whose_links_are_closing_after_the_fleet() {
+    let snapshot = crate::serve::snapshot::Snapshot::of(
+        &fleet::Fleet::new(
+            fleet::FleetConfig::default(),
+            roads::Road::new(roads::RoadLayout::straight(0.0, 20.0, 4.0, 2)).unwrap(), // valid
+            policies::PolicyRegistry::with_pd(1.0),
+        ),
+        4,
+        0.2,
+        0,
+    );
+    let leaving = UavRecord {
+        p: [3.0, 0.0],
+        v: [1.0, 0.0],
+        goal: None,
+        policy: "pd".into(),
+        link: Some("udp://127.0.0.1:19850".into()),
+        airborne: true,
+    };
+    let m = Mirror::of("west", 2, &snapshot, &[MirrorUav { id: "cf1".into(), uav: leaving.clone() }]);
+    assert_eq!((m.epoch, m.tick, m.uavs.len()), (2, 4, 1));
+    assert_eq!((m.uavs[0].id.as_str(), &m.uavs[0].uav), ("cf1", &leaving));
 }

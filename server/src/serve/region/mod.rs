@@ -136,6 +136,8 @@ pub struct Published {
     pub owned: bool,
     /// The silent UAVs' unheard times and the ghosts, sent with the states.
     pub unheard: wire::Unheard,
+    /// The UAVs released whose links are still closing, for the mirror.
+    pub leaving: Vec<failover::MirrorUav>,
 }
 
 /// What the fleet loop and `GET /api/metrics` share with the region's Zenoh side.

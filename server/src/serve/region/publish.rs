@@ -36,7 +36,12 @@ pub(super) async fn publish(
         }
         let standby_listens = publishers.mirror.matching_status().await.is_ok_and(|m| m.matching());
         if standby_listens {
-            let mirror = failover::Mirror::of(&region, publishers.failover.epoch(), &published.snapshot);
+            let mirror = failover::Mirror::of(
+                &region,
+                publishers.failover.epoch(),
+                &published.snapshot,
+                &published.leaving,
+            );
             if let Ok(payload) = serde_json::to_vec(&mirror)
                 && let Err(e) = publishers.mirror.put(payload).await
             {
