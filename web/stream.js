@@ -2,10 +2,9 @@
 // roster and reservations as they change and only the latest tick frame (decoded lazily, once per
 // animation frame), reconnects with backoff, and reports the connection state.
 
-import * as binary from "./binary.js";
-
-const { KIND_REGION, KIND_RESERVATIONS, KIND_ROSTER, KIND_TICK, decodeJson, decodeRegion, decodeTick, kindOf, regionName } =
-  binary;
+import {
+  KIND_REGION, KIND_RESERVATIONS, KIND_ROSTER, KIND_TICK, decodeJson, decodeRegion, decodeTick, kindOf, regionName,
+} from "./binary.js";
 
 /** Another region's UAVs are drawn until its messages stop for this long (ms). */
 const REGION_SHOWN_MS = 2000;

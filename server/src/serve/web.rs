@@ -82,8 +82,10 @@ mod tests {
     #[test]
     fn modules_import_only_embedded_files() {
         for asset in ASSETS.iter().filter(|a| a.name.ends_with(".js")) {
-            for line in asset.body.lines().filter(|l| l.starts_with("import ")) {
-                let target = line.rsplit("\"./").next().and_then(|r| r.split('"').next()).unwrap_or("");
+            // Every module specifier, wherever the import statement breaks its lines.
+            let specifiers = ["from \"./", "import \"./"].map(|m| asset.body.split(m).skip(1));
+            for rest in specifiers.into_iter().flatten() {
+                let target = rest.split('"').next().unwrap_or("");
                 assert!(
                     ASSETS.iter().any(|a| a.name == target),
                     "{}: imports `{target}`, not embedded",
