@@ -46,14 +46,14 @@ pub struct RoadView {
 }
 
 impl RoadView {
-    /// The view of `road` at `version`.
-    pub fn of(road: &Road, version: u64) -> Self {
+    /// The view of `road` at `version`, put in place at `since_ms`.
+    pub fn of(road: &Road, version: u64, since_ms: u64) -> Self {
         Self {
             version,
             layout: road.layout().clone(),
             walls: road.walls().iter().map(|w| [[w.a.x, w.a.y], [w.b.x, w.b.y]]).collect(),
             centerline: road.centerline().points().iter().map(|p| [p.x, p.y]).collect(),
-            since_ms: now_ms(),
+            since_ms,
         }
     }
 }
@@ -345,10 +345,8 @@ impl Engine {
     }
 
     pub(crate) fn publish_road(&self) {
-        let mut view = RoadView::of(self.fleet.road(), self.road_version);
-        if self.boundary_ms > 0 {
-            view.since_ms = self.boundary_ms;
-        }
+        let since_ms = if self.boundary_ms > 0 { self.boundary_ms } else { now_ms() };
+        let view = RoadView::of(self.fleet.road(), self.road_version, since_ms);
         self.channels.road.send_replace(Arc::new(view));
     }
 }

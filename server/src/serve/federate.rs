@@ -93,7 +93,8 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
     // its own included (whose owner answers).
     let owner = app.region.as_ref().is_some_and(|r| r.failover.is_owner());
     let read = request.method() == Method::GET;
-    if local || route == Route::Local || !(owner || read) {
+    let flown = matches!(&route, Route::Uav(id) if flown_here(&app, id));
+    if local || flown || route == Route::Local || !(owner || read) {
         return next.run(request).await;
     }
     let (parts, body) = request.into_parts();
@@ -108,7 +109,8 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
         uav: None,
         deploy: None,
     };
-    let mut regions = region_names(&app);
+    let all = region_names(&app);
+    let mut regions = all.clone();
     if owner {
         regions.retain(|r| *r != federation.own);
     }
@@ -118,7 +120,8 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
         Route::Uav(id) => {
             let mut silent = Vec::new();
             for attempt in 0..2 {
-                if flown_here(&app, &id) {
+                // Adopted here meanwhile (it was between two regions at the first ask).
+                if attempt > 0 && flown_here(&app, &id) {
                     return here(bytes).await;
                 }
                 let asked = ApiQuery { uav: Some(id.clone()), ..query.clone() };
@@ -161,11 +164,10 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
             let whole = ApiQuery { uri: uri.path().to_string(), ..query };
             let answers = federation.ask_all(&regions, &whole).await;
             let merged = if route == Route::State {
-                super::federate_merge::state(&app, &federation.own, &region_names(&app), answers)
+                super::federate_merge::state(&app, &federation.own, &all, answers)
             } else {
                 let snapshot = app.snapshots.borrow().clone();
-                let order = region_names(&app);
-                super::federate_merge::list(&uri, snapshot, &federation.own, &order, answers)
+                super::federate_merge::list(&uri, snapshot, &federation.own, &all, answers)
             };
             merged.unwrap_or_else(IntoResponse::into_response)
         }

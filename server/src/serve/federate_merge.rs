@@ -33,14 +33,16 @@ fn answered_json(answer: &Answer) -> Option<Value> {
     }
 }
 
-/// The report of one region that gave `doc` (None: no usable answer, `answer` says why).
-fn region_report(name: &str, doc: Option<&Value>, answer: &Answer) -> Value {
-    match (doc, answer) {
-        (Some(doc), _) => json!({"name": name, "answered": true, "tick": doc["tick"], "uavs": doc["uavs"]
-            .as_array()
-            .map_or(0, Vec::len)}),
-        (None, Answer::Replied(reply)) => json!({"name": name, "answered": false, "status": reply.status}),
-        (None, Answer::Silent) => json!({"name": name, "answered": false}),
+/// The report of a region that answered `doc`.
+fn answered_report(name: &str, doc: &Value) -> Value {
+    json!({"name": name, "answered": true, "tick": doc["tick"], "uavs": doc["uavs"].as_array().map_or(0, Vec::len)})
+}
+
+/// The report of a region with no usable answer (`answer` says why).
+fn unanswered_report(name: &str, answer: &Answer) -> Value {
+    match answer {
+        Answer::Replied(reply) => json!({"name": name, "answered": false, "status": reply.status}),
+        Answer::Silent => json!({"name": name, "answered": false}),
     }
 }
 
@@ -67,16 +69,19 @@ pub fn state(
         .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string()))?;
     // A standby asked its own region's owner: its own empty fleet is not the region's.
     let standby = answers.iter().any(|(name, _)| name == own);
-    let own_doc = json!({"tick": snapshot.tick, "uavs": vec![Value::Null; snapshot.uavs.len()]});
     let mut reports = Vec::new();
     if !standby {
-        reports.push((own.to_string(), region_report(own, Some(&own_doc), &Answer::Silent)));
+        let report =
+            json!({"name": own, "answered": true, "tick": snapshot.tick, "uavs": snapshot.uavs.len()});
+        reports.push((own.to_string(), report));
     }
     let mut uavs = tagged(doc["uavs"].take(), own);
     for (name, answer) in answers {
-        let mut other = answered_json(&answer);
-        reports.push((name.clone(), region_report(&name, other.as_ref(), &answer)));
-        let Some(other) = other.as_mut() else { continue };
+        let Some(mut other) = answered_json(&answer) else {
+            reports.push((name.clone(), unanswered_report(&name, &answer)));
+            continue;
+        };
+        reports.push((name.clone(), answered_report(&name, &other)));
         uavs.extend(tagged(other["uavs"].take(), &name));
         if let (Some(mine), Some(theirs)) =
             (doc["reservations"].as_array_mut(), other["reservations"].as_array_mut())

@@ -228,7 +228,7 @@ impl Server {
         let first_frame = Frame::new(first.clone(), binary);
         let (snapshots_tx, snapshots) = watch::channel(first);
         let (metrics_tx, metrics) = watch::channel(Arc::new(LoopMetrics::default()));
-        let (road_tx, road) = watch::channel(Arc::new(RoadView::of(fleet.road(), 0)));
+        let (road_tx, road) = watch::channel(Arc::new(RoadView::of(fleet.road(), 0, engine::now_ms())));
         let (frames_tx, frames) = watch::channel(first_frame);
         let clock = Arc::new(LoopClock::default());
         let channels = LoopChannels {

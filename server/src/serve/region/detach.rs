@@ -12,6 +12,12 @@ use std::time::{Duration, Instant};
 /// A detach that takes longer than this is logged (the session closes within 0.5 s).
 const SLOW_DETACH: Duration = Duration::from_secs(1);
 
+/// Takes the newest state the link gives (its last command went out in the last tick: that is
+/// where the new owner takes it on).
+fn settle(uav: &mut fleet::Uav) {
+    uav.state = uav.link.state().filter(|s| s.is_finite()).unwrap_or(uav.state);
+}
+
 /// A UAV released to another region whose link is still closing.
 pub(crate) struct Detaching {
     uav: fleet::Uav,
@@ -26,9 +32,7 @@ impl Engine {
     /// closed (a simulated one), else detached and released by [`Engine::release_detached`].
     pub(crate) fn release(&mut self, handover: &mut Handover, mut uav: fleet::Uav, to: String, seq: u64) {
         let now = Instant::now();
-        // Its last command went out in the last tick: the link's state now is where the new owner
-        // takes it on.
-        uav.state = uav.link.state().filter(|s| s.is_finite()).unwrap_or(uav.state);
+        settle(&mut uav);
         if uav.link.detached() {
             handover.released(uav.id.clone(), to, seq, record(&uav), now);
             return;
@@ -62,9 +66,8 @@ impl Engine {
                 waiting.push(d);
                 continue;
             }
-            let uav = &mut d.uav;
-            uav.state = uav.link.state().filter(|s| s.is_finite()).unwrap_or(uav.state);
-            handover.released(uav.id.clone(), d.to, d.seq, record(uav), now);
+            settle(&mut d.uav);
+            handover.released(d.uav.id.clone(), d.to, d.seq, record(&d.uav), now);
         }
         self.detaching = waiting;
     }
