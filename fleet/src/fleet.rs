@@ -167,6 +167,15 @@ pub struct Uav {
     pub(crate) was_airborne: bool,
 }
 
+impl Uav {
+    /// It is known to be in the air (taken over from another server): until its link reports,
+    /// e.g. while it connects, it is avoided as lost (its reach disk), never taken for grounded.
+    pub fn mark_airborne(&mut self) {
+        self.was_airborne = true;
+        self.condition = Condition::of(self.phase, true, self.stale_ticks, false);
+    }
+}
+
 /// The fleet: road, UAVs, policies and the reusable filter and scratch buffers.
 pub struct Fleet {
     /// Configuration.
@@ -228,7 +237,8 @@ impl Fleet {
         self.pipeline.stages
     }
 
-    /// Adds a UAV at `state` flying policy `policy` towards `goal` (None: hover where it is).
+    /// Adds a UAV at `state` flying policy `policy` towards `goal` (None: hover where it is), and
+    /// returns it.
     pub fn add(
         &mut self,
         id: String,
@@ -236,7 +246,7 @@ impl Fleet {
         link: Box<dyn Link>,
         state: UavState,
         goal: Option<Vec2>,
-    ) {
+    ) -> &mut Uav {
         let mut nav = NavState::new(state.p);
         nav.set_goal(&self.road, goal, state.p);
         let phase = link.phase();
@@ -253,24 +263,8 @@ impl Fleet {
             condition: Condition::of(phase, phase.airborne(), 0, false),
             was_airborne: phase.airborne(),
         });
-    }
-
-    /// Adds a UAV known to be in the air (taken over from another server): until its link reports,
-    /// e.g. while it connects, it is avoided as lost (its reach disk), never taken for grounded.
-    pub fn add_airborne(
-        &mut self,
-        id: String,
-        policy: String,
-        link: Box<dyn Link>,
-        state: UavState,
-        goal: Option<Vec2>,
-    ) {
-        self.add(id, policy, link, state, goal);
-        // `add` has just pushed it.
-        if let Some(uav) = self.uavs.last_mut() {
-            uav.was_airborne = true;
-            uav.condition = Condition::of(uav.phase, true, 0, false);
-        }
+        let last = self.uavs.len() - 1; // just pushed
+        &mut self.uavs[last]
     }
 
     /// Runs one tick ([`TickPipeline`]) and returns the number of UAVs that have arrived.

@@ -94,7 +94,7 @@ fn a_uav_taken_over_in_the_air_is_avoided_as_lost_while_its_new_link_connects() 
     let a = UavState::at_rest(Vec2::new(10.0, 0.0));
     let b = UavState::at_rest(Vec2::new(20.0, 0.0));
     fleet.add("a".into(), "pd".into(), Box::new(SimLink::new(a, dt)), a, Some(Vec2::new(30.0, 0.0)));
-    fleet.add_airborne("b".into(), "pd".into(), Box::new(Connecting), b, None);
+    fleet.add("b".into(), "pd".into(), Box::new(Connecting), b, None).mark_airborne();
     assert_eq!(fleet.uavs()[1].condition, fleet::Condition::Lost, "lost from the start");
     let mut min_distance = f64::INFINITY;
     for _ in 0..400 {

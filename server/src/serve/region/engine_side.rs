@@ -74,11 +74,10 @@ impl Engine {
         let goal =
             uav.goal.map(|g| Vec2::new(g[0], g[1])).filter(|g| self.fleet.check_goal(*g, "goal").is_ok());
         let link = self.links.make(id, uav.link.as_deref(), state, self.fleet.config.params.dt);
+        let added = self.fleet.add(id.to_string(), policy, link, state, goal);
         if uav.airborne {
             // A Crazyflie's new link connects first: meanwhile it is avoided as lost.
-            self.fleet.add_airborne(id.to_string(), policy, link, state, goal);
-        } else {
-            self.fleet.add(id.to_string(), policy, link, state, goal);
+            added.mark_airborne();
         }
         log.open(id, wall_now(), came);
         true
