@@ -1,11 +1,12 @@
 //! The newest state message of every other region, kept as received for the dashboard: the binary
 //! stream (`/ws?format=bin`) passes each one on to its clients as a kind 4 frame (the regions'
 //! own format, README "Regions over Zenoh"), so a dashboard connected to any region draws the whole
-//! fleet. Nothing here is decoded or used by the fleet loop.
+//! fleet. Nothing here is decoded or used by the fleet loop, and a message is copied out of Zenoh's
+//! buffers only when a stream client is sent it (once, whatever the number of clients).
 
 use axum::body::Bytes;
 use std::collections::HashMap;
-use std::sync::{Mutex, MutexGuard, PoisonError};
+use std::sync::{Mutex, MutexGuard, OnceLock, PoisonError};
 use std::time::{Duration, Instant};
 
 /// A region's message older than this is no longer sent (the region stopped publishing).
@@ -16,7 +17,9 @@ pub const SHOWN_FOR: Duration = Duration::from_secs(2);
 struct Latest {
     seq: u64,
     at: Instant,
-    payload: Bytes,
+    payload: zenoh::bytes::ZBytes,
+    /// `payload` in one piece, made for the first client sent it.
+    contiguous: OnceLock<Bytes>,
 }
 
 /// The newest message per other region.
@@ -32,10 +35,10 @@ impl Elsewhere {
     }
 
     /// Keeps `payload` as region `region`'s newest message (received at `at`).
-    pub fn put(&self, region: &str, payload: Bytes, at: Instant) {
+    pub fn put(&self, region: &str, payload: zenoh::bytes::ZBytes, at: Instant) {
         let mut regions = self.lock();
         let seq = regions.get(region).map_or(1, |l| l.seq + 1);
-        regions.insert(region.to_string(), Latest { seq, at, payload });
+        regions.insert(region.to_string(), Latest { seq, at, payload, contiguous: OnceLock::new() });
     }
 
     /// The messages a client has not `seen` (region → the number it has), no older than
@@ -47,7 +50,9 @@ impl Elsewhere {
             let fresh = now.saturating_duration_since(latest.at) < SHOWN_FOR;
             if fresh && seen.get(name).is_none_or(|s| *s < latest.seq) {
                 seen.insert(name.clone(), latest.seq);
-                out.push(latest.payload.clone());
+                let bytes =
+                    latest.contiguous.get_or_init(|| Bytes::from(latest.payload.to_bytes().into_owned()));
+                out.push(bytes.clone());
             }
         }
         out
@@ -68,14 +73,14 @@ mod tests {
     fn each_message_is_sent_once_per_client_and_not_when_stale() {
         let elsewhere = Elsewhere::default();
         let t0 = Instant::now();
-        elsewhere.put("east", Bytes::from_static(b"e1"), t0);
-        elsewhere.put("north", Bytes::from_static(b"n1"), t0);
+        elsewhere.put("east", b"e1".to_vec().into(), t0);
+        elsewhere.put("north", b"n1".to_vec().into(), t0);
         let mut seen = HashMap::new();
         let mut first = elsewhere.unseen(&mut seen, t0);
         first.sort();
         assert_eq!(first, [Bytes::from_static(b"e1"), Bytes::from_static(b"n1")]);
         assert!(elsewhere.unseen(&mut seen, t0).is_empty(), "nothing new");
-        elsewhere.put("east", Bytes::from_static(b"e2"), t0 + Duration::from_secs(1));
+        elsewhere.put("east", b"e2".to_vec().into(), t0 + Duration::from_secs(1));
         let later = t0 + Duration::from_millis(2500);
         // The new east message is 1.5 s old and sent; north's is 2.5 s old and not.
         assert_eq!(elsewhere.unseen(&mut HashMap::new(), later), [Bytes::from_static(b"e2")]);

@@ -262,11 +262,12 @@ pub async fn start(
             let name = elsewhere::region_of_key(&prefix, sample.key_expr().as_str());
             let payload = sample.payload();
             let plain = payload.len() <= MAX_PAYLOAD_BYTES && payload.len() >= wire::HEADER_BYTES;
-            if let Some(name) = name.filter(|n| *n != own && plain) {
-                let bytes = axum::body::Bytes::from(payload.to_bytes().into_owned());
-                if bytes[..2] == [wire::WIRE_VERSION, wire::KIND_REGION_STATES] {
-                    elsewhere.put(name, bytes, Instant::now());
-                }
+            let mut head = [0u8; 2];
+            let states = std::io::Read::read_exact(&mut payload.reader(), &mut head).is_ok()
+                && head == [wire::WIRE_VERSION, wire::KIND_REGION_STATES];
+            if let Some(name) = name.filter(|n| *n != own && plain && states) {
+                // Kept as Zenoh's buffers (a reference, no copy) until a stream client needs it.
+                elsewhere.put(name, payload.clone(), Instant::now());
             }
         })
         .await
