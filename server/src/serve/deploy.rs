@@ -105,9 +105,9 @@ fn check_same_regions(old: &Road, new: &Road) -> Result<(), ApiError> {
 }
 
 /// The scenario of `body`, validated, with only the UAVs that start in region `own`.
-fn scenario_for(app: &AppState, body: &str, own: &str) -> Result<ValidScenario, ApiError> {
+fn scenario_for(rules: &links::LinkRules, body: &str, own: &str) -> Result<ValidScenario, ApiError> {
     let scenario = super::error::parse::<Scenario>(body.as_bytes())?;
-    let mut valid = scenario.validate_with(&app.link_rules).map_err(|e| match e {
+    let mut valid = scenario.validate_with(rules).map_err(|e| match e {
         fleet::ScenarioError::Invalid { field, reason } => ApiError::invalid(field, reason),
         other => ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", other.to_string()),
     })?;
@@ -128,7 +128,7 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiErr
     let current = app.road.borrow().layout.clone();
     let (kind, body) = (step.kind, step.body.clone());
     let own_name = own.to_string();
-    let rules_app = app.clone();
+    let rules = app.link_rules.clone();
     // Validated on the blocking pool, one large input at a time, as over REST.
     let (road, scenario) = app
         .validate(move || {
@@ -137,7 +137,7 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiErr
             let old = Road::new(current).map_err(|e| ApiError::invalid("road", e.message))?;
             check_same_regions(&old, &road)?;
             let scenario =
-                (kind == Kind::Scenario).then(|| scenario_for(&rules_app, &body, &own_name)).transpose()?;
+                (kind == Kind::Scenario).then(|| scenario_for(&rules, &body, &own_name)).transpose()?;
             Ok((road, scenario))
         })
         .await?;
