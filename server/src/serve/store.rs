@@ -1,8 +1,12 @@
 //! The data directory's database, `DIR/airroads.db`: SQLite in WAL mode with `synchronous=FULL`, so
 //! a commit returns only once its write-ahead log is on disk. It holds the fleet's durable state
 //! (parameters, road, hold, and per UAV its policy, goal, link and last position) and the audit
-//! log. `--ephemeral` uses the same code on an in-memory database. Only the state writer
+//! log ([`audit_log`]). `--ephemeral` uses the same code on an in-memory database. Only the state writer
 //! ([`super::durable`]) touches it while the server runs.
+
+mod audit_log;
+
+pub use audit_log::{AUDIT_RETENTION, AuditEntry, AuditRecord, REFUSED_AUDIT_RETENTION, now_ms, rfc3339_ms};
 
 use super::persist::{self, SavedState, SavedUav};
 use roads::RoadLayout;
@@ -17,9 +21,6 @@ pub const DB_FILE: &str = "airroads.db";
 /// Format tag of the database (`meta.format`).
 pub const DB_FORMAT: &str = "airroads-db/1";
 
-/// Audit entries kept; older ones are deleted as new ones arrive.
-pub const AUDIT_RETENTION: i64 = 100_000;
-
 const SCHEMA: &str = "
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL) STRICT;
 CREATE TABLE IF NOT EXISTS uavs (
@@ -29,6 +30,8 @@ CREATE TABLE IF NOT EXISTS audit (
     seq INTEGER PRIMARY KEY AUTOINCREMENT, time_ms INTEGER NOT NULL, method TEXT NOT NULL,
     route TEXT NOT NULL, remote TEXT NOT NULL, status INTEGER NOT NULL, outcome TEXT NOT NULL,
     detail TEXT NOT NULL) STRICT;
+CREATE INDEX IF NOT EXISTS audit_applied ON audit(seq) WHERE outcome = 'applied';
+CREATE INDEX IF NOT EXISTS audit_refused ON audit(seq) WHERE outcome <> 'applied';
 ";
 
 /// Why the database could not be opened, read or written.
@@ -48,46 +51,6 @@ pub enum StoreError {
     /// The stored state does not parse or validate.
     #[error("stored state: {0}")]
     Corrupt(String),
-}
-
-/// One entry of the audit log.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct AuditEntry {
-    /// Increasing sequence number (the cursor of `GET /api/audit`).
-    pub seq: i64,
-    /// When the request arrived (UTC, RFC 3339 with milliseconds).
-    pub time: String,
-    /// HTTP method.
-    pub method: String,
-    /// Path and query (at most 512 bytes).
-    pub route: String,
-    /// The client's address `ip:port`.
-    pub remote: String,
-    /// The answer's HTTP status.
-    pub status: u16,
-    /// `applied`, or the error code of the answer (`unauthorized`, `invalid_value`, ...).
-    pub outcome: String,
-    /// What changed, or the error message (at most 512 bytes).
-    pub detail: String,
-}
-
-/// An audit entry to write (its sequence number is assigned by the database).
-#[derive(Debug, Clone, PartialEq)]
-pub struct AuditRecord {
-    /// Milliseconds since the Unix epoch.
-    pub time_ms: i64,
-    /// HTTP method.
-    pub method: String,
-    /// Path and query.
-    pub route: String,
-    /// The client's address.
-    pub remote: String,
-    /// HTTP status.
-    pub status: u16,
-    /// `applied` or an error code.
-    pub outcome: String,
-    /// What changed, or why not.
-    pub detail: String,
 }
 
 /// One change to the stored state.
@@ -115,14 +78,6 @@ pub struct Store {
     /// Where it lives (None: in memory).
     pub path: Option<PathBuf>,
     audit_since_trim: usize,
-}
-
-fn clip(text: &str, max: usize) -> &str {
-    let mut end = text.len().min(max);
-    while !text.is_char_boundary(end) {
-        end -= 1;
-    }
-    &text[..end]
 }
 
 impl Store {
@@ -223,10 +178,7 @@ impl Store {
             apply(&tx, write)?;
         }
         if audited > 0 && self.audit_since_trim + audited >= 1000 {
-            tx.execute(
-                "DELETE FROM audit WHERE seq <= (SELECT MAX(seq) FROM audit) - ?1",
-                [AUDIT_RETENTION],
-            )?;
+            audit_log::trim(&tx, AUDIT_RETENTION, REFUSED_AUDIT_RETENTION)?;
         }
         tx.commit()?;
         self.audit_since_trim =
@@ -238,41 +190,6 @@ impl Store {
     /// frees its space when the disk filled up (errors are ignored: the next commit reports them).
     pub fn compact_log(&self) {
         let _ = self.conn.query_row("PRAGMA wal_checkpoint(TRUNCATE)", [], |_| Ok(()));
-    }
-
-    /// Audit entries: with `after`, the oldest `limit` entries newer than it (oldest first);
-    /// otherwise the newest `limit` entries older than `before` (if given), newest first.
-    pub fn audit(
-        &self,
-        after: Option<i64>,
-        before: Option<i64>,
-        limit: usize,
-    ) -> Result<Vec<AuditEntry>, StoreError> {
-        let limit = i64::try_from(limit).unwrap_or(i64::MAX);
-        let columns = "seq, time_ms, method, route, remote, status, outcome, detail";
-        let (sql, bound) = match after {
-            Some(after) => {
-                (format!("SELECT {columns} FROM audit WHERE seq > ?1 ORDER BY seq ASC LIMIT ?2"), after)
-            }
-            None => (
-                format!("SELECT {columns} FROM audit WHERE seq < ?1 ORDER BY seq DESC LIMIT ?2"),
-                before.unwrap_or(i64::MAX),
-            ),
-        };
-        let mut statement = self.conn.prepare_cached(&sql)?;
-        let rows = statement.query_map(params![bound, limit], |r| {
-            Ok(AuditEntry {
-                seq: r.get(0)?,
-                time: rfc3339_ms(r.get(1)?),
-                method: r.get(2)?,
-                route: r.get(3)?,
-                remote: r.get(4)?,
-                status: r.get(5)?,
-                outcome: r.get(6)?,
-                detail: r.get(7)?,
-            })
-        })?;
-        Ok(rows.collect::<Result<Vec<_>, _>>()?)
     }
 }
 
@@ -336,46 +253,9 @@ fn apply(tx: &rusqlite::Transaction<'_>, write: &Write) -> rusqlite::Result<()> 
                 update.execute(params![id, p[0], p[1]])?;
             }
         }
-        Write::Audit(a) => {
-            tx.prepare_cached(
-                "INSERT INTO audit(time_ms, method, route, remote, status, outcome, detail)
-                 VALUES(?1, ?2, ?3, ?4, ?5, ?6, ?7)",
-            )?
-            .execute(params![
-                a.time_ms,
-                clip(&a.method, 16),
-                clip(&a.route, 512),
-                clip(&a.remote, 64),
-                a.status,
-                clip(&a.outcome, 64),
-                clip(&a.detail, 512)
-            ])?;
-        }
+        Write::Audit(a) => audit_log::insert(tx, a)?,
     }
     Ok(())
-}
-
-/// `time_ms` (ms since the Unix epoch, UTC) as RFC 3339 with milliseconds.
-pub fn rfc3339_ms(time_ms: i64) -> String {
-    let (days, ms) = (time_ms.div_euclid(86_400_000), time_ms.rem_euclid(86_400_000));
-    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
-    let z = days + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let day = doy - (153 * mp + 2) / 5 + 1;
-    let month = if mp < 10 { mp + 3 } else { mp - 9 };
-    let year = yoe + era * 400 + i64::from(month <= 2);
-    let (h, m, s, milli) = (ms / 3_600_000, ms / 60_000 % 60, ms / 1000 % 60, ms % 1000);
-    format!("{year:04}-{month:02}-{day:02}T{h:02}:{m:02}:{s:02}.{milli:03}Z")
-}
-
-/// Milliseconds since the Unix epoch now.
-pub fn now_ms() -> i64 {
-    let since = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).unwrap_or_default();
-    i64::try_from(since.as_millis()).unwrap_or(i64::MAX)
 }
 
 #[cfg(test)]
@@ -465,39 +345,6 @@ mod tests {
         assert!(!dir.join("state.json").exists() && !dir.join("state.json.tmp").exists());
         assert!(dir.join("state.json.imported").exists());
         std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    #[test]
-    fn audit_pages_both_ways() {
-        let mut store = Store::in_memory().unwrap();
-        let record = |i: i64| {
-            Write::Audit(AuditRecord {
-                time_ms: 1_700_000_000_000 + i,
-                method: "POST".into(),
-                route: format!("/api/x/{i}"),
-                remote: "127.0.0.1:1".into(),
-                status: 200,
-                outcome: "applied".into(),
-                detail: "x".repeat(2000),
-            })
-        };
-        let writes: Vec<Write> = (0..10).map(record).collect();
-        store.commit(&writes).unwrap();
-        let newest = store.audit(None, None, 3).unwrap();
-        assert_eq!(newest.iter().map(|e| e.seq).collect::<Vec<_>>(), vec![10, 9, 8]);
-        assert_eq!(newest[0].detail.len(), 512);
-        let older = store.audit(None, Some(8), 2).unwrap();
-        assert_eq!(older.iter().map(|e| e.seq).collect::<Vec<_>>(), vec![7, 6]);
-        let tail = store.audit(Some(8), None, 10).unwrap();
-        assert_eq!(tail.iter().map(|e| e.seq).collect::<Vec<_>>(), vec![9, 10]);
-        assert_eq!(newest[2].time, "2023-11-14T22:13:20.007Z");
-    }
-
-    #[test]
-    fn rfc3339_of_known_instants() {
-        assert_eq!(rfc3339_ms(0), "1970-01-01T00:00:00.000Z");
-        assert_eq!(rfc3339_ms(951_782_400_123), "2000-02-29T00:00:00.123Z");
-        assert_eq!(rfc3339_ms(1_798_761_599_999), "2026-12-31T23:59:59.999Z");
     }
 
     #[test]
