@@ -1,6 +1,8 @@
 # airroads server image: `docker build -t airroads .` then
-#   docker run --rm -p 8080:8080 -e AIRROADS_TOKEN=change-me -v airroads-data:/var/lib/airroads airroads
-# The server listens on 0.0.0.0 inside the container, which it only does with a token.
+#   docker run --rm -p 8080:8080 -e AIRROADS_TOKEN="$(head -c 24 /dev/urandom | base64)" \
+#       -v airroads-data:/var/lib/airroads airroads
+# The server listens on 0.0.0.0 inside the container, which it only does with a token (16 or more
+# characters). Any host port works (`-p 127.0.0.1:18180:8080`): the Host check ignores the port.
 
 # Build stage: the workspace's toolchain (rust-version 1.95) and its locked dependencies.
 FROM rust:1.95-slim-bookworm AS build

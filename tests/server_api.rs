@@ -275,14 +275,14 @@ async fn scenario_over_rest_is_validated() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_configured_token_guards_changes_but_not_reads() {
     let mut cfg = config(&small());
-    cfg.token = Some("s3cret".into());
+    cfg.token = Some("s3cret-t0ken-for-tests".into());
     let server = start(cfg).await;
     let body = json!({"id": "c", "position": [10.0, 0.0]}).to_string();
     let (status, reply) = server.call("POST", "/api/uavs", Some(&body)).await;
     assert_eq!((status, reply["error"]["code"].as_str()), (401, Some("unauthorized")));
     let wrong = [("Authorization", "Bearer nope")];
     assert_eq!(server.call_with("POST", "/api/fleet/pause", None, &wrong).await.0, 401);
-    let right = [("Authorization", "Bearer s3cret")];
+    let right = [("Authorization", "Bearer s3cret-t0ken-for-tests")];
     assert_eq!(server.call_with("POST", "/api/uavs", Some(&body), &right).await.0, 201);
     assert_eq!(server.call("GET", "/api/uavs", None).await.0, 200);
     assert_eq!(server.call("GET", "/api/state", None).await.0, 200);

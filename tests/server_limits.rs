@@ -58,6 +58,64 @@ async fn slow_and_idle_sockets_cannot_lock_the_operator_out() {
     server.stop().await;
 }
 
+/// One request (`Connection: close`) that must be answered `want` within `within`.
+async fn answered_within(
+    server: &Running,
+    method: &str,
+    path: &str,
+    headers: &[&str],
+    want: u16,
+    within: Duration,
+) {
+    let host = format!("Host: {}", server.addr);
+    let mut all = vec![host.as_str(), "Content-Type: application/json"];
+    all.extend_from_slice(headers);
+    let text = request_text(method, path, &all, "");
+    let w = tokio::time::timeout(within, exchange(server.addr, text.as_bytes()))
+        .await
+        .unwrap_or_else(|_| panic!("{method} {path} did not answer within {within:?}"));
+    assert_eq!(w.status, want, "{method} {path}: {}", w.body);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn slow_bodies_sent_with_the_token_cannot_lock_the_operator_out() {
+    const TOKEN: &str = "s3cret-t0ken-for-tests";
+    let server = start_with(&small(), |c| {
+        c.token = Some(TOKEN.into());
+        c.limits.max_connections = 16;
+    })
+    .await;
+    let auth = format!("Authorization: Bearer {TOKEN}");
+    // 40 uploads with the token that send their head and the first byte of a 100 KB body, then
+    // nothing more: more than every connection.
+    let mut held = Vec::new();
+    for _ in 0..40 {
+        let Ok(mut s) = TcpStream::connect(server.addr).await else { continue };
+        let head = format!(
+            "PUT /api/road HTTP/1.1\r\nHost: {}\r\n{auth}\r\nContent-Type: application/json\r\nContent-Length: 100000\r\n\r\n{{",
+            server.addr
+        );
+        let _ = s.write_all(head.as_bytes()).await;
+        held.push(s);
+    }
+    tokio::time::sleep(Duration::from_millis(100)).await;
+    // The operator's stop, five times in the next two seconds (before and after the bodies are
+    // a second old): answered every time, each within a second.
+    for _ in 0..5 {
+        answered_within(&server, "POST", "/api/fleet/stop", &[&auth], 200, Duration::from_secs(1)).await;
+        tokio::time::sleep(Duration::from_millis(400)).await;
+    }
+    // Bodies slower than a second give way to any new connection once every one is taken.
+    answered_within(&server, "GET", "/api/state", &[], 200, Duration::from_secs(1)).await;
+    let metrics = server.get("/api/metrics").await;
+    let connections = &metrics["connections"];
+    assert!(connections["open"].as_u64().unwrap() <= 16, "{connections}");
+    assert!(connections["evicted_slow_bodies"].as_u64().unwrap() >= 1, "{connections}");
+    assert!(connections["reserve_accepted"].as_u64().unwrap() >= 1, "{connections}");
+    drop(held);
+    server.stop().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_request_head_that_never_ends_is_closed_after_the_header_timeout() {
     let server = start_with(&small(), |c| c.limits.header_timeout = Duration::from_secs(1)).await;

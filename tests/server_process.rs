@@ -332,8 +332,23 @@ fn flags_that_would_weaken_the_server_are_refused_with_the_flag_named() {
         if let Some(token) = env {
             command.env("AIRROADS_TOKEN", token);
         }
-        let out = command.output().unwrap();
-        (out.status.code(), String::from_utf8_lossy(&out.stderr).into_owned())
+        // A server that starts after all is stopped after 10 s (and fails the test, without a code).
+        let mut child = command.stdout(Stdio::null()).stderr(Stdio::piped()).spawn().unwrap();
+        let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
+        let code = loop {
+            if let Some(status) = child.try_wait().unwrap() {
+                break status.code();
+            }
+            if std::time::Instant::now() > deadline {
+                let _ = child.kill();
+                let _ = child.wait();
+                break None;
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        };
+        let mut stderr = String::new();
+        let _ = std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut stderr);
+        (code, stderr)
     };
     // A token that cannot travel in a header unchanged would refuse every change later.
     for token in [" s3cret-with-space", "s3cret ", "sécret-token-1234", "tab\there"] {
@@ -344,6 +359,15 @@ fn flags_that_would_weaken_the_server_are_refused_with_the_flag_named() {
     let (code, stderr) = run(&[], Some("bad token"));
     assert_eq!(code, Some(2), "{stderr}");
     assert!(stderr.contains("AIRROADS_TOKEN"), "{stderr}");
+    // A token short enough to guess is refused with the minimum named.
+    for token in ["s3cret", "change-me", "fifteen-chars-x"] {
+        let (code, stderr) = run(&["--token", token], None);
+        assert_eq!(code, Some(2), "--token {token:?}: {stderr}");
+        assert!(stderr.contains("--token") && stderr.contains("at least 16"), "{stderr}");
+        let (code, stderr) = run(&[], Some(token));
+        assert_eq!(code, Some(2), "AIRROADS_TOKEN={token:?}: {stderr}");
+        assert!(stderr.contains("AIRROADS_TOKEN") && stderr.contains("at least 16"), "{stderr}");
+    }
     // Motion capture on a public address needs the senders named.
     let (code, stderr) = run(&["--mocap", "0.0.0.0:0"], None);
     assert_eq!(code, Some(2), "{stderr}");
@@ -355,6 +379,9 @@ fn flags_that_would_weaken_the_server_are_refused_with_the_flag_named() {
     let (code, stderr) = run(&["--allow-origin", "evil.example"], None);
     assert_eq!(code, Some(2), "{stderr}");
     assert!(stderr.contains("--allow-origin"), "{stderr}");
+    // Sixteen characters are enough: it starts.
+    let (child, _addr) = serve(&data, &["--token", "sixteen-chars-ok"]);
+    drop(child);
     std::fs::remove_dir_all(&data).unwrap();
 }
 

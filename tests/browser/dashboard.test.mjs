@@ -405,17 +405,17 @@ test("an invalid road is refused and the offending segment is shown", async () =
 });
 
 test("the access token is asked for once and sent with changes", async () => {
-  await withDashboard("token", ["--token", "s3cret"], async (page, { url }) => {
+  await withDashboard("token", ["--token", "s3cret-t0ken-for-tests"], async (page, { url }) => {
     await page.click("#pause");
     await page.locator("#token-dialog").waitFor({ state: "visible" });
-    await page.fill("#token-input", "s3cret");
+    await page.fill("#token-input", "s3cret-t0ken-for-tests");
     await page.click("#token-dialog button[value=ok]");
     await until("the fleet to hold", async () => (await api(url, "GET", "/api/state")).paused);
     await until("the button to offer Resume", async () => (await page.textContent("#pause")) === "Resume");
     await page.click("#pause");
     await until("the fleet to fly again", async () => !(await api(url, "GET", "/api/state")).paused);
     assert.equal(await page.locator("#token-dialog").isVisible(), false, "asked only once");
-    assert.equal(await page.evaluate(() => sessionStorage.getItem("airroads.token")), "s3cret");
+    assert.equal(await page.evaluate(() => sessionStorage.getItem("airroads.token")), "s3cret-t0ken-for-tests");
   });
 });
 

@@ -436,19 +436,8 @@ async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
         "clients_refused": s.clients_refused.load(Relaxed),
         "max_clients": app.max_stream_clients,
     });
-    let c = &app.connections;
-    doc["connections"] = json!({
-        "open": c.open.load(Relaxed),
-        "limit": c.limit.load(Relaxed),
-        "accepted": c.accepted.load(Relaxed),
-        "evicted": c.evicted.load(Relaxed),
-        "refused": c.refused.load(Relaxed),
-        "accept_errors": c.accept_errors.load(Relaxed),
-    });
-    doc["auth"] = json!({
-        "refused": app.auth_failures.refused.load(Relaxed),
-        "rate_limited": app.auth_failures.rate_limited.load(Relaxed),
-    });
+    doc["connections"] = app.connections.report();
+    doc["auth"] = app.auth_failures.report();
     doc["storage"] = serde_json::to_value(app.storage.report()).unwrap_or(Value::Null);
     doc["mocap"] = app.mocap.report();
     doc["rerun"] = app.rerun.report();

@@ -1,12 +1,15 @@
 //! What every request passes before a handler sees it (README, "Security model"):
 //! - a request line and head of bounded size (414/431 with a JSON body);
-//! - a `Host` the server listens on (an IP literal of its address, `localhost` on loopback, or
-//!   `--allow-host`), which defeats DNS rebinding;
+//! - a `Host` that names the server, whatever its port (an IP literal of its address, any IP
+//!   literal when it listens on all addresses, `localhost` on loopback, or `--allow-host`), which
+//!   defeats DNS rebinding;
 //! - for every change (any method but GET, HEAD, OPTIONS) and for `/ws`: no `Origin` but the server's
 //!   own or `--allow-origin`, and no `Sec-Fetch-Site: cross-site`, so no page on another origin can
 //!   act on the server; every change must also say `Content-Type: application/json` (a browser sends
 //!   that cross-origin only after a CORS preflight, which this server never grants);
-//! - a body with a declared length within the limit and within the budget of bodies in flight.
+//! - a body with a declared length within the limit and within the budget of bodies in flight;
+//! - on a reserve connection (taken when every ordinary one is busy, see [`super::listener`]), only
+//!   the emergency stop and land routes (`503 busy` otherwise).
 //!
 //! The outermost layer ([`finish`]) turns a panic into a 500, gives every error a JSON body, and
 //! adds the security headers (no framing, a strict content policy).
@@ -62,7 +65,9 @@ impl AccessRules {
         Self { listen, hosts: lower(hosts), origins: lower(origins) }
     }
 
-    /// True when `host` (a `Host` header value) names this server.
+    /// True when `host` (a `Host` header value) names this server. DNS rebinding is about the
+    /// name, so the port is not compared (a container or a port forward publishes the server on
+    /// another port than it listens on), except with an `--allow-host NAME:PORT` that gives one.
     pub fn host_allowed(&self, host: &str) -> bool {
         let host = host.trim().to_ascii_lowercase();
         let Some((name, port)) = split_host(&host) else {
@@ -75,9 +80,6 @@ impl AccessRules {
             .any(|(n, p)| n == name && (p.is_none() || p == port));
         if listed {
             return true;
-        }
-        if port.unwrap_or(80) != self.listen.port() {
-            return false;
         }
         let ip = self.listen.ip();
         if name == "localhost" {
@@ -139,6 +141,14 @@ pub async fn check(State(app): State<AppState>, request: Request, next: Next) ->
             format!("at most {MAX_HEADER_LINES} header lines and {MAX_HEADER_BYTES} bytes of headers");
         return ApiError::new(StatusCode::REQUEST_HEADER_FIELDS_TOO_LARGE, "headers_too_large", message)
             .into_response();
+    }
+    if request.extensions().get::<super::listener::Reserved>().is_some()
+        && !super::auth::safety_route(request.uri().path())
+    {
+        return ApiError::busy(
+            "every connection is taken; this one serves only the emergency stop and land routes",
+        )
+        .into_response();
     }
     let Some(rules) = app.access.get() else {
         return ApiError::new(StatusCode::SERVICE_UNAVAILABLE, "starting", "the server is starting")
@@ -280,32 +290,50 @@ mod tests {
     #[test]
     fn hosts_the_server_listens_on_and_nothing_else() {
         let r = rules("127.0.0.1:8080");
-        for ok in
-            ["127.0.0.1:8080", "localhost:8080", "LOCALHOST:8080", "ops.example.com", "ops.example.com:443"]
-        {
+        for ok in [
+            "127.0.0.1:8080",
+            "localhost:8080",
+            "LOCALHOST:8080",
+            "ops.example.com",
+            "ops.example.com:443",
+            // Published on another port (a container's `-p 127.0.0.1:18180:8080`, a port forward).
+            "127.0.0.1:18180",
+            "localhost:18180",
+            "127.0.0.1",
+            "localhost",
+        ] {
             assert!(r.host_allowed(ok), "{ok}");
         }
         for bad in [
             "evil.example:8080",
-            "127.0.0.1:8081",
-            "127.0.0.1",
+            "evil.example",
+            "rebind.evil.example:18180",
             "10.0.0.1:8080",
+            "127.0.0.2:8080",
             "",
             "localhost:80x",
             "a b:8080",
         ] {
             assert!(!r.host_allowed(bad), "{bad}");
         }
-        let any = rules("0.0.0.0:80");
-        assert!(
-            any.host_allowed("192.168.1.20")
-                && any.host_allowed("[fe80::1]:80")
-                && any.host_allowed("localhost")
-        );
-        assert!(!any.host_allowed("rebind.evil.example"));
+        // An allowed name with a port given is held to it.
+        let with_port =
+            AccessRules::new("127.0.0.1:8080".parse().unwrap(), &["ops.example.com:8443".into()], &[]);
+        assert!(with_port.host_allowed("ops.example.com:8443"));
+        assert!(!with_port.host_allowed("ops.example.com:9443"));
+        // In a container: listening on every address, published on another port.
+        let any = rules("0.0.0.0:8080");
+        for ok in ["192.168.1.20", "[fe80::1]:80", "localhost", "127.0.0.1:18180", "localhost:18180"] {
+            assert!(any.host_allowed(ok), "{ok}");
+        }
+        assert!(!any.host_allowed("rebind.evil.example") && !any.host_allowed("rebind.evil.example:8080"));
         let v6 = rules("[::1]:9000");
         assert!(v6.host_allowed("[::1]:9000") && v6.host_allowed("localhost:9000"));
+        assert!(v6.host_allowed("[::1]:19000") && v6.host_allowed("localhost:19000"));
         assert!(!v6.host_allowed("127.0.0.1:9000"));
+        // Not on loopback: `localhost` is not this server's name.
+        let lan = rules("192.168.1.5:8080");
+        assert!(lan.host_allowed("192.168.1.5:18080") && !lan.host_allowed("localhost:8080"));
     }
 
     #[test]

@@ -1,23 +1,49 @@
 //! The HTTP side's own accept loop (in place of `axum::serve`), so every resource a client can hold
 //! is bounded: a request head (and the idle time of a kept-alive connection) must arrive within
 //! [`Limits::header_timeout`]; request heads are capped in size; at most
-//! [`Limits::max_connections`] HTTP connections are open, and when they are all taken a new one
-//! closes the oldest connection that is idle or still sending its head (a slowloris socket), so an
-//! operator's emergency stop always gets in. Upgraded WebSocket connections leave this table and are
-//! counted and capped by [`super::ws`].
+//! [`Limits::max_connections`] HTTP connections are open. Upgraded WebSocket connections leave this
+//! table and are counted and capped by [`super::ws`].
+//!
+//! When every connection is taken, a new one makes room, so the operator's emergency stop always
+//! gets in, even past clients that hold the token and send their bodies slowly:
+//! 1. it closes the oldest connection that is idle or still sending its head (a slowloris socket);
+//! 2. else the oldest one whose request has been receiving its body for more than [`SLOW_BODY`]
+//!    (the body is wrapped to know when it ended: `table::Watched`); such an upload is cut only
+//!    when the table is full, and its client sees the connection close;
+//! 3. else (every connection serves a request that is not slow, e.g. slow bodies younger than
+//!    [`SLOW_BODY`]) it goes to a reserve of [`RESERVE_CONNECTIONS`] beyond the cap, which serves
+//!    one request each, only on the stop and land routes (others get `503 busy`, see
+//!    [`super::guard`]), with a head timeout of [`RESERVE_HEAD_TIMEOUT`]; a full reserve makes room
+//!    the same way (1, 2) among its own, else the new connection is closed.
+
+mod table;
 
 use axum::Router;
 use axum::extract::ConnectInfo;
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioIo, TokioTimer};
-use std::collections::BTreeMap;
+use serde_json::{Value, json};
 use std::net::SocketAddr;
+use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
-use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
+use table::{Conn, Evicted, Table};
 use tokio::net::TcpListener;
-use tokio::sync::{Notify, watch};
+use tokio::sync::watch;
 use tower::ServiceExt as _;
+
+/// A request receiving its body for longer than this may have its connection closed when every
+/// connection is taken.
+pub const SLOW_BODY: Duration = Duration::from_secs(1);
+/// Connections beyond the cap that serve only the emergency stop and land routes (one request
+/// each) when every ordinary one is busy.
+pub const RESERVE_CONNECTIONS: usize = 8;
+/// A reserve connection's request head must arrive within this.
+pub const RESERVE_HEAD_TIMEOUT: Duration = Duration::from_secs(1);
+
+/// Marks a request that came on a reserve connection: only the stop and land routes serve it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Reserved;
 
 /// Bounds on what clients can hold.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -71,44 +97,72 @@ pub struct ConnectionCounters {
     pub accept_errors: AtomicU64,
     /// The cap on open connections.
     pub limit: AtomicUsize,
+    /// Of the evicted, those closed while their request had been receiving its body for longer
+    /// than [`SLOW_BODY`].
+    pub evicted_slow_bodies: AtomicU64,
+    /// Open reserve connections (beyond `limit`, for the stop and land routes only).
+    pub reserve_open: AtomicUsize,
+    /// Connections admitted to the reserve since the start.
+    pub reserve_accepted: AtomicU64,
 }
 
-struct Entry {
-    busy: Arc<AtomicUsize>,
-    evict: Arc<Notify>,
-}
+impl ConnectionCounters {
+    /// The `connections` object of `/api/metrics`.
+    pub fn report(&self) -> Value {
+        json!({
+            "open": self.open.load(Relaxed),
+            "limit": self.limit.load(Relaxed),
+            "accepted": self.accepted.load(Relaxed),
+            "evicted": self.evicted.load(Relaxed),
+            "refused": self.refused.load(Relaxed),
+            "accept_errors": self.accept_errors.load(Relaxed),
+            "evicted_slow_bodies": self.evicted_slow_bodies.load(Relaxed),
+            "reserve_open": self.reserve_open.load(Relaxed),
+            "reserve_limit": RESERVE_CONNECTIONS,
+            "reserve_accepted": self.reserve_accepted.load(Relaxed),
+        })
+    }
 
-/// Open connections by age (the key is an increasing id).
-#[derive(Default)]
-struct Table(Mutex<BTreeMap<u64, Entry>>);
-
-impl Table {
-    /// Closes the oldest connection not serving a request (it leaves the table at once); false when
-    /// all are busy.
-    fn evict_one(&self) -> bool {
-        let mut table = self.0.lock().unwrap_or_else(PoisonError::into_inner);
-        let oldest_idle = table.iter().find(|(_, e)| e.busy.load(Relaxed) == 0).map(|(id, _)| *id);
-        match oldest_idle.and_then(|id| table.remove(&id)) {
-            Some(entry) => {
-                entry.evict.notify_one();
-                true
-            }
-            None => false,
+    /// Counts a connection closed to make room (`reserve`: one of the reserve's).
+    fn count_eviction(&self, why: Evicted, reserve: bool) {
+        self.evicted.fetch_add(1, Relaxed);
+        if why == Evicted::SlowBody {
+            self.evicted_slow_bodies.fetch_add(1, Relaxed);
+        }
+        // Counted closed now (it left the table), not when its task gets round to it: `open`
+        // never exceeds the cap.
+        if reserve {
+            self.reserve_open.fetch_sub(1, Relaxed);
+        } else {
+            self.open.fetch_sub(1, Relaxed);
         }
     }
-
-    fn len(&self) -> usize {
-        self.0.lock().unwrap_or_else(PoisonError::into_inner).len()
-    }
 }
 
-/// Counts a request in flight on its connection while alive.
-struct Busy(Arc<AtomicUsize>);
+/// Which table a new connection goes to.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Place {
+    Main,
+    Reserve,
+}
 
-impl Drop for Busy {
-    fn drop(&mut self) {
-        self.0.fetch_sub(1, Relaxed);
+/// Where a new connection goes (making room as the module documentation says); None: closed.
+fn make_room(main: &Table, reserve: &Table, limit: usize, counters: &ConnectionCounters) -> Option<Place> {
+    if main.len() < limit {
+        return Some(Place::Main);
     }
+    if let Some(why) = main.evict_one() {
+        counters.count_eviction(why, false);
+        return Some(Place::Main);
+    }
+    if reserve.len() < RESERVE_CONNECTIONS {
+        return Some(Place::Reserve);
+    }
+    if let Some(why) = reserve.evict_one() {
+        counters.count_eviction(why, true);
+        return Some(Place::Reserve);
+    }
+    None
 }
 
 /// Serves `router` on `listener` until `shutdown` turns true, then lets open requests finish (at
@@ -122,7 +176,8 @@ pub async fn run(
     drain: Duration,
 ) {
     counters.limit.store(limits.max_connections, Relaxed);
-    let table = Arc::new(Table::default());
+    let main = Arc::new(Table::new(SLOW_BODY));
+    let reserve = Arc::new(Table::new(SLOW_BODY));
     let mut builder = hyper::server::conn::http1::Builder::new();
     builder
         .timer(TokioTimer::new())
@@ -130,7 +185,10 @@ pub async fn run(
         .max_buf_size(limits.max_head_bytes.max(8192))
         .max_header_size(limits.max_head_bytes)
         .max_headers(limits.max_header_lines);
-    let builder = Arc::new(builder);
+    // The reserve: a short head timeout and one request per connection.
+    let mut reserved = builder.clone();
+    reserved.header_read_timeout(limits.header_timeout.min(RESERVE_HEAD_TIMEOUT)).keep_alive(false);
+    let (builder, reserved) = (Arc::new(builder), Arc::new(reserved));
     let mut next_id = 0u64;
     loop {
         let accepted = tokio::select! {
@@ -143,68 +201,76 @@ pub async fn run(
                 // Out of file descriptors: make room by closing an idle connection, then retry.
                 counters.accept_errors.fetch_add(1, Relaxed);
                 tracing::warn!("accept failed: {e}");
-                if table.evict_one() {
-                    counters.evicted.fetch_add(1, Relaxed);
-                    counters.open.fetch_sub(1, Relaxed);
+                if let Some(why) = main.evict_one() {
+                    counters.count_eviction(why, false);
                 }
                 tokio::time::sleep(Duration::from_millis(10)).await;
                 continue;
             }
         };
-        if table.len() >= limits.max_connections {
-            if table.evict_one() {
-                // Counted closed now (it left the table), not when its task gets round to it: `open`
-                // never exceeds the cap.
-                counters.evicted.fetch_add(1, Relaxed);
-                counters.open.fetch_sub(1, Relaxed);
-            } else {
-                counters.refused.fetch_add(1, Relaxed);
-                drop(stream);
-                continue;
-            }
-        }
+        let Some(place) = make_room(&main, &reserve, limits.max_connections, &counters) else {
+            counters.refused.fetch_add(1, Relaxed);
+            drop(stream);
+            continue;
+        };
         let _ = stream.set_nodelay(true);
         next_id += 1;
         let id = next_id;
-        let entry = Entry { busy: Arc::default(), evict: Arc::new(Notify::new()) };
-        let (busy, evict) = (entry.busy.clone(), entry.evict.clone());
-        table.0.lock().unwrap_or_else(PoisonError::into_inner).insert(id, entry);
+        let conn = Arc::new(Conn::default());
+        let (table, builder) = match place {
+            Place::Main => {
+                counters.open.fetch_add(1, Relaxed);
+                (main.clone(), builder.clone())
+            }
+            Place::Reserve => {
+                counters.reserve_open.fetch_add(1, Relaxed);
+                counters.reserve_accepted.fetch_add(1, Relaxed);
+                (reserve.clone(), reserved.clone())
+            }
+        };
+        table.insert(id, conn.clone());
         counters.accepted.fetch_add(1, Relaxed);
-        counters.open.fetch_add(1, Relaxed);
         let service = hyper::service::service_fn({
-            let router = router.clone();
-            move |mut request: hyper::Request<Incoming>| {
+            let (router, table, conn) = (router.clone(), table.clone(), conn.clone());
+            move |request: hyper::Request<Incoming>| {
+                let (parts, body) = request.into_parts();
+                let (busy, body) = table.begin(&conn, body);
+                let mut request = hyper::Request::from_parts(parts, axum::body::Body::new(body));
                 request.extensions_mut().insert(ConnectInfo(remote));
-                busy.fetch_add(1, Relaxed);
-                let guard = Busy(busy.clone());
-                let call = router.clone().oneshot(request.map(axum::body::Body::new));
+                if place == Place::Reserve {
+                    request.extensions_mut().insert(Reserved);
+                }
+                let call = router.clone().oneshot(request);
                 async move {
                     let response = call.await;
-                    drop(guard);
+                    drop(busy);
                     response
                 }
             }
         });
         let connection = builder.serve_connection(TokioIo::new(stream), service).with_upgrades();
-        let (table, counters, mut shutdown) = (table.clone(), counters.clone(), shutdown.clone());
+        let (counters, mut shutdown) = (counters.clone(), shutdown.clone());
         tokio::spawn(async move {
             tokio::pin!(connection);
             tokio::select! {
                 _ = connection.as_mut() => {}
-                () = evict.notified() => {}
+                () = conn.evict.notified() => {}
                 () = closing(&mut shutdown) => {
                     connection.as_mut().graceful_shutdown();
                     let _ = tokio::time::timeout(drain, connection).await;
                 }
             }
             // An evicted connection was already taken out of the table and the count.
-            if table.0.lock().unwrap_or_else(PoisonError::into_inner).remove(&id).is_some() {
-                counters.open.fetch_sub(1, Relaxed);
+            if table.remove(id) {
+                match place {
+                    Place::Main => counters.open.fetch_sub(1, Relaxed),
+                    Place::Reserve => counters.reserve_open.fetch_sub(1, Relaxed),
+                };
             }
         });
     }
     let deadline = tokio::time::Instant::now() + drain;
-    while table.len() > 0 && tokio::time::Instant::now() < deadline {
+    while main.len() + reserve.len() > 0 && tokio::time::Instant::now() < deadline {
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
 }
