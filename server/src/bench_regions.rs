@@ -27,7 +27,7 @@ struct Running {
 
 fn free_endpoint() -> anyhow::Result<String> {
     let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
-    Ok(format!("tcp/127.0.0.1:{port}"))
+    Ok(format!("tls/127.0.0.1:{port}"))
 }
 
 async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
@@ -49,9 +49,20 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let seconds = args.seconds.max(1.0);
     say!(
         "airroads bench regions: {n} UAVs on the trunk road ({segments} segments) over {count} regions, \
-         one process, Zenoh over loopback TCP, policy {}, {seconds} s measured after 3 s",
+         one process, Zenoh over loopback TLS (mutual, access control), policy {}, {seconds} s measured after 3 s",
         args.policy
     );
+    // The deployment's certificates, as `airroads certs` makes them.
+    let names: Vec<String> = (0..count).map(|k| format!("r{k}")).collect();
+    let certs = std::env::temp_dir().join(format!("airroads-bench-regions-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&certs);
+    let request = region::certs::Request {
+        regions: names.clone(),
+        roles: vec!["primary".into()],
+        hosts: vec![],
+        days: 1,
+    };
+    region::certs::issue(&certs, &request)?;
     let mut running = Vec::new();
     for k in 0..count {
         let name = format!("r{k}");
@@ -64,6 +75,12 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             connect: endpoints[..k].to_vec(),
             config_file: None,
             prefix: "bench".into(),
+            transport: region::secure::Transport::Tls(region::secure::TlsFiles {
+                ca: certs.join(region::certs::CA_CERT),
+                cert: region::certs::server_files(&certs, &name, "primary").0,
+                key: region::certs::server_files(&certs, &name, "primary").1,
+            }),
+            regions: names.clone(),
         };
         let session = region::open(&options).await?;
         let keys = region::tokens::RegionKeys::new(&options, &name);
@@ -90,7 +107,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     tokio::time::sleep(Duration::from_secs_f64(seconds)).await;
     let elapsed = started.elapsed().as_secs_f64();
     say!(
-        "{:>6} {:>6} {:>10} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8} {:>7}",
+        "{:>6} {:>6} {:>10} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8} {:>8} {:>7} {:>8}",
         "region",
         "uavs",
         "MB/s out",
@@ -101,7 +118,8 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         "handed",
         "tick p50",
         "tick p99",
-        "missed"
+        "missed",
+        "refused"
     );
     let mut total = 0.0;
     for (k, r) in running.iter().enumerate() {
@@ -114,7 +132,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         let ages = &report["foreign_age_ms"];
         let ms = |v: &serde_json::Value| v.as_u64().map_or("-".into(), |x| format!("{x} ms"));
         say!(
-            "{:>6} {:>6} {:>10.2} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8.1} {:>8.1} {:>7}",
+            "{:>6} {:>6} {:>10.2} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8.1} {:>8.1} {:>7} {:>8}",
             r.shared.name,
             uavs,
             rate,
@@ -126,12 +144,18 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             metrics.tick.p50_us / 1e3,
             metrics.tick.p99_us / 1e3,
             metrics.missed_ticks - missed_at_start[k],
+            report["refused"].as_u64().unwrap_or_default(),
         );
+        if report["refused"].as_u64().unwrap_or_default() > 0 {
+            say!("  {} refused its neighbours' messages: {}", r.shared.name, report["peer_refused"]);
+        }
     }
     say!("all regions: {total:.2} MB/s of state messages published ({elapsed:.1} s measured)");
     say!("age: of every foreign state each tick gave the fleet, on the receiver's clock (since the start)");
+    say!("refused: neighbours' state messages this region refused (undecodable or failing its checks)");
     for r in running {
         r.server.shutdown().await;
     }
+    let _ = std::fs::remove_dir_all(&certs);
     Ok(())
 }

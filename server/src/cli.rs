@@ -29,6 +29,9 @@ pub enum Command {
     Serve(ServeArgs),
     /// Ask a running server for `/healthz`; exit 0 when it answers 200 (for container health checks).
     Health(HealthArgs),
+    /// Make the region network's certificate authority and one certificate per region and role
+    /// (for `serve --region ... --zenoh-ca/--zenoh-cert/--zenoh-key`); exit 2 for invalid input.
+    Certs(CertsArgs),
     /// Fly the paper's reference trajectories with a tracking policy and the PD baselines; print
     /// tracking RMSE and inference time.
     Track(TrackArgs),
@@ -157,11 +160,11 @@ pub struct ServeArgs {
     /// when the owner is gone (README "Regions over Zenoh"). Needs --scenario (for the road).
     #[arg(long = "standby-for", value_name = "NAME", requires = "scenario", group = "regional")]
     pub standby_for: Option<String>,
-    /// Zenoh endpoint to listen on, e.g. `tcp/0.0.0.0:7447` (repeatable; with --region or
+    /// Zenoh endpoint to listen on, e.g. `tls/0.0.0.0:7447` (repeatable; with --region or
     /// --standby-for).
     #[arg(long = "zenoh-listen", value_name = "ENDPOINT", requires = "regional")]
     pub zenoh_listen: Vec<String>,
-    /// Zenoh endpoint to connect to, e.g. `tcp/10.0.0.2:7447` (repeatable; with --region or
+    /// Zenoh endpoint to connect to, e.g. `tls/10.0.0.2:7447` (repeatable; with --region or
     /// --standby-for).
     #[arg(long = "zenoh-connect", value_name = "ENDPOINT", requires = "regional")]
     pub zenoh_connect: Vec<String>,
@@ -172,9 +175,47 @@ pub struct ServeArgs {
     /// First chunks of the Zenoh keys: states go to `PREFIX/region/NAME/state`.
     #[arg(long = "zenoh-prefix", value_name = "PREFIX", default_value = "airroads")]
     pub zenoh_prefix: String,
+    /// The region network's certificate authority (`ca.pem` of `airroads certs`); with
+    /// --zenoh-cert and --zenoh-key the region network is TLS with mutual authentication.
+    #[arg(long = "zenoh-ca", value_name = "FILE", requires_all = ["zenoh_cert", "zenoh_key"])]
+    pub zenoh_ca: Option<PathBuf>,
+    /// This server's certificate, whose common name is its region (`NAME.ROLE.pem`).
+    #[arg(long = "zenoh-cert", value_name = "FILE", requires_all = ["zenoh_ca", "zenoh_key"])]
+    pub zenoh_cert: Option<PathBuf>,
+    /// This server's private key (`NAME.ROLE.key`).
+    #[arg(long = "zenoh-key", value_name = "FILE", requires_all = ["zenoh_ca", "zenoh_cert"])]
+    pub zenoh_key: Option<PathBuf>,
+    /// Join the region network over plain TCP without authentication: only on loopback endpoints,
+    /// and any process on this host can then command the region (logged as a warning).
+    #[arg(long = "zenoh-insecure", requires = "regional", conflicts_with_all = ["zenoh_ca", "zenoh_cert", "zenoh_key"])]
+    pub zenoh_insecure: bool,
     /// Flight options (`--policy` is the policy of UAVs added without one).
     #[command(flatten)]
     pub flight: FlightArgs,
+}
+
+/// `airroads certs`.
+#[derive(Debug, Args)]
+pub struct CertsArgs {
+    /// Directory of the certificates (created; an existing authority in it is reused and existing
+    /// certificates are kept).
+    #[arg(long, value_name = "DIR")]
+    pub out: PathBuf,
+    /// A region to certify (repeatable; the certificate's common name).
+    #[arg(long = "region", value_name = "NAME")]
+    pub regions: Vec<String>,
+    /// Take the regions from this scenario's or road's `regions` (besides any --region).
+    #[arg(long, value_name = "FILE.json")]
+    pub road: Option<PathBuf>,
+    /// The certificates per region, by role: `NAME.ROLE.pem` and `NAME.ROLE.key`.
+    #[arg(long, value_delimiter = ',', default_value = "primary,standby")]
+    pub roles: Vec<String>,
+    /// A host name or IP address the certificates also name (repeatable).
+    #[arg(long = "host", value_name = "NAME")]
+    pub hosts: Vec<String>,
+    /// How long each server certificate is valid (days, at most 3650).
+    #[arg(long, default_value_t = 825)]
+    pub days: u64,
 }
 
 /// `airroads health`.

@@ -18,6 +18,7 @@ mod bench_regions;
 mod bench_scale;
 mod bench_server;
 mod bench_solver;
+mod certs_cmd;
 mod cli;
 mod plot;
 mod run_cmd;
@@ -37,5 +38,6 @@ fn main() -> ExitCode {
         cli::Command::Track(args) => track::main(args),
         cli::Command::Serve(args) => serve_cmd::main(args),
         cli::Command::Health(args) => serve_cmd::health(&args.url),
+        cli::Command::Certs(args) => certs_cmd::main(&args),
     }
 }

@@ -82,9 +82,6 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
     if let Some(t) = &token {
         let source = if from_env { "AIRROADS_TOKEN" } else { "--token" };
         serve::auth::check_token(t).map_err(|reason| format!("{source}: {reason}"))?;
-        if t.len() < 16 {
-            tracing::warn!("{source} is {} characters; use at least 16 random ones", t.len());
-        }
     }
     if token.is_none() && !args.addr.ip().is_loopback() {
         return Err(format!(
@@ -108,6 +105,9 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
         }
         (None, None) => None,
     };
+    if region.is_some() {
+        transport(args)?;
+    }
     let policies = args.flight.policies(initial.params.delta)?;
     if args.cfsim > initial.uavs.len() {
         return Err(format!("--cfsim {}: the scenario has only {} UAVs", args.cfsim, initial.uavs.len()));
@@ -188,7 +188,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     // A region's ownership is settled before the loop starts: a server started while the region's
     // owner lives joins as its standby and flies nothing.
     let zenoh = match &config.region {
-        Some(shared) => Some(claim_region(args, shared).await?),
+        Some(shared) => Some(claim_region(args, shared, config.initial.road.layout()).await?),
         None => None,
     };
     if config.region.as_ref().is_some_and(|r| !r.failover.is_owner()) {
@@ -255,21 +255,50 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     served
 }
 
-fn zenoh_options(args: &ServeArgs) -> serve::region::ZenohOptions {
-    serve::region::ZenohOptions {
+/// How this server joins the region network: QUIC with its certificate, or `--zenoh-insecure`.
+fn transport(args: &ServeArgs) -> Result<serve::region::secure::Transport, String> {
+    use serve::region::secure::{TlsFiles, Transport};
+    let transport = match (&args.zenoh_ca, &args.zenoh_cert, &args.zenoh_key) {
+        (Some(ca), Some(cert), Some(key)) => {
+            Transport::Tls(TlsFiles { ca: ca.clone(), cert: cert.clone(), key: key.clone() })
+        }
+        _ if args.zenoh_insecure => Transport::InsecureLoopback,
+        _ => {
+            return Err("--region/--standby-for: the region network needs --zenoh-ca, --zenoh-cert and \
+                        --zenoh-key (make them with `airroads certs`), or --zenoh-insecure on loopback"
+                .into());
+        }
+    };
+    let endpoints = args.zenoh_listen.iter().chain(&args.zenoh_connect);
+    serve::region::secure::check_endpoints(&transport, endpoints)?;
+    Ok(transport)
+}
+
+fn zenoh_options(args: &ServeArgs, road: &roads::RoadLayout) -> anyhow::Result<serve::region::ZenohOptions> {
+    let transport = transport(args).map_err(anyhow::Error::msg)?;
+    Ok(serve::region::ZenohOptions {
         listen: args.zenoh_listen.clone(),
         connect: args.zenoh_connect.clone(),
         config_file: args.zenoh_config.clone(),
         prefix: args.zenoh_prefix.clone(),
-    }
+        transport,
+        regions: road.regions.iter().flatten().map(|r| r.name.clone()).collect(),
+    })
 }
 
 /// Opens the region's Zenoh session (`--region`, `--standby-for`) and settles who owns the region.
 async fn claim_region(
     args: &ServeArgs,
     shared: &serve::region::RegionShared,
+    road: &roads::RoadLayout,
 ) -> anyhow::Result<(zenoh::Session, serve::region::tokens::Claim)> {
-    let options = zenoh_options(args);
+    let options = zenoh_options(args, road)?;
+    if options.transport == serve::region::secure::Transport::InsecureLoopback {
+        tracing::warn!(
+            "--zenoh-insecure: the region network is plain TCP without authentication; any process on \
+             this host can publish states, hand over UAVs and command this region"
+        );
+    }
     let session = serve::region::open(&options).await?;
     let keys = serve::region::tokens::RegionKeys::new(&options, &shared.name);
     let standby = args.standby_for.is_some();
@@ -285,8 +314,8 @@ async fn start_region(
     shared: &serve::region::RegionShared,
     app: &serve::state::AppState,
 ) -> anyhow::Result<(serve::region::RegionLink, zenoh::query::Queryable<()>)> {
-    let options = zenoh_options(args);
     let road = app.road.borrow().layout.clone();
+    let options = zenoh_options(args, &road)?;
     let road = roads::Road::new(road).context("the served road")?;
     let neighbours = serve::region::neighbours_of(&road, &shared.name).map_err(anyhow::Error::msg)?;
     let link = serve::region::start(session.clone(), &options, shared, &neighbours, claim).await?;

@@ -578,9 +578,14 @@ test("with regions, one region's dashboard shows every region's UAVs and the bor
       probe.close(() => resolve(port));
     });
   });
-  const endpoint = `tcp/127.0.0.1:${port}`;
-  const west = await startServer(["--scenario", scenario, "--region", "west", "--zenoh-listen", endpoint]);
-  const east = await startServer(["--scenario", scenario, "--region", "east", "--zenoh-connect", endpoint]);
+  // The region network as deployed: TLS with the deployment's certificates (`airroads certs`).
+  const certs = join(dir, "certs");
+  execFileSync(BIN, ["certs", "--out", certs, "--road", scenario, "--roles", "primary"]);
+  const tls = (name) => ["--zenoh-ca", join(certs, "ca.pem"), "--zenoh-cert", join(certs, `${name}.primary.pem`),
+    "--zenoh-key", join(certs, `${name}.primary.key`)];
+  const endpoint = `tls/127.0.0.1:${port}`;
+  const west = await startServer(["--scenario", scenario, "--region", "west", "--zenoh-listen", endpoint, ...tls("west")]);
+  const east = await startServer(["--scenario", scenario, "--region", "east", "--zenoh-connect", endpoint, ...tls("east")]);
   const page = await openDashboard(browser, west.url);
   try {
     const s = await until("the east's UAV on the west's dashboard", async () => {

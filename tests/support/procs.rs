@@ -51,12 +51,48 @@ impl Drop for Proc {
 /// The lines a server printed on stdout (read by a thread).
 pub type Banner = Arc<Mutex<Vec<String>>>;
 
+/// The region network's certificates of this test process (made by `airroads certs`, the
+/// authority once, each region's certificates when first asked for): the `--zenoh-ca`,
+/// `--zenoh-cert` and `--zenoh-key` arguments of a server of `region` in `role`.
+pub fn tls_args(region: &str, role: &str) -> Vec<String> {
+    static MADE: Mutex<()> = Mutex::new(());
+    let _one_at_a_time = MADE.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let dir = std::env::temp_dir().join(format!("airroads-certs-{}", std::process::id()));
+    let cert = dir.join(format!("{region}.{role}.pem"));
+    if !cert.exists() {
+        let out = Command::new(env!("CARGO_BIN_EXE_airroads"))
+            .args(["certs", "--out"])
+            .arg(&dir)
+            .args(["--region", region, "--roles", role, "--days", "2"])
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "airroads certs: {}", String::from_utf8_lossy(&out.stderr));
+    }
+    let path = |p: PathBuf| p.display().to_string();
+    vec![
+        "--zenoh-ca".into(),
+        path(dir.join("ca.pem")),
+        "--zenoh-cert".into(),
+        path(cert),
+        "--zenoh-key".into(),
+        path(dir.join(format!("{region}.{role}.key"))),
+    ]
+}
+
 /// Starts `airroads serve --ephemeral` on 127.0.0.1:0 with `args`; returns it, its address and its
-/// stdout lines.
+/// stdout lines. A region server (`--region`, `--standby-for`) gets this test's certificates of its
+/// region unless `args` choose the transport.
 pub fn serve(args: &[&str]) -> (Proc, SocketAddr, Banner) {
+    let chosen = args.iter().any(|a| a.starts_with("--zenoh-ca") || *a == "--zenoh-insecure");
+    let region = args.windows(2).find(|w| w[0] == "--region" || w[0] == "--standby-for");
+    let tls = match region {
+        Some(w) if !chosen => tls_args(w[1], if w[0] == "--region" { "primary" } else { "standby" }),
+        _ => Vec::new(),
+    };
     let mut child = Command::new(env!("CARGO_BIN_EXE_airroads"))
         .args(["serve", "--addr", "127.0.0.1:0", "--ephemeral"])
         .args(args)
+        .args(&tls)
         .env_remove("AIRROADS_TOKEN")
         .stdout(Stdio::piped())
         .stderr(Stdio::inherit())
@@ -89,10 +125,10 @@ pub fn banner_has(banner: &Banner, text: &str) -> bool {
     false
 }
 
-/// A Zenoh endpoint on a loopback TCP port that was free a moment ago.
+/// A Zenoh TLS endpoint on a loopback port that was free a moment ago.
 pub fn free_endpoint() -> String {
     let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-    format!("tcp/127.0.0.1:{port}")
+    format!("tls/127.0.0.1:{port}")
 }
 
 /// `GET path` answered 200 with JSON.

@@ -18,6 +18,15 @@ use serde_json::{Value, json};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
 
+/// A request another region forwarded (its owner applies and audits it here).
+#[derive(Debug, Clone)]
+pub struct Forwarded {
+    /// The region the operator sent it to.
+    pub region: String,
+    /// The operator's address there.
+    pub client: Option<String>,
+}
+
 /// The audit context of the request being handled.
 #[derive(Debug)]
 pub struct RequestAudit {
@@ -41,7 +50,10 @@ pub async fn record(State(app): State<AppState>, request: Request, next: Next) -
     if !is_change(request.method()) {
         return next.run(request).await;
     }
-    let remote = super::listener::remote(&request).map_or_else(|| "unknown".to_string(), |a| a.to_string());
+    let remote = match request.extensions().get::<Forwarded>() {
+        Some(f) => format!("{} via region {}", f.client.as_deref().unwrap_or("unknown"), f.region),
+        None => super::listener::remote(&request).map_or_else(|| "unknown".to_string(), |a| a.to_string()),
+    };
     let route = request.uri().path_and_query().map_or_else(String::new, |p| p.as_str().to_string());
     let context = Arc::new(RequestAudit {
         record: AuditRecord {

@@ -185,6 +185,7 @@ async fn everywhere(
     regions: &[String],
     step: &Step,
     timeout: Duration,
+    authorization: &Option<String>,
 ) -> Vec<(String, Answer)> {
     let query = ApiQuery {
         method: "POST".into(),
@@ -192,6 +193,8 @@ async fn everywhere(
         body: String::new(),
         uav: None,
         deploy: Some(step.clone()),
+        authorization: authorization.clone(),
+        client: None,
     };
     let asks = regions.iter().map(|region| {
         let query = &query;
@@ -221,12 +224,26 @@ fn refused(region: &str, answer: Answer) -> Response {
 }
 
 /// Deploys `body` (a `kind`) to every region of the served road, as the coordinator.
-pub async fn coordinate(app: &AppState, federation: &Federation, kind: Kind, body: String) -> Response {
+/// `authorization`: the operator's, for each region to check itself.
+pub async fn coordinate(
+    app: &AppState,
+    federation: &Federation,
+    kind: Kind,
+    body: String,
+    authorization: Option<String>,
+) -> Response {
     let old_layout = app.road.borrow().layout.clone();
     let regions = names(&old_layout);
     let prepare = Step { commit: false, kind, body: body.clone(), at_ms: 0 };
-    for (region, answer) in
-        everywhere(app, federation, &regions, &prepare, super::region::federation::ASK_TIMEOUT).await
+    for (region, answer) in everywhere(
+        app,
+        federation,
+        &regions,
+        &prepare,
+        super::region::federation::ASK_TIMEOUT,
+        &authorization,
+    )
+    .await
     {
         let ok = matches!(&answer, Answer::Replied(r) if (200..300).contains(&r.status));
         if !ok {
@@ -237,7 +254,7 @@ pub async fn coordinate(app: &AppState, federation: &Federation, kind: Kind, bod
     let dt_ms = ((app.metrics.borrow().dt * 1e3).round() as u64).max(1);
     let at_ms = (now_ms() + SWITCH_DELAY.as_millis() as u64).div_ceil(dt_ms) * dt_ms;
     let commit = Step { commit: true, kind, body, at_ms };
-    let answers = everywhere(app, federation, &regions, &commit, COMMIT_TIMEOUT).await;
+    let answers = everywhere(app, federation, &regions, &commit, COMMIT_TIMEOUT, &authorization).await;
     let mut report = serde_json::Map::new();
     let (mut failed, mut switched) = (Vec::new(), Vec::new());
     let mut own_body = json!({});
@@ -271,7 +288,7 @@ pub async fn coordinate(app: &AppState, federation: &Federation, kind: Kind, bod
     if kind == Kind::Road && !switched.is_empty() {
         let old = serde_json::to_string(&old_layout).unwrap_or_default();
         let back = Step { commit: true, kind, body: old, at_ms: now_ms() };
-        let undone = everywhere(app, federation, &switched, &back, COMMIT_TIMEOUT).await;
+        let undone = everywhere(app, federation, &switched, &back, COMMIT_TIMEOUT, &authorization).await;
         let ok: Vec<String> = undone
             .into_iter()
             .filter(|(_, a)| matches!(a, Answer::Replied(r) if (200..300).contains(&r.status)))

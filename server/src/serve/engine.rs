@@ -348,5 +348,9 @@ impl Engine {
         let since_ms = if self.boundary_ms > 0 { self.boundary_ms } else { now_ms() };
         let view = RoadView::of(self.fleet.road(), self.road_version, since_ms);
         self.channels.road.send_replace(Arc::new(view));
+        if let Some(region) = &self.region {
+            // The other regions' messages are checked against the road flown.
+            region.screen.set_road(self.fleet.road());
+        }
     }
 }

@@ -8,8 +8,9 @@
 //!
 //! The other side: requests from other regions arrive on this region's queryable and are run
 //! through the same API handlers (without this middleware, so nothing is forwarded twice); only
-//! the region's owner answers. Zenoh peers are trusted like the fleet loop's own messages: secure
-//! the Zenoh network (`--zenoh-config`: TLS, access control) where other hosts can reach it.
+//! the region's owner answers. The owner checks the operator's token itself (carried with the
+//! request) and audits the change in its own log, with the asking region and the operator's
+//! address; only servers with a certificate of the deployment can ask (`region::secure`).
 
 use super::api;
 use super::error::{ApiError, MAX_BODY_BYTES};
@@ -27,6 +28,9 @@ use tokio::sync::Semaphore;
 
 /// Requests from other regions run at once at most (more are answered 503 `busy`).
 pub const MAX_CONCURRENT_QUERIES: usize = 16;
+/// Requests of this server's clients waiting on other regions at once at most (more are answered
+/// 503 `busy` at once); a quarter of the default connection cap.
+pub const MAX_FORWARDED: usize = 64;
 /// A request about a UAV nobody answered for is asked again once after this long (it may have
 /// been between two regions, released and not yet adopted).
 const RETRY_AFTER: Duration = Duration::from_millis(150);
@@ -102,12 +106,30 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
         return ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, "body_too_large", "the body is too large")
             .into_response();
     };
+    let authorization =
+        parts.headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()).map(str::to_string);
+    let client =
+        parts.extensions.get::<axum::extract::ConnectInfo<std::net::SocketAddr>>().map(|c| c.0.to_string());
     let query = ApiQuery {
         method: parts.method.to_string(),
         uri: parts.uri.path_and_query().map_or_else(|| parts.uri.path().to_string(), |p| p.to_string()),
         body: String::from_utf8_lossy(&bytes).into_owned(),
         uav: None,
         deploy: None,
+        authorization,
+        client,
+    };
+    // Requests waiting on other regions are bounded, so they never take every connection; the
+    // fleet-wide commands (the emergency stop among them) are never refused here.
+    let _permit = match route {
+        Route::Fleet => None,
+        _ => match app.forwarding.clone().try_acquire_owned() {
+            Ok(permit) => Some(permit),
+            Err(_) => {
+                return ApiError::busy("too many requests waiting on other regions; try again")
+                    .into_response();
+            }
+        },
     };
     let all = region_names(&app);
     let mut regions = all.clone();
@@ -171,7 +193,9 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
             };
             merged.unwrap_or_else(IntoResponse::into_response)
         }
-        Route::Deploy(kind) => super::deploy::coordinate(&app, &federation, kind, query.body).await,
+        Route::Deploy(kind) => {
+            super::deploy::coordinate(&app, &federation, kind, query.body, query.authorization).await
+        }
         Route::Local => here(bytes).await,
     }
 }
@@ -250,6 +274,16 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
     if !owner {
         return None;
     }
+    // Asked on `.../api/ASKER` by a server of this deployment's region ASKER (another region, or
+    // this region's standby; the access control lets only ASKER's certificates ask there);
+    // anything else is not answered.
+    let region = app.region.as_ref()?;
+    let asker = region.federation.get()?.asker(query.key_expr().as_str())?;
+    let known =
+        app.road.borrow().layout.regions.as_ref().is_some_and(|rs| rs.iter().any(|r| r.name == asker));
+    if !known {
+        return None;
+    }
     let payload = query.payload()?;
     if payload.len() > MAX_CARRIED_BYTES {
         return Some(
@@ -260,6 +294,19 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
         Ok(q) => q,
         Err(e) => return Some(ApiError::invalid("query", e.to_string()).into_response()),
     };
+    // The operator's authority: this region checks the token itself, as for its own clients.
+    let change = asked.deploy.is_some()
+        || Method::from_bytes(asked.method.as_bytes()).is_ok_and(|m| super::guard::is_change(&m))
+        || asked.uri.split('?').next() == Some("/api/audit");
+    if let Some(token) = &app.token
+        && change
+    {
+        let given = asked.authorization.as_deref().and_then(|a| axum::http::HeaderValue::from_str(a).ok());
+        if !super::auth::authorised(given.as_ref(), token) {
+            let message = "this server needs `Authorization: Bearer <token>` for changes";
+            return Some(ApiError::new(StatusCode::UNAUTHORIZED, "unauthorized", message).into_response());
+        }
+    }
     if let Some(step) = asked.deploy {
         let own = app.region.as_ref().map(|r| r.name.clone()).unwrap_or_default();
         return Some(super::deploy::answer(app, &own, step).await);
@@ -271,11 +318,16 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
         .method(asked.method.as_str())
         .uri(asked.uri.as_str())
         .header(header::CONTENT_TYPE, "application/json")
+        .extension(super::audit::Forwarded { region: asker.to_string(), client: asked.client })
         .body(Body::from(asked.body));
     let Ok(request) = request else {
         return Some(ApiError::invalid("query", "not a request").into_response());
     };
-    let router = api::router().with_state(app.clone());
+    // Audited here, where it is applied (in the change's own transaction), naming the region and
+    // the operator's address.
+    let router = api::router()
+        .layer(axum::middleware::from_fn_with_state(app.clone(), super::audit::record))
+        .with_state(app.clone());
     // The router's error type is Infallible.
     Some(tower::ServiceExt::oneshot(router, request).await.unwrap_or_else(|e| match e {}))
 }
@@ -291,7 +343,10 @@ pub async fn reply_of(response: Response) -> ApiReply {
 async fn reply(query: &zenoh::query::Query, response: Response) {
     let answer = reply_of(response).await;
     let Ok(payload) = serde_json::to_vec(&answer) else { return };
-    if let Err(e) = query.reply(query.key_expr().clone(), payload).await {
+    // A plain key (not the query's wire form, which may name a resource the asker declared): the
+    // asker's access control resolves a reply's key before letting it in.
+    let key = query.key_expr().as_str().to_string();
+    if let Err(e) = query.reply(key, payload).await {
         tracing::warn!("answering another region: {e}");
     }
 }

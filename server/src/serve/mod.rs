@@ -272,6 +272,7 @@ impl Server {
             storage: writer.status,
             token,
             auth_failures: Arc::default(),
+            forwarding: Arc::new(tokio::sync::Semaphore::new(federate::MAX_FORWARDED)),
             access: Arc::default(),
             policies,
             default_policy,

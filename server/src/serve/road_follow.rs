@@ -32,6 +32,8 @@ pub async fn follow(app: AppState) {
             body: String::new(),
             uav: None,
             deploy: None,
+            authorization: None,
+            client: None,
         };
         let Answer::Replied(reply) = federation.ask(&region.name, &query).await else { continue };
         let layout =

@@ -112,6 +112,8 @@ pub struct AppState {
     pub token: Option<Arc<str>>,
     /// Failed authentication attempts per client.
     pub auth_failures: Arc<AuthFailures>,
+    /// Requests waiting on other regions at once (`--region`; `federate::MAX_FORWARDED`).
+    pub forwarding: Arc<tokio::sync::Semaphore>,
     /// Accepted `Host` and `Origin` values (set when the server starts listening).
     pub access: Arc<OnceLock<AccessRules>>,
     /// Names of the loaded policies.

@@ -24,7 +24,9 @@ impl Engine {
         handover.expire(now);
         self.release_detached(&mut handover);
         let rules = self.link_rules.clone();
-        for change in handover.receive(&self.fleet, self.max_uavs, &rules, now) {
+        let table = self.region.as_ref().map(|r| r.foreign.clone());
+        let commanded_elsewhere = || table.as_ref().map(|t| t.commanded_by()).unwrap_or_default();
+        for change in handover.receive(&self.fleet, self.max_uavs, &rules, now, &commanded_elsewhere) {
             match change {
                 FleetChange::Release { id, to, seq } => {
                     let Ok(uav) = self.fleet.remove(&id) else { continue };

@@ -161,7 +161,12 @@ pub struct Failover {
     given_way: AtomicU64,
     mirror: Mutex<Option<(Arc<Mirror>, Instant)>>,
     released_away: Mutex<HashMap<String, Instant>>,
+    /// The records of the fleet this server last gave way with, and when.
+    given_away: Mutex<Option<(Records, Instant)>>,
 }
+
+/// UAV records by id.
+pub type Records = Vec<(String, UavRecord)>;
 
 /// A fresh incarnation: the wall clock's nanoseconds and the process id, as 24 hex digits (ordered
 /// by start time, distinct between processes).
@@ -196,6 +201,7 @@ impl Failover {
             given_way: AtomicU64::new(0),
             mirror: Mutex::new(None),
             released_away: Mutex::new(HashMap::new()),
+            given_away: Mutex::new(None),
         }
     }
 
@@ -225,6 +231,22 @@ impl Failover {
         self.owner.store(false, SeqCst);
         self.given_way.fetch_add(1, SeqCst);
         self.give_way.store(true, SeqCst);
+    }
+
+    /// Keeps the records of the fleet this server gave way with: if the owner ahead of it leaves no
+    /// mirror (it was never real, or died first), a later takeover flies them on.
+    pub fn keep_given_away(&self, records: Records, at: Instant) {
+        *lock(&self.given_away) = Some((records, at));
+    }
+
+    /// The records given away, unless a mirror came after them (then the mirror is newer); taken
+    /// once.
+    pub fn take_given_away(&self) -> Records {
+        let kept = lock(&self.given_away).take();
+        match (kept, self.mirror()) {
+            (Some((records, at)), mirror) if mirror.as_ref().is_none_or(|(_, m)| *m < at) => records,
+            _ => Vec::new(),
+        }
     }
 
     /// For the loop: adopt the mirror now (once per takeover).

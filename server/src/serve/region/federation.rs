@@ -1,5 +1,7 @@
 //! The Zenoh side of "one fleet to the operator" (README "Regions over Zenoh", One fleet): every
-//! region answers REST requests from the other regions on its queryable `PREFIX/region/NAME/api`
+//! region answers REST requests from the other regions on its queryable `PREFIX/region/NAME/api/*`
+//! (region ASKER asks on `PREFIX/region/NAME/api/ASKER`; the access control lets only ASKER's
+//! certificate ask there)
 //! (only the region's owner answers; a standby stays silent), and asks them with [`Federation`].
 //! The HTTP side (what is forwarded, how reads are merged) is `serve::federate`.
 
@@ -11,13 +13,23 @@ use std::time::Duration;
 
 /// How long a request to another region may take before it counts as unanswered.
 pub const ASK_TIMEOUT: Duration = Duration::from_secs(2);
+/// A region that let a request wait out its timeout is taken as silent, without being asked, for
+/// this long: a flood of requests about it costs no waiting.
+pub const SILENCE_MEMORY: Duration = Duration::from_secs(1);
 /// Largest request or answer carried (bytes): a request body is at most 4 MiB, a region's
 /// `GET /api/state` at 10,000 UAVs about 6 MB.
 pub const MAX_CARRIED_BYTES: usize = 64 << 20;
 
-/// The key of region `region`'s queryable: `<prefix>/region/<name>/api`.
-pub fn api_key(prefix: &str, region: &str) -> String {
-    format!("{prefix}/region/{region}/api")
+/// The key region `asker` asks region `region` on: `<prefix>/region/<region>/api/<asker>`.
+pub fn api_key(prefix: &str, region: &str, asker: &str) -> String {
+    format!("{prefix}/region/{region}/api/{asker}")
+}
+
+/// The region that asked on `key` (its last chunk), when `key` is an ask of region `own`.
+pub fn asker_of<'k>(prefix: &str, own: &str, key: &'k str) -> Option<&'k str> {
+    let asker =
+        key.strip_prefix(prefix)?.strip_prefix("/region/")?.strip_prefix(own)?.strip_prefix("/api/")?;
+    (!asker.is_empty() && !asker.contains('/')).then_some(asker)
 }
 
 /// A REST request carried to another region (JSON).
@@ -37,6 +49,12 @@ pub struct ApiQuery {
     /// A step of a deployment-wide road or scenario (`serve::deploy`) instead of a request.
     #[serde(default)]
     pub deploy: Option<crate::serve::deploy::Step>,
+    /// The operator's `Authorization` header, checked by the region that applies the request.
+    #[serde(default)]
+    pub authorization: Option<String>,
+    /// The operator's address, for the applying region's audit log.
+    #[serde(default)]
+    pub client: Option<String>,
 }
 
 /// A region's answer: the HTTP status and body its API gave.
@@ -70,6 +88,8 @@ pub struct Federation {
     pub own: String,
     /// The served road, built once per version (to find the region of a new UAV's position).
     road: Arc<Mutex<Option<VersionedRoad>>>,
+    /// Regions that did not answer lately, until when they count as silent.
+    silent_until: Arc<Mutex<std::collections::HashMap<String, std::time::Instant>>>,
 }
 
 impl std::fmt::Debug for Federation {
@@ -81,7 +101,13 @@ impl std::fmt::Debug for Federation {
 impl Federation {
     /// Asks over `session` under `prefix`, as region `own`.
     pub fn new(session: zenoh::Session, prefix: &str, own: &str) -> Self {
-        Self { session, prefix: prefix.into(), own: own.into(), road: Arc::default() }
+        Self {
+            session,
+            prefix: prefix.into(),
+            own: own.into(),
+            road: Arc::default(),
+            silent_until: Arc::default(),
+        }
     }
 
     /// The road of `view` (built at its first use per version; None if it does not build).
@@ -97,9 +123,14 @@ impl Federation {
         Some(road)
     }
 
-    /// The key this region answers on.
+    /// The keys this region answers on (every asker's).
     pub fn own_key(&self) -> String {
-        api_key(&self.prefix, &self.own)
+        api_key(&self.prefix, &self.own, "*")
+    }
+
+    /// The region that asked on `key`, when it is one of this region's keys.
+    pub fn asker<'k>(&self, key: &'k str) -> Option<&'k str> {
+        asker_of(&self.prefix, &self.own, key)
     }
 
     /// Sends `query` to region `region` and returns its owner's answer (the first; there is one).
@@ -107,10 +138,42 @@ impl Federation {
         self.ask_within(region, query, ASK_TIMEOUT).await
     }
 
-    /// [`Federation::ask`], waiting at most `timeout`.
+    /// True while `region` counts as silent (it did not answer within the last
+    /// [`SILENCE_MEMORY`]).
+    pub fn remembered_silent(&self, region: &str) -> bool {
+        let silent = self.silent_until.lock().unwrap_or_else(PoisonError::into_inner);
+        silent.get(region).is_some_and(|until| std::time::Instant::now() < *until)
+    }
+
+    fn heard(&self, region: &str, answered: bool) {
+        let mut silent = self.silent_until.lock().unwrap_or_else(PoisonError::into_inner);
+        if answered {
+            silent.remove(region);
+        } else {
+            silent.insert(region.to_string(), std::time::Instant::now() + SILENCE_MEMORY);
+        }
+    }
+
+    /// [`Federation::ask`], waiting at most `timeout`; a region remembered silent is not asked.
     pub async fn ask_within(&self, region: &str, query: &ApiQuery, timeout: Duration) -> Answer {
+        if self.remembered_silent(region) {
+            return Answer::Silent;
+        }
+        let asked = std::time::Instant::now();
+        let answer = self.ask_now(region, query, timeout).await;
+        match answer {
+            Answer::Replied(_) => self.heard(region, true),
+            // Only a silence that cost the wait is remembered: an ask that nobody could take
+            // (no queryable: the region is gone or not up yet) ends at once and costs nothing.
+            Answer::Silent if asked.elapsed() >= timeout / 2 => self.heard(region, false),
+            Answer::Silent => {}
+        }
+        answer
+    }
+
+    async fn ask_now(&self, region: &str, query: &ApiQuery, timeout: Duration) -> Answer {
         let Ok(payload) = serde_json::to_vec(query) else { return Answer::Silent };
-        let key = api_key(&self.prefix, region);
+        let key = api_key(&self.prefix, region, &self.own);
         let asked = self
             .session
             .get(key.as_str())
@@ -158,12 +221,17 @@ mod tests {
             body: "{}".into(),
             uav: None,
             deploy: None,
+            authorization: Some("Bearer t".into()),
+            client: Some("127.0.0.1:5000".into()),
         };
         let text = serde_json::to_string(&q).unwrap();
         assert_eq!(serde_json::from_str::<ApiQuery>(&text).unwrap(), q);
         let bare: ApiQuery = serde_json::from_str(r#"{"method": "GET", "uri": "/api/state"}"#).unwrap();
         assert_eq!((bare.body.as_str(), bare.uav), ("", None));
         assert!(serde_json::from_str::<ApiReply>(r#"{"status": 200, "body": "", "x": 1}"#).is_err());
-        assert_eq!(api_key("airroads", "west"), "airroads/region/west/api");
+        assert_eq!(api_key("airroads", "west", "east"), "airroads/region/west/api/east");
+        assert_eq!(asker_of("airroads", "west", "airroads/region/west/api/east"), Some("east"));
+        assert_eq!(asker_of("airroads", "west", "airroads/region/west/api/"), None);
+        assert_eq!(asker_of("airroads", "west", "airroads/region/east/api/west"), None);
     }
 }

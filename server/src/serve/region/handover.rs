@@ -18,6 +18,7 @@
 
 pub use super::messages::{Message, UavRecord};
 use super::ownership::OwnershipLog;
+use super::screen::{PeerRefusals, Screen};
 use fleet::{Condition, Fleet, ForeignUav};
 use links::LinkRules;
 use serde::Serialize;
@@ -48,6 +49,11 @@ pub const MAX_MESSAGES_PER_GAP: usize = 256;
 pub const HELD_RELEASE_TTL: Duration = Duration::from_secs(2);
 /// Largest handover message accepted (bytes).
 pub const MAX_MESSAGE_BYTES: usize = 16 << 10;
+/// Offers one region may have accepted here and not released yet; more are refused.
+pub const MAX_RESERVATIONS_PER_SENDER: usize = 64;
+/// Offers from one region read per gap (each costs a check against the fleet); more are dropped
+/// unanswered and made again by their sender.
+pub const MAX_OFFERS_PER_SENDER_PER_GAP: usize = 32;
 
 /// An offer made and not answered yet.
 #[derive(Debug)]
@@ -61,6 +67,7 @@ struct Offer {
 #[derive(Debug)]
 struct Reservation {
     from: String,
+    seq: u64,
     accepted: Instant,
 }
 
@@ -129,6 +136,8 @@ pub struct Handover {
     pub ownership: Arc<OwnershipLog>,
     /// What happened so far.
     pub counts: HandoverCounts,
+    /// The checks of other regions' messages, whose refusal counts this shares.
+    screen: Arc<Screen>,
 }
 
 impl Handover {
@@ -138,6 +147,7 @@ impl Handover {
         inbox: Receiver<Message>,
         outbox: tokio::sync::mpsc::Sender<Message>,
         ownership: Arc<OwnershipLog>,
+        screen: Arc<Screen>,
     ) -> Self {
         Self {
             own: own.into(),
@@ -154,6 +164,7 @@ impl Handover {
             held: HashMap::new(),
             ownership,
             counts: HandoverCounts::default(),
+            screen,
         }
     }
 
@@ -173,14 +184,19 @@ impl Handover {
     /// Reads up to [`MAX_MESSAGES_PER_GAP`] messages: answers offers (checked against `fleet`, which
     /// may hold at most `max_uavs`, and the links this server may open, `rules`), and returns what
     /// the loop must do to the fleet now.
+    /// `commanded_elsewhere` gives, per UAV id the other regions command, the region (asked at
+    /// most once, at the first offer).
     pub fn receive(
         &mut self,
         fleet: &Fleet,
         max_uavs: usize,
         rules: &LinkRules,
         now: Instant,
+        commanded_elsewhere: &dyn Fn() -> HashMap<String, String>,
     ) -> Vec<FleetChange> {
         let mut changes = Vec::new();
+        let mut listed: Option<HashMap<String, String>> = None;
+        let mut offers_from: HashMap<String, usize> = HashMap::new();
         for _ in 0..MAX_MESSAGES_PER_GAP {
             let Ok(message) = self.inbox.try_recv() else { break };
             if message.to() != self.own || message.from() == self.own {
@@ -189,10 +205,27 @@ impl Handover {
             }
             match message {
                 Message::Offer { from, id, seq, uav, .. } => {
-                    let answer = match self.check_offer(fleet, max_uavs, rules, &from, &id, &uav) {
+                    let read = offers_from.entry(from.clone()).or_default();
+                    *read += 1;
+                    if *read > MAX_OFFERS_PER_SENDER_PER_GAP {
+                        PeerRefusals::count(&self.screen.refused.too_many_offers);
+                        self.counts.dropped += 1;
+                        continue;
+                    }
+                    let checked = self.check_offer(fleet, max_uavs, rules, &from, &id, &uav).and_then(|()| {
+                        let listed = listed.get_or_insert_with(commanded_elsewhere);
+                        match listed.get(&id) {
+                            Some(region) if *region != from => {
+                                PeerRefusals::count(&self.screen.refused.unsafe_uav);
+                                Err(format!("UAV `{id}` is flown by region `{region}`"))
+                            }
+                            _ => Ok(()),
+                        }
+                    });
+                    let answer = match checked {
                         Ok(()) => {
-                            self.reservations
-                                .insert(id.clone(), Reservation { from: from.clone(), accepted: now });
+                            let reservation = Reservation { from: from.clone(), seq, accepted: now };
+                            self.reservations.insert(id.clone(), reservation);
                             Message::Accept { from: self.own.clone(), to: from, id, seq }
                         }
                         Err(reason) => {
@@ -217,51 +250,27 @@ impl Handover {
                         self.retry_at.insert(id, now + RETRY_AFTER);
                     }
                 }
-                Message::Release { id, uav, .. } => {
-                    // The old owner no longer commands it: taking it can never make two owners,
-                    // so a release is taken even when its reservation was forgotten.
+                Message::Release { from, id, seq, uav, .. } => {
+                    // Only the release of an offer this region accepted, from its sender, for that
+                    // id (the reservation outlives the offer, so an honest release finds it); its
+                    // safety here was checked with the offer.
+                    let answers = self.reservations.get(&id).is_some_and(|r| r.from == from && r.seq == seq);
+                    if !answers {
+                        PeerRefusals::count(&self.screen.refused.unrequested_release);
+                        self.counts.dropped += 1;
+                        continue;
+                    }
                     self.reservations.remove(&id);
                     if fleet.uav(&id).is_none() && uav.state().is_finite() {
                         changes.push(FleetChange::Adopt { id, uav });
                     } else {
+                        PeerRefusals::count(&self.screen.refused.unsafe_uav);
                         self.counts.dropped += 1;
                     }
                 }
             }
         }
         changes
-    }
-
-    /// Why this region cannot take UAV `id` offered by `from` (Err: the reason sent back).
-    fn check_offer(
-        &self,
-        fleet: &Fleet,
-        max_uavs: usize,
-        rules: &LinkRules,
-        from: &str,
-        id: &str,
-        uav: &UavRecord,
-    ) -> Result<(), String> {
-        uav::check_uav_id(id).map_err(|e| format!("id: {e}"))?;
-        if fleet.uav(id).is_some() {
-            return Err(format!("a UAV `{id}` is flown here already"));
-        }
-        if self.reservations.get(id).is_some_and(|r| r.from != from) {
-            return Err(format!("UAV `{id}` is being handed over from another region"));
-        }
-        if !uav.state().is_finite() {
-            return Err("its state is not finite".into());
-        }
-        if !fleet.policy_names().any(|n| n == uav.policy) {
-            return Err(format!("policy `{}` is not loaded here", uav.policy));
-        }
-        if let Some(Err(e)) = uav.link.as_deref().map(|l| links::check_link_with(l, rules)) {
-            return Err(format!("link: {e}"));
-        }
-        if fleet.uavs().len() + self.reservations.len() >= max_uavs {
-            return Err(format!("this region flies its maximum of {max_uavs} UAVs"));
-        }
-        Ok(())
     }
 
     /// Offers every UAV of `fleet` whose tracked segment lies in a neighbouring region to that
@@ -410,6 +419,9 @@ pub fn record(u: &fleet::Uav) -> UavRecord {
         airborne: u.condition.in_the_air(),
     }
 }
+
+#[path = "handover_checks.rs"]
+mod checks;
 
 #[cfg(test)]
 #[path = "handover_tests.rs"]

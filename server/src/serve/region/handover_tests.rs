@@ -15,6 +15,9 @@ struct Side {
     handover: Handover,
     inbox: SyncSender<Message>,
     outbox: tokio::sync::mpsc::Receiver<Message>,
+    /// The UAVs other regions list, by id (what the neighbours' state messages say).
+    listed: std::collections::HashMap<String, String>,
+    screen: Arc<super::super::screen::Screen>,
 }
 
 /// A straight road x ∈ [0, 40] of 8 segments: `west` 0–3, `east` 4–7.
@@ -28,10 +31,12 @@ fn road() -> Road {
 fn side(name: &str) -> Side {
     let config = FleetConfig::default();
     let fleet = Fleet::new(config, road(), PolicyRegistry::with_pd(config.params.delta));
-    let (inbox, inbox_rx) = sync_channel(16);
-    let (outbox_tx, outbox) = tokio::sync::mpsc::channel(16);
-    let handover = Handover::new(name, inbox_rx, outbox_tx, Arc::new(OwnershipLog::default()));
-    Side { fleet, handover, inbox, outbox }
+    let (inbox, inbox_rx) = sync_channel(256);
+    let (outbox_tx, outbox) = tokio::sync::mpsc::channel(256);
+    let screen = Arc::new(super::super::screen::Screen::default());
+    let handover =
+        Handover::new(name, inbox_rx, outbox_tx, Arc::new(OwnershipLog::default()), screen.clone());
+    Side { fleet, handover, inbox, outbox, listed: Default::default(), screen }
 }
 
 impl Side {
@@ -50,7 +55,10 @@ impl Side {
     /// One gap: receives, applies the changes as the engine does, offers.
     fn gap(&mut self, now: Instant) {
         self.handover.expire(now);
-        for change in self.handover.receive(&self.fleet, 100, &links::LinkRules::default(), now) {
+        let listed = self.listed.clone();
+        let commanded_elsewhere = move || listed.clone();
+        let rules = links::LinkRules::default();
+        for change in self.handover.receive(&self.fleet, 100, &rules, now, &commanded_elsewhere) {
             match change {
                 FleetChange::Release { id, to, seq } => {
                     let uav = self.fleet.remove(&id).unwrap(); // receive() checked it is here
@@ -178,9 +186,7 @@ fn offers_of_unknown_policies_and_bad_states_are_refused_and_releases_of_owned_u
         .collect();
     assert_eq!(reasons.len(), 3, "{reasons:?}");
     assert!(
-        reasons[0].contains("policy `nope`")
-            && reasons[1].contains("not finite")
-            && reasons[2].starts_with("id")
+        reasons[0].contains("policy `nope`") && reasons[1].contains("finite") && reasons[2].starts_with("id")
     );
     // A release of a UAV east flies already changes nothing.
     let release = Message::Release {
@@ -251,4 +257,117 @@ fn messages_round_trip_as_json_and_unknown_fields_are_refused() {
     assert_eq!(serde_json::from_str::<Message>(&text).unwrap(), m);
     let extra = text.replacen('{', r#"{"x":1,"#, 1);
     assert!(serde_json::from_str::<Message>(&extra).is_err());
+}
+
+/// A record of a UAV at `p`, hovering, flying `pd`.
+fn hovering(p: [f64; 2]) -> UavRecord {
+    UavRecord { p, v: [0.0, 0.0], goal: None, policy: "pd".into(), link: None, airborne: true }
+}
+
+#[test]
+fn a_release_is_adopted_only_for_an_offer_accepted_from_its_sender() {
+    let mut east = side("east");
+    let release = |from: &str, id: &str, seq| Message::Release {
+        from: from.into(),
+        to: "east".into(),
+        id: id.into(),
+        seq,
+        uav: hovering([21.0, 0.0]),
+    };
+    let t0 = Instant::now();
+    // Unsolicited: nothing was offered.
+    east.inbox.send(release("west", "u", 1)).unwrap();
+    east.gap(t0);
+    assert!(!east.owns("u"), "an unsolicited release is refused");
+    // Offered by west and accepted: a release of another number or from another region is not it.
+    let offer = Message::Offer {
+        from: "west".into(),
+        to: "east".into(),
+        id: "u".into(),
+        seq: 7,
+        uav: hovering([21.0, 0.0]),
+    };
+    east.inbox.send(offer).unwrap();
+    east.gap(t0);
+    assert!(matches!(east.sent(), Some(Message::Accept { seq: 7, .. })));
+    east.inbox.send(release("west", "u", 8)).unwrap();
+    east.inbox.send(release("north", "u", 7)).unwrap();
+    east.gap(t0);
+    assert!(!east.owns("u"));
+    east.inbox.send(release("west", "u", 7)).unwrap();
+    east.gap(t0);
+    assert!(east.owns("u"), "the release of the accepted offer is adopted");
+    east.inbox.send(release("west", "u", 7)).unwrap();
+    east.gap(t0);
+    assert_eq!(east.fleet.uavs().len(), 1, "and only once");
+    assert_eq!(east.screen.report()["unrequested_release"], 4);
+}
+
+#[test]
+fn offers_off_the_road_too_close_listed_elsewhere_or_too_many_are_refused_by_name() {
+    let mut east = side("east");
+    east.add("mine", 30.0);
+    east.listed.insert("theirs".into(), "north".into());
+    east.listed.insert("crossing".into(), "west".into());
+    let offer = |id: &str, seq, p| Message::Offer {
+        from: "west".into(),
+        to: "east".into(),
+        id: id.into(),
+        seq,
+        uav: hovering(p),
+    };
+    let t0 = Instant::now();
+    for (k, (id, p)) in [
+        ("off", [500.0, 500.0]),
+        ("on-top", [30.062, 0.0]),
+        ("theirs", [22.0, 0.0]),
+        ("deep-west", [2.0, 0.0]),
+        ("crossing", [21.0, 0.0]),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        east.inbox.send(offer(id, k as u64, p)).unwrap();
+    }
+    east.gap(t0);
+    let answers: Vec<Message> = std::iter::from_fn(|| east.sent()).collect();
+    let refused = |id: &str, why: &str| {
+        answers
+            .iter()
+            .any(|m| matches!(m, Message::Refuse { id: i, reason, .. } if i == id && reason.contains(why)))
+    };
+    assert!(refused("off", "outside the road"), "{answers:?}");
+    assert!(refused("on-top", "D_c"), "{answers:?}");
+    assert!(refused("theirs", "flown by region `north`"), "{answers:?}");
+    assert!(refused("deep-west", "not in or next to region `east`"), "{answers:?}");
+    assert!(matches!(answers.last(), Some(Message::Accept { id, .. }) if id == "crossing"), "{answers:?}");
+    // One sender's offers are read at most so many per gap, and it may have only so many waiting.
+    for k in 0..MAX_RESERVATIONS_PER_SENDER {
+        let x = 20.5 + 0.01 * k as f64;
+        east.inbox.send(offer(&format!("n{k}"), 100 + k as u64, [x, 1.5 - 0.04 * k as f64])).unwrap();
+    }
+    east.gap(t0);
+    let first: Vec<Message> = std::iter::from_fn(|| east.sent()).collect();
+    assert_eq!(first.len(), MAX_OFFERS_PER_SENDER_PER_GAP, "the rest wait for their sender to offer again");
+    assert_eq!(
+        east.screen.report()["too_many_offers"],
+        (MAX_RESERVATIONS_PER_SENDER - MAX_OFFERS_PER_SENDER_PER_GAP) as u64
+    );
+    for k in MAX_OFFERS_PER_SENDER_PER_GAP..MAX_RESERVATIONS_PER_SENDER {
+        let x = 20.5 + 0.01 * k as f64;
+        east.inbox.send(offer(&format!("n{k}"), 100 + k as u64, [x, 1.5 - 0.04 * k as f64])).unwrap();
+    }
+    east.gap(t0);
+    let answers: Vec<Message> = std::iter::from_fn(|| east.sent()).collect();
+    assert!(
+        matches!(answers.last(), Some(Message::Refuse { reason, .. }) if reason.contains("not released")),
+        "{answers:?}"
+    );
+    let report = east.screen.report();
+    assert_eq!(
+        report["too_many_offers"],
+        (MAX_RESERVATIONS_PER_SENDER - MAX_OFFERS_PER_SENDER_PER_GAP + 1) as u64
+    );
+    assert_eq!(report["unsafe_uav"], 3);
+    assert_eq!(report["far_from_region"], 1);
 }

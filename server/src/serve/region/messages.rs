@@ -1,4 +1,4 @@
-//! The handover protocol's messages (`handover`), JSON on the key `PREFIX/region/<to>/handover`
+//! The handover protocol's messages (`handover`), JSON on the key `PREFIX/region/<to>/handover/<from>`
 //! (README "Regions over Zenoh", Handover): `offer`, `accept`, `refuse`, `release`.
 
 use crate::serve::snapshot::UavSnapshot;
@@ -43,7 +43,7 @@ impl UavRecord {
     }
 }
 
-/// A handover message, on the key `PREFIX/region/<to>/handover` (JSON).
+/// A handover message, on the key `PREFIX/region/<to>/handover/<from>` (JSON).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
 pub enum Message {

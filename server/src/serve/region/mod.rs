@@ -8,6 +8,8 @@
 //! the foreign UAVs out of a [`ForeignTable`] that the subscriber's callback fills.
 
 pub mod ages;
+pub mod certs;
+mod config;
 pub(crate) mod detach;
 pub mod elsewhere;
 mod engine_side;
@@ -17,50 +19,44 @@ pub mod handover;
 pub mod messages;
 pub mod ownership;
 mod publish;
+pub mod screen;
+pub mod secure;
 pub mod table;
 mod takeover;
 pub mod tokens;
 pub mod wire;
 
+pub use config::{ZenohOptions, zenoh_config};
 pub use failover::Failover;
 pub use handover::Handover;
 pub use ownership::OwnershipLog;
 pub use table::ForeignTable;
 
 use super::snapshot::Snapshot;
-use anyhow::Context as _;
 use roads::Road;
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use std::sync::mpsc::SyncSender;
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Instant;
 use tokio::sync::watch;
 
-/// Largest payload read from a neighbour (bytes): far above 10,000 UAVs' worth.
+/// Largest mirror read from the region's owner (bytes, JSON): far above 10,000 UAVs' worth.
 pub const MAX_PAYLOAD_BYTES: usize = 16 << 20;
-
-/// How `serve --region` joins Zenoh.
-#[derive(Debug, Clone, Default)]
-pub struct ZenohOptions {
-    /// Endpoints to listen on (`tcp/HOST:PORT`).
-    pub listen: Vec<String>,
-    /// Endpoints to connect to.
-    pub connect: Vec<String>,
-    /// A Zenoh configuration file (JSON5, Zenoh's own format), applied first.
-    pub config_file: Option<PathBuf>,
-    /// The first chunks of every key (`--zenoh-prefix`).
-    pub prefix: String,
-}
+/// Largest state message read from a neighbour (bytes): [`screen::MAX_UAVS_PER_REGION`] UAVs with
+/// ids of the longest length.
+pub const MAX_STATE_BYTES: usize = wire::HEADER_BYTES
+    + roads::MAX_REGION_NAME
+    + screen::MAX_UAVS_PER_REGION * (2 + uav::MAX_UAV_ID_LEN + wire::RECORD_TAIL_BYTES);
 
 /// The key a region's states are published under: `<prefix>/region/<name>/state`.
 pub fn state_key(prefix: &str, region: &str) -> String {
     format!("{prefix}/region/{region}/state")
 }
 
-/// The key a region's handover messages go to: `<prefix>/region/<name>/handover`.
-pub fn handover_key(prefix: &str, region: &str) -> String {
-    format!("{prefix}/region/{region}/handover")
+/// The key `from`'s handover messages to `region` go to: `<prefix>/region/<region>/handover/<from>`
+/// (the access control lets only `from`'s certificate put there).
+pub fn handover_key(prefix: &str, region: &str, from: &str) -> String {
+    format!("{prefix}/region/{region}/handover/{from}")
 }
 
 /// Handover messages waiting in either direction at most (the loop drops beyond; see `handover`).
@@ -95,34 +91,6 @@ pub fn neighbours_of(road: &Road, name: &str) -> Result<Vec<String>, String> {
         .collect();
     next.sort_by_key(|r| r.first());
     Ok(next.into_iter().map(|r| r.name.clone()).collect())
-}
-
-/// The Zenoh configuration: the file's if given, then the endpoints. With endpoints given, multicast
-/// scouting is off (only the endpoints named are used, so separate deployments, and tests run side
-/// by side, never find each other).
-pub fn zenoh_config(options: &ZenohOptions) -> anyhow::Result<zenoh::Config> {
-    let mut config = match &options.config_file {
-        Some(file) => zenoh::Config::from_file(file)
-            .map_err(|e| anyhow::anyhow!("{e}"))
-            .with_context(|| format!("--zenoh-config {}", file.display()))?,
-        None => zenoh::Config::default(),
-    };
-    let set = |config: &mut zenoh::Config, key: &str, value: String| {
-        config.insert_json5(key, &value).map_err(|e| anyhow::anyhow!("{key}: {e}"))
-    };
-    for (key, endpoints, flag) in [
-        ("listen/endpoints", &options.listen, "--zenoh-listen"),
-        ("connect/endpoints", &options.connect, "--zenoh-connect"),
-    ] {
-        if !endpoints.is_empty() {
-            let list = serde_json::to_string(endpoints)?;
-            set(&mut config, key, list).with_context(|| format!("{flag} {}", endpoints.join(" ")))?;
-        }
-    }
-    if !(options.listen.is_empty() && options.connect.is_empty()) {
-        set(&mut config, "scouting/multicast/enabled", "false".into())?;
-    }
-    Ok(config)
 }
 
 /// A snapshot on its way to the publishing task, with when its states were read.
@@ -163,6 +131,8 @@ pub struct RegionShared {
     pub elsewhere: Arc<elsewhere::Elsewhere>,
     /// How this region asks the others (set once the Zenoh side started; `serve::federate`).
     pub federation: Arc<std::sync::OnceLock<federation::Federation>>,
+    /// The checks of the other regions' messages, and their refusals.
+    pub screen: Arc<screen::Screen>,
     /// Handover messages received, for the loop.
     inbox: SyncSender<handover::Message>,
     /// Handover messages received that the loop's queue had no room for.
@@ -179,7 +149,8 @@ impl RegionShared {
         let ownership = Arc::new(OwnershipLog::default());
         let (inbox, inbox_rx) = std::sync::mpsc::sync_channel(HANDOVER_QUEUE);
         let (outbox_tx, outbox) = tokio::sync::mpsc::channel(HANDOVER_QUEUE);
-        let handover = Handover::new(name, inbox_rx, outbox_tx, ownership.clone());
+        let screen = Arc::new(screen::Screen::default());
+        let handover = Handover::new(name, inbox_rx, outbox_tx, ownership.clone(), screen.clone());
         Self {
             name: name.into(),
             foreign: Arc::new(ForeignTable::new(name)),
@@ -190,6 +161,7 @@ impl RegionShared {
             failover: Arc::new(Failover::new()),
             handover_counts: Arc::default(),
             federation: Arc::default(),
+            screen,
             elsewhere: Arc::default(),
             inbox,
             inbox_dropped: Arc::default(),
@@ -213,6 +185,7 @@ impl RegionShared {
         doc["failover"] = self.failover.report(now);
         doc["foreign_age_ms"] = self.foreign_ages.report();
         doc["published_bytes"] = self.published_bytes.load(Relaxed).into();
+        doc["peer_refused"] = self.screen.report();
         doc
     }
 }
@@ -245,10 +218,10 @@ pub async fn start(
     tokio::spawn(tokens::watch(session.clone(), keys, shared.failover.clone(), claim));
     for name in neighbours {
         let key = state_key(&options.prefix, name);
-        let (table, expected) = (shared.foreign.clone(), name.clone());
+        let (table, screen, expected) = (shared.foreign.clone(), shared.screen.clone(), name.clone());
         let subscriber = session
             .declare_subscriber(key.as_str())
-            .callback(move |sample| receive(&table, &expected, sample.payload()))
+            .callback(move |sample| receive(&table, &screen, &expected, sample.payload()))
             .await
             .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?;
         subscribers.push(subscriber);
@@ -256,16 +229,18 @@ pub async fn start(
     // Every other region's states, kept as received for the dashboard (`elsewhere`).
     let key = format!("{}/region/*/state", options.prefix);
     let (elsewhere, prefix, own) = (shared.elsewhere.clone(), options.prefix.clone(), shared.name.clone());
+    let screen = shared.screen.clone();
     let subscriber = session
         .declare_subscriber(key.as_str())
         .callback(move |sample| {
             let name = elsewhere::region_of_key(&prefix, sample.key_expr().as_str());
             let payload = sample.payload();
-            let plain = payload.len() <= MAX_PAYLOAD_BYTES && payload.len() >= wire::HEADER_BYTES;
+            let plain = payload.len() <= MAX_STATE_BYTES && payload.len() >= wire::HEADER_BYTES;
             let mut head = [0u8; 2];
             let states = std::io::Read::read_exact(&mut payload.reader(), &mut head).is_ok()
                 && head == [wire::WIRE_VERSION, wire::KIND_REGION_STATES];
-            if let Some(name) = name.filter(|n| *n != own && plain && states) {
+            // Only the deployment's regions: memory for their messages stays bounded.
+            if let Some(name) = name.filter(|n| *n != own && plain && states && screen.knows(n)) {
                 // Kept as Zenoh's buffers (a reference, no copy) until a stream client needs it.
                 elsewhere.put(name, payload.clone(), Instant::now());
             }
@@ -273,17 +248,28 @@ pub async fn start(
         .await
         .map_err(|e| anyhow::anyhow!("subscribing to {key}: {e}"))?;
     subscribers.push(subscriber);
-    let key = handover_key(&options.prefix, &shared.name);
-    let (inbox, dropped) = (shared.inbox.clone(), shared.inbox_dropped.clone());
+    // Messages to this region, one key per sender (`.../handover/SENDER`): the access control lets
+    // only the sender's certificate put there, and a message must name the sender of its key.
+    let key = format!("{}/region/{}/handover/*", options.prefix, shared.name);
+    let (inbox, dropped, prefix) =
+        (shared.inbox.clone(), shared.inbox_dropped.clone(), options.prefix.clone());
+    let own = shared.name.clone();
     let subscriber = session
         .declare_subscriber(key.as_str())
         .callback(move |sample| {
+            let sender = sample.key_expr().as_str().rsplit('/').next().unwrap_or_default();
             let payload = sample.payload();
             let message = (payload.len() <= handover::MAX_MESSAGE_BYTES)
                 .then(|| serde_json::from_slice::<handover::Message>(&payload.to_bytes()).ok())
-                .flatten();
-            // A malformed message, or one the loop has no room for, is dropped: the protocol
-            // makes every message but a release again, and sends a release only with room.
+                .flatten()
+                .filter(|m| {
+                    m.from() == sender
+                        && m.to() == own
+                        && sample.key_expr().as_str() == handover_key(&prefix, &own, sender)
+                });
+            // A malformed message, one whose sender is not its key's, or one the loop has no room
+            // for, is dropped: the protocol makes every message but a release again, and sends a
+            // release only with room.
             if message.is_none_or(|m| inbox.try_send(m).is_err()) {
                 dropped.fetch_add(1, Relaxed);
             }
@@ -293,7 +279,12 @@ pub async fn start(
     subscribers.push(subscriber);
     let outbox = shared.outbox.lock().unwrap_or_else(PoisonError::into_inner).take();
     if let Some(outbox) = outbox {
-        tokio::spawn(publish::send_handover(session.clone(), options.prefix.clone(), outbox));
+        tokio::spawn(publish::send_handover(
+            session.clone(),
+            options.prefix.clone(),
+            shared.name.clone(),
+            outbox,
+        ));
     }
     let key = state_key(&options.prefix, &shared.name);
     let publisher = session
@@ -317,14 +308,20 @@ pub async fn start(
     Ok(RegionLink { session, _subscribers: subscribers })
 }
 
-/// Decodes a neighbour's payload into the table (on Zenoh's thread); what cannot be used is counted.
-fn receive(table: &ForeignTable, expected: &str, payload: &zenoh::bytes::ZBytes) {
+/// Screens and decodes a neighbour's payload into the table (on Zenoh's thread); what cannot be used
+/// is counted (`refused`, and by reason in `peer_refused`).
+fn receive(table: &ForeignTable, screen: &screen::Screen, expected: &str, payload: &zenoh::bytes::ZBytes) {
     let at = Instant::now();
-    if payload.len() > MAX_PAYLOAD_BYTES {
+    if payload.len() > MAX_STATE_BYTES || screen.admit(expected, at).is_err() {
         table.refuse();
         return;
     }
-    match wire::decode(&payload.to_bytes()) {
+    let states = wire::decode(&payload.to_bytes()).map_err(|e| e.to_string()).and_then(|states| {
+        let listed = states.uavs.iter().map(|u| (u.id.as_str(), u.p.map(f64::from)));
+        screen.check_states(expected, listed).map_err(|e| e.to_string())?;
+        Ok(states)
+    });
+    match states {
         Ok(states) => {
             table.accept(expected, states, at);
         }

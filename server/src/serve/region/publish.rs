@@ -51,15 +51,16 @@ pub(super) async fn publish(
     }
 }
 
-/// Puts each handover message the loop queues on its region's key, waiting (congestion control:
+/// Puts each handover message the loop queues on its region's key from this one, waiting (congestion control:
 /// block) rather than dropping: a release must arrive.
 pub(super) async fn send_handover(
     session: zenoh::Session,
     prefix: String,
+    own: String,
     mut outbox: tokio::sync::mpsc::Receiver<handover::Message>,
 ) {
     while let Some(message) = outbox.recv().await {
-        let key = handover_key(&prefix, message.to());
+        let key = handover_key(&prefix, message.to(), &own);
         let Ok(payload) = serde_json::to_vec(&message) else { continue };
         let put = session.put(key.as_str(), payload).congestion_control(zenoh::qos::CongestionControl::Block);
         if let Err(e) = put.await {

@@ -121,6 +121,17 @@ impl ForeignTable {
         out.truncate(n);
     }
 
+    /// The UAVs the neighbours command now, with the region that commands each.
+    pub fn commanded_by(&self) -> HashMap<String, String> {
+        let regions = self.lock();
+        regions
+            .iter()
+            .flat_map(|(name, h)| {
+                h.uavs.iter().filter(|u| !u.ghost).map(move |u| (u.id.clone(), name.clone()))
+            })
+            .collect()
+    }
+
     /// The UAVs the neighbours command now (their last messages' records that are not ghosts).
     pub fn commanded_ids(&self) -> std::collections::HashSet<String> {
         let regions = self.lock();

@@ -1,6 +1,6 @@
 //! The fleet loop's failover step between two ticks (`failover` has the rules): a standby holds
 //! the releases sent to its region and commands nothing; a takeover adopts the mirror's UAVs; an
-//! owner that gives way drops its fleet. Only plain data moves here; nothing waits.
+//! owner that gives way stops commanding its fleet and keeps its records. Only plain data moves here; nothing waits.
 
 use super::Handover;
 use super::ownership::wall_now;
@@ -26,12 +26,18 @@ impl Engine {
     }
 
     /// Another owner is ahead: this server stops commanding every UAV at once and closes their
-    /// links without landing them (the new owner flies them on).
+    /// links without landing them (the new owner flies them on); it keeps their records.
     fn give_way(&mut self, handover: &mut Handover) {
         let at = wall_now();
+        let mut records = Vec::new();
         for mut uav in self.fleet.take_all() {
             uav.link.detach();
             handover.ownership.close(&uav.id, at, "gave_way");
+            records.push((uav.id.clone(), super::handover::record(&uav)));
+        }
+        tracing::warn!("gave way: {} UAVs' records kept for a later takeover", records.len());
+        if let Some(region) = &self.region {
+            region.failover.keep_given_away(records, Instant::now());
         }
         handover.forget_all();
     }
@@ -43,14 +49,32 @@ impl Engine {
             .mirror()
             .map(|(mirror, _)| mirror.uavs.iter().map(|u| (u.id.clone(), u.uav.clone())).collect())
             .unwrap_or_default();
-        records.extend(handover.take_held());
+        // What this server gave way with, when no owner since left a mirror of it (a mirror's
+        // records come first, so an id in both is taken from the mirror).
+        records.extend(failover.take_given_away());
+        // Releases a neighbour sent while this server was a standby answer offers only the dead
+        // owner saw: each must be safe here, like an offer (a neighbour's message is untrusted).
+        let held = handover.take_held();
+        let refused = self.region.as_ref().map(|r| r.screen.clone());
+        for (id, uav) in held {
+            match self.fleet.check_start(&uav.state(), "state") {
+                Ok(()) => records.push((id, uav)),
+                Err(e) => {
+                    tracing::warn!("takeover: the release of `{id}` held as a standby is not safe here: {e}");
+                    if let Some(screen) = &refused {
+                        super::screen::PeerRefusals::count(&screen.refused.unsafe_uav);
+                    }
+                }
+            }
+        }
         // The neighbours' ghosts are not theirs: a ghost is a UAV released (here, maybe).
         let listed = self.region.as_ref().map(|r| r.foreign.commanded_ids()).unwrap_or_default();
         let mut flown: HashSet<String> = self.fleet.uavs().iter().map(|u| u.id.clone()).collect();
         let (mut adopted, mut skipped) = (0usize, 0usize);
         for (id, uav) in records {
             let theirs = listed.contains(&id) || failover.released_away(&id, now);
-            if theirs || flown.contains(&id) || !uav.state().is_finite() || flown.len() >= self.max_uavs {
+            let valid = uav::check_uav_id(&id).is_ok() && uav.state().is_finite();
+            if theirs || flown.contains(&id) || !valid || flown.len() >= self.max_uavs {
                 skipped += 1;
                 continue;
             }

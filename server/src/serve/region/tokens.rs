@@ -118,7 +118,12 @@ pub async fn watch(session: zenoh::Session, keys: RegionKeys, failover: Arc<Fail
                     Ok(handle) => {
                         // The token is out before the loop commands anything.
                         failover.became_owner(epoch, true);
-                        tracing::warn!("region {}: took over as owner (epoch {epoch})", keys.name);
+                        tracing::warn!(
+                            "region {}: took over as owner (epoch {epoch}); no owner token left (the last \
+                             seen: epoch {})",
+                            keys.name,
+                            claim.tokens.max_epoch
+                        );
                         claim.owner_token = Some((token, handle));
                         claim.standby_token = None;
                     }
@@ -133,9 +138,18 @@ pub async fn watch(session: zenoh::Session, keys: RegionKeys, failover: Arc<Fail
             }
             Decision::GiveWay => {
                 failover.became_standby();
+                // Who caused it: only a server holding this region's certificate can declare an
+                // owner token under its keys (the access control), named by its incarnation.
+                let ahead: Vec<String> = claim
+                    .tokens
+                    .owners
+                    .iter()
+                    .map(|t| format!("epoch {} by {}", t.epoch, t.incarnation))
+                    .collect();
                 tracing::warn!(
-                    "region {}: another owner is ahead; this server is now its standby",
-                    keys.name
+                    "region {}: another owner is ahead ({}); this server is now its standby",
+                    keys.name,
+                    ahead.join(", ")
                 );
                 claim.owner_token = None;
                 match declare(&session, keys.standby(&failover.incarnation)).await {
@@ -178,7 +192,7 @@ pub async fn follow(
         .map_err(zerr(&key))?;
     subscribers.push(subscriber);
     for neighbour in neighbours {
-        let key = handover_key(&keys.prefix, neighbour);
+        let key = handover_key(&keys.prefix, neighbour, &keys.name);
         let (seen, own) = (failover.clone(), keys.name.clone());
         let subscriber = session
             .declare_subscriber(key.as_str())
