@@ -96,18 +96,27 @@ async fn a_rogue_peer_without_a_certificate_or_with_another_regions_cannot_comma
     let scenario = scenario.to_str().unwrap();
     let (west_endpoint, east_endpoint) = (free_endpoint(), free_endpoint());
     let with_token = ["--token", TOKEN];
-    let (_west, west, _) = serve(
+    let (mut west_process, west, _) = serve(
         &[&["--scenario", scenario, "--region", "west", "--zenoh-listen", &west_endpoint][..], &with_token]
             .concat(),
     );
     let east_args = ["--scenario", scenario, "--region", "east", "--zenoh-listen", &east_endpoint];
     let (_east, east, _) =
         serve(&[&east_args[..], &["--zenoh-connect", &west_endpoint], &with_token].concat());
+    // West's hot standby: the rogue's forged owner token, standby token and mirror aim at it.
+    let standby_args = ["--scenario", scenario, "--standby-for", "west", "--zenoh-connect", &west_endpoint];
+    let (_standby, standby, _) =
+        serve(&[&standby_args[..], &["--zenoh-connect", &east_endpoint], &with_token].concat());
     let both = format!("{west_endpoint},{east_endpoint}");
-    // East sees west's UAVs before anything starts.
+    // East sees west's UAVs, and the standby mirrors them, before anything starts.
     let deadline = std::time::Instant::now() + std::time::Duration::from_secs(10);
-    while get(east, "/api/metrics").await["region"]["heard"]["west"]["uavs"] != 2 {
-        assert!(std::time::Instant::now() < deadline, "east never heard west");
+    while get(east, "/api/metrics").await["region"]["heard"]["west"]["uavs"] != 2
+        || get(standby, "/api/metrics").await["region"]["failover"]["mirror_uavs"] != 2
+    {
+        assert!(
+            std::time::Instant::now() < deadline,
+            "east never heard west, or the standby never mirrored it"
+        );
         tokio::time::sleep(std::time::Duration::from_millis(100)).await;
     }
 
@@ -130,6 +139,7 @@ async fn a_rogue_peer_without_a_certificate_or_with_another_regions_cannot_comma
         "east".into(),
     ];
     let before = get(west, "/api/metrics").await["region"].clone();
+    let missed_before = get(west, "/api/metrics").await["missed_ticks"].as_u64().unwrap();
     let seen = attack(&python, &both, &cert, east).await;
     assert_eq!(seen["connected"], true, "{seen}");
     // West checks the operator's token itself: a forwarded change or audit read without it is 401;
@@ -156,6 +166,16 @@ async fn a_rogue_peer_without_a_certificate_or_with_another_regions_cannot_comma
         "{after}"
     );
     assert_eq!(after["heard"]["east"]["uavs"], 2, "{after}");
+    // The 12 MiB message of 300,000 UAVs was refused before decoding: no tick stretched.
+    let missed = get(west, "/api/metrics").await["missed_ticks"].as_u64().unwrap() - missed_before;
+    assert!(missed <= 1, "{missed} ticks missed during the attack");
+    // The standby kept the real owner's mirror and its role; the invented UAV is nowhere.
+    let failover = get(standby, "/api/metrics").await["region"]["failover"].clone();
+    assert_eq!(
+        (failover["role"].clone(), failover["mirror_uavs"].clone()),
+        (json!("standby"), json!(2)),
+        "{failover}"
+    );
     // The forwarded request that was refused is in west's own audit log, with the region it came
     // through; the operator's token still works from east.
     let bearer = format!("Bearer {TOKEN}");
@@ -168,6 +188,17 @@ async fn a_rogue_peer_without_a_certificate_or_with_another_regions_cannot_comma
         e["route"] == "/api/uavs/w1/land" && e["remote"].as_str().unwrap_or("").ends_with("via region east")
     });
     assert!(forwarded, "the land forwarded from east is audited at west: {entries}");
+    // The forged standby token did not keep the real standby from taking over: kill -9 of west.
+    west_process.kill();
+    let killed = std::time::Instant::now();
+    while get(standby, "/api/metrics").await["region"]["failover"]["role"] != "owner" {
+        assert!(killed.elapsed() < std::time::Duration::from_secs(2), "the standby never took over");
+        tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+    }
+    eprintln!("takeover seen {:.3} s after the kill", killed.elapsed().as_secs_f64());
+    tokio::time::sleep(std::time::Duration::from_millis(200)).await;
+    let flown = uav_ids(&get(standby, "/api/state?scope=region").await);
+    assert_eq!(flown, ["w1", "w2"], "the standby flies west's UAVs and nothing invented");
 }
 
 #[test]

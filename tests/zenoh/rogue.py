@@ -103,12 +103,17 @@ def main():
             (t, "selfish", [19.0, -0.5]),
         ]):
             session.put(f"{p}/region/{t}/handover/{sender}", release(p, t, sender, uav_id, pos))
-        # 4. Forged states: a wall of phantoms as the target and as the sender, far away and fast.
+        # 4. Oversized and invented: one message of 300,000 UAVs (12 MiB) as the sender, and 200
+        #    regions the road does not have.
+        session.put(f"{p}/region/{me}/state", phantom_states(me, 300_000, 9000.0))
+        for k in range(200):
+            session.put(f"{p}/region/invented{k}/state", phantom_states(f"invented{k}", 2_000, 0.0))
+        # 5. Forged states: a wall of phantoms as the target and as the sender, far away and fast.
         for _ in range(50):
             session.put(f"{p}/region/{t}/state", phantom_states(t, 55, 18.0))
             session.put(f"{p}/region/{me}/state", phantom_states(me, 55, 9000.0))
             time.sleep(0.005)
-        # 5. A rogue queryable on the target's API.
+        # 6. A rogue queryable on the target's API.
         queryable = session.declare_queryable(
             f"{p}/region/{t}/api/*",
             lambda q: q.reply(q.key_expr, json.dumps({"status": 200, "body": "{\"rogue\": true}"})),
