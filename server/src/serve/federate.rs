@@ -294,38 +294,42 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
         Ok(q) => q,
         Err(e) => return Some(ApiError::invalid("query", e.to_string()).into_response()),
     };
-    // The operator's authority: this region checks the token itself, as for its own clients.
-    let change = asked.deploy.is_some()
-        || Method::from_bytes(asked.method.as_bytes()).is_ok_and(|m| super::guard::is_change(&m))
-        || asked.uri.split('?').next() == Some("/api/audit");
-    if let Some(token) = &app.token
-        && change
-    {
-        let given = asked.authorization.as_deref().and_then(|a| axum::http::HeaderValue::from_str(a).ok());
-        if !super::auth::authorised(given.as_ref(), token) {
+    let given = asked.authorization.as_deref().and_then(|a| axum::http::HeaderValue::from_str(a).ok());
+    if let Some(step) = asked.deploy {
+        // A deployment step is no API route: its token is checked here (every other request
+        // passes the API's own token check below).
+        if let Some(token) = &app.token
+            && !super::auth::authorised(given.as_ref(), token)
+        {
             let message = "this server needs `Authorization: Bearer <token>` for changes";
             return Some(ApiError::new(StatusCode::UNAUTHORIZED, "unauthorized", message).into_response());
         }
-    }
-    if let Some(step) = asked.deploy {
         let own = app.region.as_ref().map(|r| r.name.clone()).unwrap_or_default();
         return Some(super::deploy::answer(app, &own, step).await);
     }
     if let Some(id) = asked.uav.as_deref().filter(|id| !flown_here(app, id)) {
         return Some(ApiError::unknown_uav(id).into_response());
     }
-    let request = Request::builder()
+    let mut request = Request::builder()
         .method(asked.method.as_str())
         .uri(asked.uri.as_str())
-        .header(header::CONTENT_TYPE, "application/json")
-        .extension(super::audit::Forwarded { region: asker.to_string(), client: asked.client })
-        .body(Body::from(asked.body));
-    let Ok(request) = request else {
+        .header(header::CONTENT_TYPE, "application/json");
+    if let Some(given) = given {
+        request = request.header(header::AUTHORIZATION, given);
+    }
+    // The operator's address stands for the client's: wrong tokens count against its network.
+    if let Some(client) = asked.client.as_deref().and_then(|c| c.parse::<std::net::SocketAddr>().ok()) {
+        request = request.extension(axum::extract::ConnectInfo(client));
+    }
+    let forwarded = super::audit::Forwarded { region: asker.to_string(), client: asked.client };
+    let Ok(request) = request.extension(forwarded).body(Body::from(asked.body)) else {
         return Some(ApiError::invalid("query", "not a request").into_response());
     };
-    // Audited here, where it is applied (in the change's own transaction), naming the region and
+    // The operator's authority is checked here, by the API's own token check and rate limit, and
+    // the change audited here, where it is applied (in its own transaction), naming the region and
     // the operator's address.
     let router = api::router()
+        .layer(axum::middleware::from_fn_with_state(app.clone(), super::auth::require_token))
         .layer(axum::middleware::from_fn_with_state(app.clone(), super::audit::record))
         .with_state(app.clone());
     // The router's error type is Infallible.
