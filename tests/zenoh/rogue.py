@@ -45,7 +45,7 @@ def ask(session, key, request):
     return None
 
 
-def release(prefix, target, sender, uav_id, p):
+def release(target, sender, uav_id, p):
     return json.dumps({
         "kind": "release", "from": sender, "to": target, "id": uav_id, "seq": 1,
         "uav": {"p": p, "v": [0.0, 0.0], "goal": None, "policy": "pd", "link": None, "airborne": True},
@@ -102,7 +102,7 @@ def main():
             (me, "dup", [19.0, 0.5]),
             (t, "selfish", [19.0, -0.5]),
         ]):
-            session.put(f"{p}/region/{t}/handover/{sender}", release(p, t, sender, uav_id, pos))
+            session.put(f"{p}/region/{t}/handover/{sender}", release(t, sender, uav_id, pos))
         # 4. Oversized and invented: one message of 300,000 UAVs (12 MiB) as the sender, and 200
         #    regions the road does not have.
         session.put(f"{p}/region/{me}/state", phantom_states(me, 300_000, 9000.0))

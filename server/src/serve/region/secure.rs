@@ -78,54 +78,35 @@ pub fn check_endpoints<'a>(
 /// The access-control section for a deployment of `regions` under `prefix` (see the module
 /// documentation).
 pub fn access_control(prefix: &str, regions: &[String]) -> Value {
+    // An allow rule: its id, the messages and flow it allows, on one key expression.
+    let rule = |id: String, messages: &[&str], flow: &str, key: String| json!({"id": id, "messages": messages, "flows": [flow], "permission": "allow", "key_exprs": [key]});
+    let read = ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"];
     let all = ["put", "delete", "declare_subscriber", "query", "reply", "declare_queryable"]
         .into_iter()
         .chain(["liveliness_token", "liveliness_query", "declare_liveliness_subscriber"])
         .collect::<Vec<_>>();
     let mut rules = vec![
-        json!({
-            "id": "read",
-            "messages": ["declare_subscriber", "declare_liveliness_subscriber", "liveliness_query"],
-            "flows": ["ingress"],
-            "permission": "allow",
-            "key_exprs": [format!("{prefix}/**")],
-        }),
-        json!({
-            "id": "egress",
-            "messages": all,
-            "flows": ["egress"],
-            "permission": "allow",
-            "key_exprs": [format!("{prefix}/**")],
-        }),
+        rule("read".into(), &read, "ingress", format!("{prefix}/**")),
+        rule("egress".into(), &all, "egress", format!("{prefix}/**")),
     ];
     let mut subjects = Vec::new();
     let mut policies = Vec::new();
     for region in regions {
-        rules.push(json!({
-            "id": format!("own-{region}"),
-            "messages": ["put", "delete", "declare_queryable", "reply", "liveliness_token"],
-            "flows": ["ingress"],
-            "permission": "allow",
-            "key_exprs": [format!("{prefix}/region/{region}/**")],
-        }));
-        rules.push(json!({
-            "id": format!("handover-from-{region}"),
-            "messages": ["put"],
-            "flows": ["ingress"],
-            "permission": "allow",
-            "key_exprs": [format!("{prefix}/region/*/handover/{region}")],
-        }));
-        rules.push(json!({
-            "id": format!("ask-from-{region}"),
-            "messages": ["query"],
-            "flows": ["ingress"],
-            "permission": "allow",
-            "key_exprs": [format!("{prefix}/region/*/api/{region}")],
-        }));
+        let own = ["put", "delete", "declare_queryable", "reply", "liveliness_token"];
+        let (own_id, handover_id, ask_id) =
+            (format!("own-{region}"), format!("handover-from-{region}"), format!("ask-from-{region}"));
+        rules.push(rule(own_id.clone(), &own, "ingress", format!("{prefix}/region/{region}/**")));
+        rules.push(rule(
+            handover_id.clone(),
+            &["put"],
+            "ingress",
+            format!("{prefix}/region/*/handover/{region}"),
+        ));
+        rules.push(rule(ask_id.clone(), &["query"], "ingress", format!("{prefix}/region/*/api/{region}")));
         subjects.push(json!({ "id": format!("region-{region}"), "cert_common_names": [region] }));
         policies.push(json!({
             "id": format!("as-{region}"),
-            "rules": [format!("own-{region}"), format!("handover-from-{region}"), format!("ask-from-{region}")],
+            "rules": [own_id, handover_id, ask_id],
             "subjects": [format!("region-{region}")],
         }));
     }
