@@ -25,9 +25,9 @@ struct Running {
     _link: region::RegionLink,
 }
 
-fn free_endpoint() -> anyhow::Result<String> {
+fn free_endpoint(protocol: &str) -> anyhow::Result<String> {
     let port = std::net::TcpListener::bind("127.0.0.1:0")?.local_addr()?.port();
-    Ok(format!("tls/127.0.0.1:{port}"))
+    Ok(format!("{protocol}/127.0.0.1:{port}"))
 }
 
 async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
@@ -45,11 +45,14 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             .collect(),
     );
     let scenario = scenario.validate().context("the trunk road's regions")?;
-    let endpoints: Vec<String> = (0..count).map(|_| free_endpoint()).collect::<anyhow::Result<_>>()?;
+    let endpoints: Vec<String> = (0..count)
+        .map(|_| free_endpoint(if args.zenoh_insecure { "tcp" } else { "tls" }))
+        .collect::<anyhow::Result<_>>()?;
     let seconds = args.seconds.max(1.0);
     say!(
         "airroads bench regions: {n} UAVs on the trunk road ({segments} segments) over {count} regions, \
-         one process, Zenoh over loopback TLS (mutual, access control), policy {}, {seconds} s measured after 3 s",
+         one process, Zenoh over loopback {}, policy {}, {seconds} s measured after 3 s",
+        if args.zenoh_insecure { "plain TCP (--zenoh-insecure)" } else { "TLS (mutual, access control)" },
         args.policy
     );
     // The deployment's certificates, as `airroads certs` makes them.
@@ -75,11 +78,16 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             connect: endpoints[..k].to_vec(),
             config_file: None,
             prefix: "bench".into(),
-            transport: region::secure::Transport::Tls(region::secure::TlsFiles {
-                ca: certs.join(region::certs::CA_CERT),
-                cert: region::certs::server_files(&certs, &name, "primary").0,
-                key: region::certs::server_files(&certs, &name, "primary").1,
-            }),
+            transport: if args.zenoh_insecure {
+                region::secure::Transport::InsecureLoopback
+            } else {
+                let (cert, key) = region::certs::server_files(&certs, &name, "primary");
+                region::secure::Transport::Tls(region::secure::TlsFiles {
+                    ca: certs.join(region::certs::CA_CERT),
+                    cert,
+                    key,
+                })
+            },
             regions: names.clone(),
         };
         let session = region::open(&options).await?;

@@ -334,6 +334,9 @@ pub struct BenchArgs {
     /// Region servers of the deployment (`regions`).
     #[arg(long, default_value_t = 4, value_parser = clap::value_parser!(u64).range(2..=16))]
     pub regions: u64,
+    /// Join the regions over plain TCP instead of TLS with certificates (`regions`; loopback).
+    #[arg(long = "zenoh-insecure")]
+    pub zenoh_insecure: bool,
 }
 
 /// Benchmarks.
