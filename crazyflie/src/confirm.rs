@@ -38,6 +38,9 @@ pub const STATUS_VARIABLES: [&str; 2] = ["supervisor.info", "stabilizer.thrust"]
 /// Below this height (m) a Crazyflie is on the ground.
 pub const ON_GROUND_M: f64 = 0.1;
 
+/// A take-off is done within this distance of the flight altitude (m).
+pub const TAKEOFF_TOLERANCE_M: f64 = 0.15;
+
 /// Below this collective thrust (PWM units of 65535) the motors are off.
 pub const THRUST_OFF: f64 = 1.0;
 
@@ -77,6 +80,18 @@ impl Status {
         let off = self.thrust_off() == Some(true) || self.supervisor().is_some_and(|s| !s.is_flying());
         z < ON_GROUND_M && off
     }
+
+    /// A take-off to `altitude` is confirmed at estimated height `z` (m): within
+    /// [`TAKEOFF_TOLERANCE_M`] of it, with the motors running and (when logged) the supervisor
+    /// flying and not locked. Nothing heard yet confirms nothing.
+    pub fn confirms_airborne(&self, z: f64, altitude: f64) -> bool {
+        let heard = self.info.is_some() || self.thrust.is_some();
+        let supervisor_flying = self.supervisor().is_none_or(|s| s.is_flying() && !s.is_locked());
+        heard
+            && supervisor_flying
+            && self.thrust_off() != Some(true)
+            && (z - altitude).abs() <= TAKEOFF_TOLERANCE_M
+    }
 }
 
 #[cfg(test)]
@@ -111,5 +126,22 @@ mod tests {
         assert!(!s(Some(FLYING), None).confirms_landed(0.02), "is-flying still set, thrust not logged");
         assert!(!s(Some(0), Some(0.0)).confirms_landed(0.5), "motors off but not down (falling)");
         assert!(!Status::default().confirms_landed(0.0), "nothing heard yet");
+    }
+
+    #[test]
+    fn a_take_off_needs_the_height_the_motors_and_the_supervisor() {
+        let s = |info, thrust| Status { info, thrust };
+        assert!(s(Some(FLYING), Some(36000.0)).confirms_airborne(0.95, 1.0));
+        assert!(s(Some(FLYING), None).confirms_airborne(1.1, 1.0));
+        assert!(s(None, Some(36000.0)).confirms_airborne(1.0, 1.0), "older firmware: thrust alone");
+        assert!(!s(Some(FLYING), Some(36000.0)).confirms_airborne(0.5, 1.0), "still climbing");
+        assert!(!s(Some(FLYING), Some(36000.0)).confirms_airborne(1.3, 1.0), "overshot");
+        assert!(
+            !s(Some(bits::AUTO_ARM | bits::CAN_FLY), Some(36000.0)).confirms_airborne(1.0, 1.0),
+            "not flying"
+        );
+        assert!(!s(Some(FLYING | bits::IS_LOCKED), Some(36000.0)).confirms_airborne(1.0, 1.0), "locked");
+        assert!(!s(Some(FLYING), Some(0.0)).confirms_airborne(1.0, 1.0), "motors off");
+        assert!(!Status::default().confirms_airborne(1.0, 1.0), "nothing heard yet");
     }
 }

@@ -2,10 +2,12 @@
 //! [`CrazyflieLink`], the fleet's [`links::Link`] to one Crazyflie.
 
 pub mod confirm;
+mod prepare;
 mod relay;
 mod session;
 pub mod transport;
 pub mod udp;
 
-pub use relay::{CrazyflieLink, RelayConfig, Sample, Setpoint, Shared, StopHandle, Urgent};
+pub use prepare::CONTROLLER_PARAM;
+pub use relay::{Controller, CrazyflieLink, RelayConfig, Sample, Setpoint, Shared, StopHandle, Urgent};
 pub use session::STATE_VARIABLES;

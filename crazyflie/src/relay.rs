@@ -43,6 +43,39 @@ pub struct RelayConfig {
     /// A landing not confirmed within `land_s` plus this margin is given up and reported (s). It
     /// covers the firmware's 2 s before it stops calling itself flying once the thrust is idle.
     pub land_margin_s: f64,
+    /// The firmware controller set on connect (`stabilizer.controller`, read back), or `None` to
+    /// keep the Crazyflie's own. The full-state setpoints need one that follows their velocity and
+    /// acceleration feed-forward: Mellinger ([`Controller::Mellinger`]); the default PID follows
+    /// only their position.
+    pub controller: Option<Controller>,
+    /// A take-off the firmware has not confirmed (flying, within 0.15 m of the altitude) within
+    /// `takeoff_s` plus this margin is reported and landed (s).
+    pub takeoff_margin_s: f64,
+}
+
+/// The firmware's controllers, by their `stabilizer.controller` values.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Controller {
+    /// PID (1), the firmware's default: follows a full-state setpoint's position only.
+    Pid = 1,
+    /// Mellinger (2): follows position, velocity and acceleration.
+    Mellinger = 2,
+}
+
+impl Controller {
+    /// The value of `stabilizer.controller`.
+    pub fn value(self) -> u8 {
+        self as u8
+    }
+
+    /// Parses `pid` or `mellinger`.
+    pub fn parse(name: &str) -> Option<Self> {
+        match name {
+            "pid" => Some(Self::Pid),
+            "mellinger" => Some(Self::Mellinger),
+            _ => None,
+        }
+    }
 }
 
 impl Default for RelayConfig {
@@ -61,6 +94,8 @@ impl Default for RelayConfig {
             resend_every: 0.15,
             stop_confirm_s: 3.0,
             land_margin_s: 3.0,
+            controller: Some(Controller::Mellinger),
+            takeoff_margin_s: 3.0,
         }
     }
 }
@@ -92,6 +127,11 @@ pub struct Setpoint {
 }
 
 impl RelayConfig {
+    /// How long a take-off may wait for the firmware's confirmation before it is given up.
+    pub fn takeoff_bound(&self) -> Duration {
+        Duration::from_secs_f64((self.takeoff_s + self.takeoff_margin_s).clamp(0.0, 3600.0))
+    }
+
     /// How long a request may wait for the Crazyflie's confirmation before it is given up.
     pub fn confirm_bound(&self, request: Urgent) -> Duration {
         let seconds = match request {

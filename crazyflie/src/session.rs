@@ -5,10 +5,11 @@
 //! supervisor records it, waits and reconnects.
 
 use crate::confirm::{ON_GROUND_M, STATUS_VARIABLES, Status};
+use crate::prepare::{SharedTocCache, ready_for_take_off, set_controller};
 use crate::relay::{RelayConfig, Setpoint, Shared, Urgent};
 use crate::transport::open;
+use crazyflie_lib::Crazyflie;
 use crazyflie_lib::subsystems::log::LogPeriod;
-use crazyflie_lib::{Crazyflie, TocCache};
 use links::LinkPhase;
 use std::sync::Arc;
 use std::time::Duration;
@@ -98,7 +99,7 @@ pub async fn supervise(uri: String, config: RelayConfig, shared: Arc<Shared>, ch
 /// The sessions of [`supervise`], one after another.
 async fn run_sessions(uri: String, config: RelayConfig, shared: Arc<Shared>, mut channels: Channels) {
     let mut intent = Intent::Fly;
-    let cache = MemoryTocCache::default();
+    let cache = SharedTocCache::process();
     let mut connected_before = false;
     let mut failures = 0u32;
     loop {
@@ -156,7 +157,7 @@ async fn session(
     shared: Arc<Shared>,
     mut ch: Channels,
     mut intent: Intent,
-    cache: MemoryTocCache,
+    cache: SharedTocCache,
     limit: f64,
 ) -> (End, Channels, Intent, bool) {
     let connect = async {
@@ -185,23 +186,6 @@ async fn session(
     // is dropped in any case.
     let _ = timeout(DISCONNECT_WAIT, cf.disconnect()).await;
     (end, ch, intent, true)
-}
-
-/// The tables of contents of one Crazyflie, kept across its reconnections.
-#[derive(Clone, Default)]
-struct MemoryTocCache(Arc<std::sync::Mutex<std::collections::HashMap<Vec<u8>, String>>>);
-
-impl TocCache for MemoryTocCache {
-    fn get_toc(&self, key: &[u8]) -> Option<String> {
-        self.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner).get(key).cloned()
-    }
-
-    fn store_toc(&self, key: &[u8], toc: &str) {
-        self.0
-            .lock()
-            .unwrap_or_else(std::sync::PoisonError::into_inner)
-            .insert(key.to_vec(), toc.to_string());
-    }
 }
 
 async fn start_log(
@@ -324,6 +308,24 @@ fn check_confirmed(shared: &Shared, status: &Status, pending: &mut Option<Pendin
     *pending = None;
 }
 
+/// Sets the phase to flying once the firmware confirms the take-off (then nothing waits for its
+/// deadline any more).
+fn check_airborne(
+    shared: &Shared,
+    status: &Status,
+    config: RelayConfig,
+    intent: Intent,
+    until: &mut Option<Instant>,
+) {
+    if shared.phase() != LinkPhase::TakingOff || intent != Intent::Fly {
+        return;
+    }
+    if shared.sample().is_some_and(|s| status.confirms_airborne(s.p[2], config.altitude)) {
+        shared.set_phase(LinkPhase::Flying);
+        *until = None;
+    }
+}
+
 /// Flies one connected session; returns when the connection is lost or the link is dropped and
 /// the Crazyflie is down (or a stop or landing was given up on).
 async fn fly(
@@ -360,11 +362,19 @@ async fn fly(
     let on_ground = p[2] < ON_GROUND_M;
     let request = match (*intent, on_ground) {
         (Intent::Fly, true) if !ch.urgent.is_closed() => {
+            if let Some(controller) = config.controller
+                && let Err(e) = set_controller(cf, controller).await
+            {
+                return End::Lost(e);
+            }
+            if let Err(e) = ready_for_take_off(cf).await {
+                return End::Lost(e);
+            }
             if let Err(e) = hl.take_off(config.altitude as f32, None, config.takeoff_s as f32, None).await {
                 return End::Lost(format!("take-off: {e}"));
             }
             shared.set_phase(LinkPhase::TakingOff);
-            phase_until = Some(Instant::now() + Duration::from_secs_f64(config.takeoff_s + 0.2));
+            phase_until = Some(Instant::now() + config.takeoff_bound());
             None
         }
         (Intent::Fly, false) => {
@@ -443,6 +453,7 @@ async fn fly(
                         shared.set_sample(p, v);
                         last_sample = Instant::now();
                         check_confirmed(shared, &status, &mut pending);
+                        check_airborne(shared, &status, config, *intent, &mut phase_until);
                     }
                 }
                 Err(e) => return End::Lost(format!("log: {e}")),
@@ -451,6 +462,7 @@ async fn fly(
                 Ok(data) => {
                     status = decode_status(&data.data);
                     check_confirmed(shared, &status, &mut pending);
+                    check_airborne(shared, &status, config, *intent, &mut phase_until);
                 }
                 Err(e) => return End::Lost(format!("status log: {e}")),
             },
@@ -496,7 +508,20 @@ async fn fly(
             _ = sleep_until(phase_until.unwrap_or_else(far_future)), if phase_until.is_some() => {
                 phase_until = None;
                 if shared.phase() == LinkPhase::TakingOff && *intent == Intent::Fly {
-                    shared.set_phase(LinkPhase::Flying);
+                    // The firmware never said it was up: bring it down rather than fly it.
+                    let z = shared.sample().map_or(f64::NAN, |s| s.p[2]);
+                    shared.set_error(Some(format!(
+                        "take-off not confirmed after {} s (height {z:.2} m, supervisor.info {}, thrust {})",
+                        config.takeoff_bound().as_secs_f64(),
+                        status.info.map_or("not logged".into(), |i| format!("{i:#06x}")),
+                        status.thrust.map_or("not logged".into(), |t| format!("{t:.0}")),
+                    )));
+                    shared.record_unconfirmed();
+                    *intent = Intent::Land;
+                    match start(cf, config, shared, Urgent::Land).await {
+                        Ok(p) => pending = Some(p),
+                        Err(e) => return End::Lost(e),
+                    }
                 }
             }
         }

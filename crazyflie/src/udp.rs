@@ -12,10 +12,14 @@
 //! ```
 //!
 //! On open it sends the connect datagram `0xF3` and on close `0xF4` (CrazySim's cflib fork).
-//! Like the radio, it sends a null packet (`0xFF`, port 15 channel 3) every keep-alive interval;
-//! the simulator answers null packets, so silence means the link is gone: when nothing at all has
-//! been received for the link timeout the connection is declared disconnected, for good (open a
-//! new one to reconnect). Null packets received are not passed to the client.
+//! Like the radio, it sends a null packet (`0xFF`, port 15 channel 3) every keep-alive interval.
+//! The real firmware does not answer null packets (over the radio the Crazyradio's acknowledgement
+//! does; over UDP nothing does), so the link asks for an answer the firmware does give: a link echo
+//! request (port 15, channel 0, [`ECHO_PROBE`] as payload) on open and whenever nothing has been
+//! received for two keep-alive intervals. Silence therefore means the link is gone: when nothing
+//! at all has been received for the link timeout the connection is declared disconnected, for good
+//! (open a new one to reconnect). Null packets and the echoes of the probe are not passed to the
+//! client.
 
 use std::net::SocketAddr;
 use std::sync::{Arc, Mutex, PoisonError};
@@ -33,6 +37,22 @@ pub const CONNECT_DATAGRAM: u8 = 0xf3;
 pub const CLOSE_DATAGRAM: u8 = 0xf4;
 /// The null packet sent as keep-alive (port 15, channel 3, link-layer bits set).
 pub const NULL_PACKET: u8 = 0xff;
+/// The header of a link echo request (port 15, channel 0): the firmware sends the packet back.
+pub const ECHO_HEADER: u8 = 0xf0;
+/// The payload of the link's own echo requests, told apart from a client's echoes by it.
+pub const ECHO_PROBE: &[u8] = b"airroads-link-probe";
+
+/// The echo request the link sends to get an answer from a firmware that ignores null packets.
+fn probe_datagram() -> Vec<u8> {
+    let mut datagram = vec![ECHO_HEADER];
+    datagram.extend_from_slice(ECHO_PROBE);
+    datagram
+}
+
+/// True for the echo of [`probe_datagram`] (any link-layer bits).
+fn is_probe_echo(datagram: &[u8]) -> bool {
+    datagram.first().is_some_and(|h| h & 0xf3 == ECHO_HEADER) && &datagram[1..] == ECHO_PROBE
+}
 
 /// Errors opening a UDP link.
 #[derive(Debug, thiserror::Error)]
@@ -126,6 +146,7 @@ impl UdpConnection {
         // Connected: only datagrams from the peer are received.
         socket.connect(peer).await?;
         socket.send(&[CONNECT_DATAGRAM]).await?;
+        socket.send(&probe_datagram()).await?;
         let status = Arc::new(Mutex::new(ConnectionStatus::Connecting));
         let (down_tx, down_rx) = mpsc::unbounded_channel();
         let (close_tx, close_rx) = watch::channel(false);
@@ -220,8 +241,9 @@ async fn run(
                     }
                 }
                 let header = buf[0];
-                // Null packets (port 15, channel 3) carry no data: keep-alive answers.
-                if header & 0xf3 == 0xf3 && n == 1 {
+                // Null packets (port 15, channel 3) carry no data: keep-alive answers. The probe's
+                // echo is the link's own.
+                if (header & 0xf3 == 0xf3 && n == 1) || is_probe_echo(&buf[..n]) {
                     continue;
                 }
                 // A receiver gone means the connection object was dropped.
@@ -237,6 +259,9 @@ async fn run(
                     );
                 }
                 let _ = socket.send(&[NULL_PACKET]).await;
+                if last_rx.elapsed() >= 2 * config.keepalive {
+                    let _ = socket.send(&probe_datagram()).await;
+                }
             }
         }
     };
@@ -333,5 +358,46 @@ mod tests {
         assert!(reason.contains("timeout"), "{reason}");
         assert!(conn.recv_packet().await.is_err());
         assert!(conn.send_packet(Packet::new(0, 0, vec![])).await.is_err());
+    }
+
+    /// A peer that answers only echo requests and ignores null packets, as the real firmware
+    /// does over UDP: the link connects and stays up on the echoes, which the client never sees.
+    #[tokio::test]
+    async fn stays_up_on_a_peer_that_answers_only_echoes() {
+        let peer = UdpSocket::bind("127.0.0.1:0").await.expect("bind");
+        let uri = format!("udp://{}", peer.local_addr().expect("addr"));
+        let config =
+            UdpConfig { link_timeout: Duration::from_millis(200), keepalive: Duration::from_millis(20) };
+        let firmware = tokio::spawn(async move {
+            let mut buf = [0u8; 64];
+            let mut nulls = 0;
+            loop {
+                let (n, from) = peer.recv_from(&mut buf).await.expect("recv");
+                match buf[0] {
+                    NULL_PACKET if n == 1 => nulls += 1,
+                    ECHO_HEADER => {
+                        peer.send_to(&buf[..n], from).await.expect("echo");
+                    }
+                    // The client's own packet: answer it once, then stop.
+                    0x51 => {
+                        peer.send_to(&[0x51, 7], from).await.expect("send");
+                        return nulls;
+                    }
+                    _ => {}
+                }
+            }
+        });
+        let conn = UdpConnection::open_with(&uri, config).await.expect("open");
+        assert!(conn.wait_connected(Duration::from_millis(500)).await, "the echo of the probe connects");
+        // Five link timeouts with nothing but echoes coming back.
+        tokio::time::sleep(Duration::from_millis(1000)).await;
+        assert!(matches!(conn.status_now(), ConnectionStatus::Connected));
+        conn.send_packet(Packet::new(5, 1, vec![1])).await.expect("send");
+        let pk = tokio::time::timeout(Duration::from_secs(1), conn.recv_packet())
+            .await
+            .expect("a packet")
+            .expect("ok");
+        assert_eq!((pk.get_port(), pk.get_data().as_slice()), (5, &[7u8][..]), "no echo reaches the client");
+        assert!(firmware.await.expect("peer") > 10, "null packets are still sent");
     }
 }

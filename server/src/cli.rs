@@ -138,6 +138,12 @@ pub struct ServeArgs {
     /// Crazyflie flight altitude (m).
     #[arg(long, default_value_t = 1.0, value_name = "M")]
     pub altitude: f64,
+    /// The firmware controller each Crazyflie is set to on connect (`stabilizer.controller`, read
+    /// back): `mellinger` follows the full-state setpoints' velocity and acceleration; `pid` (the
+    /// firmware's default) only their position; `keep` leaves the Crazyflie's own.
+    #[arg(long = "cf-controller", value_name = "NAME", default_value = "mellinger",
+          value_parser = ["mellinger", "pid", "keep"])]
+    pub cf_controller: String,
     /// Most UAVs the fleet may have; adding more (or a larger scenario) is refused with 422.
     #[arg(long, value_name = "N", default_value_t = airroads::serve::DEFAULT_MAX_UAVS)]
     pub max_uavs: usize,

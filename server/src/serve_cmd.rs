@@ -152,7 +152,9 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
         ServeConfig::new(args.flight.fleet_config(), policies, args.flight.policy.clone(), initial);
     config.token = token;
     config.data_dir = data_dir;
-    config.relay = crazyflie::RelayConfig { altitude: args.altitude, ..Default::default() };
+    // Checked by clap's value parser: `keep` is the only name that is no controller.
+    let controller = crazyflie::Controller::parse(&args.cf_controller);
+    config.relay = crazyflie::RelayConfig { altitude: args.altitude, controller, ..Default::default() };
     // An explicit scenario (or --cfsim) starts over; the database is replaced when the server has
     // started, so a failed start loses nothing.
     config.resume = args.scenario.is_none() && args.cfsim == 0;
