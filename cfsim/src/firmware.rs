@@ -7,7 +7,7 @@ use crate::crtp::{
 };
 use crate::dynamics::Gains;
 use crate::estimator::Estimator;
-use crate::flight::{Flight, FlightMode};
+use crate::flight::{CONTROLLER_PID, Flight, FlightMode};
 use crate::log::{Log, LogVar};
 use crate::logvars::Sources;
 use crate::param::Params;
@@ -35,6 +35,9 @@ pub struct FirmwareSettings {
     /// Arms itself (the Crazyflie 2.1 default); `false` waits for an arming request, like a
     /// firmware built with `CONFIG_MOTORS_REQUIRE_ARMING`.
     pub auto_arm: bool,
+    /// Answer null packets (port 15, channel 3) with an empty one, as a radio's acknowledgement
+    /// would; the real firmware over UDP does not (the default).
+    pub answer_null: bool,
 }
 
 /// The firmware state.
@@ -93,12 +96,17 @@ impl Firmware {
             self.steps += 1;
             self.t = self.steps as f64 * dt;
             let hl = self.hl_enabled();
+            self.flight.controller =
+                self.params.get("stabilizer", "controller").map_or(CONTROLLER_PID, |c| c as u8);
             self.flight.step(self.t, dt, hl, self.supervisor.motors_allowed());
             self.sync_lock();
             if self.steps.is_multiple_of(supervisor_steps) {
                 let locked = self.flight.mode == FlightMode::Locked;
-                let conditions =
-                    Conditions { is_flying: self.flight.is_flying(self.t), emergency_stop: locked };
+                let conditions = Conditions {
+                    is_flying: self.flight.is_flying(self.t),
+                    emergency_stop: locked,
+                    commander_timeout: self.flight.watchdog_expired(),
+                };
                 self.supervisor.update(self.t, conditions);
                 if self.supervisor.is_stopped() {
                     self.flight.lock();
@@ -161,7 +169,7 @@ impl Firmware {
                 let bits = self.supervisor_bits();
                 self.supervisor.handle(pk, bits)
             }
-            PORT_LINK => services::link(pk),
+            PORT_LINK => services::link(pk, self.settings.answer_null),
             _ => None,
         };
         answer.into_iter().collect()
@@ -228,6 +236,7 @@ mod tests {
             version: "test".into(),
             link_timeout: 1.0,
             auto_arm,
+            answer_null: false,
         })
     }
 
@@ -241,7 +250,8 @@ mod tests {
         let ask = |f: &mut Firmware, port, ch, d: &[u8]| f.handle(&Packet::new(port, ch, d.to_vec()));
         assert_eq!(ask(&mut f, 13, 1, &[1])[0].data, b"\x01test".to_vec());
         assert_eq!(ask(&mut f, 4, 0, &[1])[0].data, vec![1, 0]);
-        assert_eq!(ask(&mut f, 15, 3, &[])[0].to_datagram(), vec![0xf3]);
+        assert!(ask(&mut f, 15, 3, &[]).is_empty(), "null packets unanswered, as on the firmware");
+        assert_eq!(ask(&mut f, 15, 0, &[7])[0].data, vec![7], "the link echo answers");
         let sup = ask(&mut f, 9, 0, &[0x0c]);
         assert_eq!(sup[0].data, [vec![0x8c], f.supervisor_bits().to_le_bytes().to_vec()].concat());
         assert_eq!(ask(&mut f, 9, 1, &[1, 1])[0].data, vec![0x81, 1, 1], "auto-armed: already armed");

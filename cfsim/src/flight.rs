@@ -12,6 +12,10 @@ const WDT_STABILIZE: f64 = 0.5;
 const WDT_SHUTDOWN: f64 = 2.0;
 /// Emergency-stop watchdog timeout once armed (s).
 const ESTOP_WATCHDOG: f64 = 1.0;
+/// `stabilizer.controller` of the firmware's PID controller (its default), which follows only the
+/// position of a full-state setpoint (its velocity and acceleration are replaced by its own
+/// position loop).
+pub const CONTROLLER_PID: u8 = 1;
 /// Thrust fraction that hovers (about 36000 PWM on a Crazyflie 2.1).
 const HOVER_THRUST: f64 = 0.55;
 /// The supervisor calls the Crazyflie flying until this long after the thrust was last over idle
@@ -39,6 +43,8 @@ struct LowLevel {
     stamp: f64,
     relaxed: bool,
     hold_z: Option<f64>,
+    /// Given up by the client (notify setpoint stop): its expiry is no watchdog timeout.
+    notified: bool,
 }
 
 /// The flight-control state of one simulated Crazyflie.
@@ -64,6 +70,16 @@ pub struct Flight {
     thrust_unlocked: bool,
     /// When the motors last ran (s), for the supervisor's is-flying hysteresis.
     last_thrust: Option<f64>,
+    /// Low-level setpoints hold the commander's priority (`commanderSetSetpoint`): the high-level
+    /// commander's setpoints are refused until a notify-stop relaxes it (`commanderRelaxPriority`)
+    /// or a reboot, however old the last low-level setpoint is. A take-off after a session that
+    /// ended without a notify-stop is ignored, as on the firmware.
+    low_level_priority: bool,
+    /// The firmware's controller (`stabilizer.controller`), set by the firmware before each step.
+    pub controller: u8,
+    /// A low-level setpoint expired in flight without a notify-stop (the commander watchdog's
+    /// shutdown, which the supervisor turns into a lock when flying); cleared by a reboot.
+    watchdog_expired: bool,
 }
 
 impl Flight {
@@ -82,6 +98,9 @@ impl Flight {
             estop_deadline: None,
             thrust_unlocked: false,
             last_thrust: None,
+            low_level_priority: false,
+            controller: CONTROLLER_PID,
+            watchdog_expired: false,
         }
     }
 
@@ -101,6 +120,12 @@ impl Flight {
     /// the last [`IS_FLYING_HYSTERESIS`] seconds (so it stays "flying" for 2 s after a landing).
     pub fn is_flying(&self, t: f64) -> bool {
         self.mode != FlightMode::Locked && self.last_thrust.is_some_and(|l| t - l < IS_FLYING_HYSTERESIS)
+    }
+
+    /// Whether a low-level setpoint outlived the commander watchdog's shutdown time (2 s) without a
+    /// notify-stop: the supervisor's "commander watchdog timeout".
+    pub fn watchdog_expired(&self) -> bool {
+        self.watchdog_expired
     }
 
     /// Whether the high-level planner's current trajectory has ended.
@@ -140,14 +165,17 @@ impl Flight {
                     self.thrust_unlocked = true;
                 }
                 // A low-level setpoint takes priority and disables the high-level planner.
-                self.ll = Some(LowLevel { sp, stamp: t, relaxed: false, hold_z: None });
+                self.ll = Some(LowLevel { sp, stamp: t, relaxed: false, hold_z: None, notified: false });
+                self.low_level_priority = true;
                 self.planner.disable();
             }
             Command::NotifySetpointsStop { remain_ms } => {
+                self.low_level_priority = false;
                 if let Some(ll) = &mut self.ll {
                     let remain = f64::from(remain_ms) / 1000.0;
                     ll.stamp = t - (WDT_SHUTDOWN - remain).max(0.0);
                     ll.relaxed = true;
+                    ll.notified = true;
                 }
             }
             Command::Hl(hl) if hl_enabled => self.high_level(hl, t),
@@ -214,7 +242,10 @@ impl Flight {
         if let Some(ll) = self.ll.filter(|l| fresh && !l.relaxed) {
             return self.low_level(ll.sp);
         }
-        if hl_enabled && let Some((p, v, a)) = self.planner.goal(t) {
+        if hl_enabled
+            && !self.low_level_priority
+            && let Some((p, v, a)) = self.planner.goal(t)
+        {
             // The planner's setpoints replace the (relaxed or stale) low-level one.
             self.ll = None;
             self.mode = FlightMode::HighLevel;
@@ -234,6 +265,11 @@ impl Flight {
                 Some([Axis::Vel(0.0), Axis::Vel(0.0), Axis::hold(z)])
             }
             _ => {
+                if self.ll.is_some_and(|ll| !ll.notified && !matches!(ll.sp, Setpoint::Stop))
+                    && self.motors_on
+                {
+                    self.watchdog_expired = true;
+                }
                 self.ll = None;
                 self.mode = FlightMode::Idle;
                 None
@@ -250,6 +286,8 @@ impl Flight {
                 return None;
             }
             Setpoint::Position(p) => p.map(Axis::hold),
+            // PID tracks the position alone (a setpoint one tick ahead: the Crazyflie creeps).
+            Setpoint::FullState { p, .. } if self.controller == CONTROLLER_PID => p.map(Axis::hold),
             Setpoint::FullState { p, v, a } => [0, 1, 2].map(|k| Axis::Pos { p: p[k], v: v[k], a: a[k] }),
             Setpoint::VelocityWorld(v) => v.map(Axis::Vel),
             Setpoint::Hover { vx, vy, z } => [Axis::Vel(vx), Axis::Vel(vy), Axis::hold(z)],
@@ -297,11 +335,67 @@ mod tests {
         run(&mut f, &mut t, 0.6);
         assert_eq!(f.mode, FlightMode::Leveling);
         assert!(f.motors_on && (f.body.p[2] - 1.0).abs() < 0.05);
+        assert!(!f.watchdog_expired());
         run(&mut f, &mut t, 1.5);
         assert_eq!(f.mode, FlightMode::Idle);
         assert!(!f.motors_on);
+        assert!(f.watchdog_expired(), "the supervisor is told (and locks)");
         run(&mut f, &mut t, 1.0);
         assert_eq!(f.body.p[2], 0.0);
+        f.reboot();
+        assert!(!f.watchdog_expired());
+    }
+
+    /// A session that ended on low-level setpoints without a notify-stop keeps their priority: the
+    /// next session's take-off is ignored until it sends one (as on the firmware).
+    #[test]
+    fn a_stale_low_level_setpoint_outranks_a_take_off_until_a_notify_stop() {
+        let mut f = Flight::new([0.0; 3], GAINS);
+        let mut t = 0.0;
+        f.command(Command::Setpoint(Setpoint::Stop), t, true);
+        run(&mut f, &mut t, 5.0);
+        let take_off = HlCommand::Takeoff { group: 0, height: 1.0, duration: 1.0 };
+        f.command(Command::Hl(take_off), t, true);
+        run(&mut f, &mut t, 2.0);
+        assert!(!f.motors_on && f.body.p[2] == 0.0, "ignored: {:?}", f.body.p);
+        f.command(Command::NotifySetpointsStop { remain_ms: 0 }, t, true);
+        f.command(Command::Hl(take_off), t, true);
+        run(&mut f, &mut t, 2.0);
+        assert!(f.motors_on && (f.body.p[2] - 1.0).abs() < 0.05, "flown: {:?}", f.body.p);
+    }
+
+    /// Setpoints given up with a notify-stop expire without a watchdog timeout.
+    #[test]
+    fn notified_setpoints_expire_quietly() {
+        let mut f = Flight::new([0.0; 3], GAINS);
+        let mut t = 0.0;
+        for _ in 0..50 {
+            f.command(Command::Setpoint(Setpoint::Position([0.0, 0.0, 1.0])), t, true);
+            run(&mut f, &mut t, 0.02);
+        }
+        f.command(Command::NotifySetpointsStop { remain_ms: 0 }, t, true);
+        run(&mut f, &mut t, 3.0);
+        assert!(!f.motors_on && !f.watchdog_expired());
+    }
+
+    /// Full-state setpoints one tick ahead of a Crazyflie moving at 1 m/s: Mellinger follows
+    /// their velocity; PID, the firmware's default, only their position (it creeps).
+    #[test]
+    fn full_state_feed_forward_needs_mellinger() {
+        let speed_after = |controller: u8| {
+            let mut f = Flight::new([0.0, 0.0, 1.0], GAINS);
+            f.controller = controller;
+            let mut t = 0.0;
+            for _ in 0..100 {
+                let p = f.body.p;
+                let sp = Setpoint::FullState { p: [p[0] + 0.05, p[1], 1.0], v: [1.0, 0.0, 0.0], a: [0.0; 3] };
+                f.command(Command::Setpoint(sp), t, true);
+                run(&mut f, &mut t, 0.05);
+            }
+            f.body.v[0]
+        };
+        assert!((speed_after(2) - 1.0).abs() < 0.05, "Mellinger: {}", speed_after(2));
+        assert!(speed_after(CONTROLLER_PID) < 0.15, "PID: {}", speed_after(CONTROLLER_PID));
     }
 
     #[test]

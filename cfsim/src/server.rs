@@ -4,9 +4,11 @@
 //! Connection convention (CrazySim's cflib fork, `cflib/crtp/udpdriver.py`): the client sends
 //! the single byte `0xF3` when it connects and `0xF4` when it closes. Upstream cflib's UDP driver
 //! sends nothing on connect and probes ports 19850.. with a null packet (`0xFF`), expecting any
-//! answer; the simulator answers every null packet (port 15, channel 3) with an empty one
-//! (`0xF3`, what the radio returns as an empty acknowledgement), which also lets a client detect
-//! a dead link. Answers go to the address of the last client datagram.
+//! answer. Like the real firmware, the simulator does not answer null packets (port 15, channel
+//! 3) unless [`SimConfig::answer_null`] (`cfsim --answer-null`): then with an empty one (`0xF3`,
+//! what the radio returns as an empty acknowledgement), which cflib's scan needs. A client that
+//! wants an answer asks for one the firmware gives (a link echo). Answers go to the address of the
+//! last client datagram.
 
 use std::io;
 use std::net::SocketAddr;
@@ -56,6 +58,9 @@ pub struct SimConfig {
     /// Wait for an arming request before the motors may run (a firmware built with
     /// `CONFIG_MOTORS_REQUIRE_ARMING`); by default it arms itself, like a Crazyflie 2.1.
     pub require_arming: bool,
+    /// Answer null packets with an empty one (what cflib's UDP scan needs); the real firmware does
+    /// not, and neither does the simulator by default.
+    pub answer_null: bool,
 }
 
 impl Default for SimConfig {
@@ -73,6 +78,7 @@ impl Default for SimConfig {
             firmware_version: "2025.12 (cfsim)".to_owned(),
             link_timeout: Duration::from_secs(1),
             require_arming: false,
+            answer_null: false,
         }
     }
 }
@@ -171,6 +177,7 @@ impl SimCrazyflie {
             version: config.firmware_version.clone(),
             link_timeout: config.link_timeout.as_secs_f64(),
             auto_arm: !config.require_arming,
+            answer_null: config.answer_null,
         };
         let shared = Arc::new(Shared {
             fw: Mutex::new(Firmware::new(settings)),

@@ -33,10 +33,11 @@ pub fn memory(pk: &Packet) -> Option<Packet> {
     }
 }
 
-/// Link port: echo (0), source (1), sink (2); null packets (3) are answered with an empty
-/// channel-3 packet (`0xF3`), the UDP stand-in for the radio's empty acknowledgement (cflib's UDP
-/// scan relies on an answer).
-pub fn link(pk: &Packet) -> Option<Packet> {
+/// Link port: echo (0), source (1), sink (2). Null packets (3) go unanswered, as on the real
+/// firmware (over the radio the Crazyradio's acknowledgement answers them; over UDP nothing does),
+/// unless `answer_null`: then an empty channel-3 packet (`0xF3`), the stand-in for that
+/// acknowledgement (cflib's UDP scan relies on one).
+pub fn link(pk: &Packet, answer_null: bool) -> Option<Packet> {
     match pk.channel {
         0 => Some(Packet::new(PORT_LINK, 0, pk.data.clone())),
         1 => {
@@ -44,7 +45,7 @@ pub fn link(pk: &Packet) -> Option<Packet> {
             d.resize(crtp::MAX_PAYLOAD, 0);
             Some(Packet::new(PORT_LINK, 1, d))
         }
-        3 => Some(Packet::new(PORT_LINK, 3, Vec::new())),
+        3 if answer_null => Some(Packet::new(PORT_LINK, 3, Vec::new())),
         _ => None,
     }
 }
@@ -67,10 +68,11 @@ mod tests {
         assert_eq!(version(&pk(13, 1, &[1]), &long).map(|p| p.data.len()), Some(crtp::MAX_PAYLOAD));
         assert_eq!(memory(&pk(4, 0, &[1])).map(|p| p.data), Some(vec![1, 0]));
         assert!(memory(&pk(4, 1, &[0])).is_none());
-        assert_eq!(link(&pk(15, 0, &[1, 2])).map(|p| p.data), Some(vec![1, 2]));
-        let source = link(&pk(15, 1, &[0])).expect("source");
+        assert_eq!(link(&pk(15, 0, &[1, 2]), false).map(|p| p.data), Some(vec![1, 2]));
+        let source = link(&pk(15, 1, &[0]), false).expect("source");
         assert!(source.data.starts_with(b"Bitcraze Crazyflie") && source.data.len() == crtp::MAX_PAYLOAD);
-        assert!(link(&pk(15, 2, &[1, 2])).is_none());
-        assert_eq!(link(&pk(15, 3, &[])).map(|p| p.to_datagram()), Some(vec![0xf3]));
+        assert!(link(&pk(15, 2, &[1, 2]), false).is_none());
+        assert!(link(&pk(15, 3, &[]), false).is_none(), "the firmware ignores null packets");
+        assert_eq!(link(&pk(15, 3, &[]), true).map(|p| p.to_datagram()), Some(vec![0xf3]));
     }
 }

@@ -3,8 +3,9 @@
 //!
 //! The state machine runs once per supervisor cycle ([`PERIOD`], the firmware's 25 Hz) on two
 //! conditions of the simulated vehicle: flying (thrust over idle within the last 2 s) and
-//! emergency stop. The commander watchdog, tumbling and crashes are not simulated (the simulated
-//! commander watchdog levels out and stops the motors without locking). Arming is a request, as
+//! emergency stop, and the commander watchdog's timeout, which in flight locks the Crazyflie as on
+//! the firmware (its setpoints stopped for 2 s without a notify-stop: "free falling!", then
+//! "Locked, reboot required"). Tumbling and crashes are not simulated. Arming is a request, as
 //! in the firmware: it is granted from "pre-flight checks passed" only, and a firmware that
 //! auto-arms (the Crazyflie 2.1 default) requests it itself on entering that state.
 //!
@@ -91,6 +92,9 @@ pub struct Conditions {
     pub is_flying: bool,
     /// An emergency stop was requested (supervisor or localization port, or its watchdog).
     pub emergency_stop: bool,
+    /// The commander watchdog's shutdown: no setpoint for 2 s while low-level setpoints had
+    /// priority (`SUPERVISOR_CB_COMMANDER_WDT_TIMEOUT`).
+    pub commander_timeout: bool,
 }
 
 /// The supervisor's state, armed flag and timers.
@@ -166,7 +170,7 @@ impl Supervisor {
             // Disarmed, or armed too long on the ground: "pre-flight checks passed" again.
             ReadyToFly if !self.armed || t - self.latest_arming > PREFLIGHT_TIMEOUT => PreFlightChecksPassed,
             ReadyToFly if c.is_flying => Flying,
-            Flying if !self.armed => ExceptFreeFall,
+            Flying if !self.armed || c.commander_timeout => ExceptFreeFall,
             Flying if !c.is_flying => Landed,
             Landed if self.latest_landing.is_some_and(|l| t - l > LANDING_TIMEOUT) => Reset,
             Landed if c.is_flying => Flying,
@@ -252,8 +256,9 @@ mod tests {
     use super::*;
     use SupervisorState::*;
 
-    const GROUND: Conditions = Conditions { is_flying: false, emergency_stop: false };
-    const AIR: Conditions = Conditions { is_flying: true, emergency_stop: false };
+    const GROUND: Conditions =
+        Conditions { is_flying: false, emergency_stop: false, commander_timeout: false };
+    const AIR: Conditions = Conditions { is_flying: true, emergency_stop: false, commander_timeout: false };
 
     fn cycles(s: &mut Supervisor, t: &mut f64, n: usize, c: Conditions) {
         for _ in 0..n {
@@ -355,7 +360,7 @@ mod tests {
         s.lock();
         assert_eq!(s.bits(HL_DISABLED), AUTO_ARM | IS_LOCKED | HL_DISABLED);
         let (mut s, mut t) = (Supervisor::new(true), 0.0);
-        cycles(&mut s, &mut t, 1, Conditions { is_flying: false, emergency_stop: true });
+        cycles(&mut s, &mut t, 1, Conditions { emergency_stop: true, ..GROUND });
         assert_eq!((s.state(), s.motors_allowed()), (ExceptFreeFall, false));
         cycles(&mut s, &mut t, 1, GROUND);
         assert_eq!(s.state(), Locked);
@@ -382,5 +387,20 @@ mod tests {
         assert_eq!(plat(&mut s, &[3, 1]).map(|p| p.data), Some(vec![]));
         assert_eq!(plat(&mut s, &[0, 1]).map(|p| p.data), Some(vec![0, 1]));
         assert!(plat(&mut s, &[]).is_none());
+    }
+
+    /// The commander watchdog's timeout locks a flying Crazyflie ("free falling!", then "Locked,
+    /// reboot required"), and means nothing on the ground.
+    #[test]
+    fn commander_timeout_locks_in_flight_only() {
+        let (mut s, mut t) = (Supervisor::new(true), 0.0);
+        cycles(&mut s, &mut t, 2, Conditions { commander_timeout: true, ..GROUND });
+        assert_eq!(s.state(), ReadyToFly);
+        cycles(&mut s, &mut t, 1, AIR);
+        assert_eq!(s.state(), Flying);
+        cycles(&mut s, &mut t, 1, Conditions { commander_timeout: true, ..AIR });
+        assert_eq!((s.state(), s.motors_allowed()), (ExceptFreeFall, false));
+        cycles(&mut s, &mut t, 1, GROUND);
+        assert_eq!((s.state(), s.bits(0) & IS_LOCKED), (Locked, IS_LOCKED));
     }
 }

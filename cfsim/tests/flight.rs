@@ -48,6 +48,8 @@ async fn high_level_take_off_and_land() {
 async fn full_state_setpoints_track_a_line() {
     let sim = sim_at([0.0, 0.0, 0.0]);
     let cf = connect(&sim).await;
+    // The feed-forward needs Mellinger, as on the firmware (PID, the default, holds positions).
+    cf.param.set("stabilizer.controller", 2u8).await.expect("controller");
     take_off(&cf, &sim, 1.0).await;
 
     // x(t) = 0.5 t for 2 s, streamed at 20 Hz.

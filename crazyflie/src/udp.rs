@@ -146,7 +146,9 @@ impl UdpConnection {
         // Connected: only datagrams from the peer are received.
         socket.connect(peer).await?;
         socket.send(&[CONNECT_DATAGRAM]).await?;
-        socket.send(&probe_datagram()).await?;
+        // Lossy like every later datagram: a refused one (ICMP from a port nobody listens on) is
+        // silence, which the link timeout decides on.
+        let _ = socket.send(&probe_datagram()).await;
         let status = Arc::new(Mutex::new(ConnectionStatus::Connecting));
         let (down_tx, down_rx) = mpsc::unbounded_channel();
         let (close_tx, close_rx) = watch::channel(false);
