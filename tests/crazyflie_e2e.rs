@@ -139,6 +139,16 @@ async fn the_server_flies_three_crazyflies_to_their_goals_and_lands_them() {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     assert!(min_distance >= 0.3, "true distance {min_distance} m < D_c");
+    // Each Crazyflie's own report: its supervisor flying, its battery, the share of its state log
+    // that arrives (every sample, on loopback; the bound allows for a loaded machine).
+    for id in ["cf1", "cf2", "cf3"] {
+        let f = &server.get(&format!("/api/uavs/{id}")).await["firmware"];
+        assert!(f["flying"] == true && f["armed"] == true && f["locked"] == false, "{id}: {f}");
+        assert!(f["battery_v"].as_f64().is_some_and(|v| (3.0..4.3).contains(&v)), "{id}: {f}");
+        assert!(f["link_quality"].as_f64().is_some_and(|q| q > 0.5), "{id}: {f}");
+    }
+    let links = &server.get("/api/metrics").await["links"];
+    assert_eq!((links["crazyflies"].as_u64(), links["locked"].as_u64()), (Some(3), Some(0)), "{links}");
 
     let (status, body) = server.call("POST", "/api/fleet/land", None).await;
     assert_eq!(status, 200, "{body}");
@@ -162,14 +172,14 @@ async fn a_lost_crazyflie_is_avoided_and_the_fleet_stays_safe() {
     until_every_phase(&server, &sims, "flying").await;
     // Fly a little first (not a window anything depends on).
     tokio::time::sleep(Duration::from_secs(2)).await;
-    // cf1 goes out of range mid-flight, for 1.5 s and until the server reported it lost: no states,
-    // no setpoints reach it. (Out for longer than its watchdog's 2 s, it falls, is avoided where it
-    // fell, and takes off again once back: the test still holds.)
+    // cf1 goes out of range mid-flight, for 1 s and until the server reported it lost: no states,
+    // no setpoints reach it. (Out for longer than its commander watchdog's 2 s, it locks and falls,
+    // as the firmware does, and is avoided where it fell, reported locked until a reboot.)
     sims[0].set_faults(Faults { disconnected: true, ..Faults::NONE });
     let lost_at = Instant::now();
     let mut seen_lost = false;
     let mut min_distance = f64::INFINITY;
-    while lost_at.elapsed() < Duration::from_millis(1500) || !seen_lost {
+    while lost_at.elapsed() < Duration::from_millis(1000) || !seen_lost {
         assert!(lost_at.elapsed() < Duration::from_secs_f64(PATIENCE), "cf1 never reported lost");
         let state = server.get("/api/uavs/cf1").await;
         seen_lost |= state["status"] == "lost" && state["lost"] == true;
@@ -204,6 +214,13 @@ async fn a_lost_crazyflie_is_avoided_and_the_fleet_stays_safe() {
         let t = sim.truth();
         assert!(!t.motors_on && t.mode == cfsim::FlightMode::Locked, "not stopped: {t:?}");
     }
+    // The firmware says locked; so do the UAVs' reports and the metrics.
+    let deadline = Instant::now() + Duration::from_secs_f64(PATIENCE);
+    while server.get("/api/metrics").await["links"]["locked"] != 3 {
+        assert!(Instant::now() < deadline, "{}", server.get("/api/metrics").await["links"]);
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    assert_eq!(server.get("/api/uavs/cf2").await["firmware"]["locked"], true);
     server.stop().await;
     for sim in sims {
         sim.shutdown().await;

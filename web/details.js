@@ -11,6 +11,21 @@ const REASONS = {
 
 const fmt = (v, d = 2) => (v === null || v === undefined ? "–" : v.toFixed(d));
 
+/** A Crazyflie's own report in words: its supervisor's state, battery and link quality. */
+function firmwareWords(f) {
+  const state = [
+    f.locked && "LOCKED (reboot it)",
+    f.crashed && "crashed",
+    f.tumbled && "tumbled",
+    f.flying && "flying",
+    f.armed && "armed",
+  ].filter(Boolean);
+  const info = f.supervisor_info === null ? "supervisor not logged" : `supervisor ${state.join(", ") || "idle"}`;
+  const battery = f.battery_v === null ? null : `battery ${fmt(f.battery_v)} V`;
+  const quality = f.link_quality === null ? null : `link ${Math.round(100 * f.link_quality)} %`;
+  return [info, battery, quality].filter(Boolean).join("; ");
+}
+
 function card(u) {
   const speed = Math.hypot(u.v[0], u.v[1]);
   const rows = [
@@ -23,6 +38,7 @@ function card(u) {
     ["margins", `road ${fmt(u.road_margin_m, 3)} m, collision ${fmt(u.collision_margin_m, 3)} m`],
     ["link", u.phase ? `${u.link} (${u.phase})` : u.link],
     ["link error", u.link_error ?? null],
+    ["firmware", u.firmware ? firmwareWords(u.firmware) : null],
   ];
   const el = document.createElement("section");
   el.dataset.uav = u.id;

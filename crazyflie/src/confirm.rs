@@ -32,8 +32,8 @@
 
 use crazyflie_lib::subsystems::supervisor::SupervisorInfo;
 
-/// The log variables that confirm a stop or a landing, in the order of [`Status`].
-pub const STATUS_VARIABLES: [&str; 2] = ["supervisor.info", "stabilizer.thrust"];
+/// The log variables that confirm a stop or a landing, and the battery, in the order of [`Status`].
+pub const STATUS_VARIABLES: [&str; 3] = ["supervisor.info", "stabilizer.thrust", "pm.vbat"];
 
 /// Below this height (m) a Crazyflie is on the ground.
 pub const ON_GROUND_M: f64 = 0.1;
@@ -52,6 +52,8 @@ pub struct Status {
     pub info: Option<u16>,
     /// `stabilizer.thrust`.
     pub thrust: Option<f64>,
+    /// `pm.vbat` (V).
+    pub vbat: Option<f64>,
 }
 
 impl Status {
@@ -105,7 +107,7 @@ mod tests {
 
     #[test]
     fn a_stop_needs_the_lock_and_no_thrust() {
-        let s = |info, thrust| Status { info, thrust };
+        let s = |info, thrust| Status { info, thrust, vbat: None };
         assert!(s(Some(LOCKED), Some(0.0)).confirms_stop());
         assert!(s(Some(LOCKED), None).confirms_stop());
         // Motors off by the setpoint watchdog, but not locked: a new setpoint would restart them.
@@ -119,7 +121,7 @@ mod tests {
 
     #[test]
     fn a_landing_needs_the_ground_and_the_motors_off() {
-        let s = |info, thrust| Status { info, thrust };
+        let s = |info, thrust| Status { info, thrust, vbat: None };
         assert!(s(Some(FLYING), Some(0.0)).confirms_landed(0.0), "thrust off, still within the 2 s");
         assert!(s(Some(bits::AUTO_ARM | bits::CAN_FLY), None).confirms_landed(0.02));
         assert!(!s(Some(FLYING), Some(12000.0)).confirms_landed(0.02), "on the ground, motors on");
@@ -130,7 +132,7 @@ mod tests {
 
     #[test]
     fn a_take_off_needs_the_height_the_motors_and_the_supervisor() {
-        let s = |info, thrust| Status { info, thrust };
+        let s = |info, thrust| Status { info, thrust, vbat: None };
         assert!(s(Some(FLYING), Some(36000.0)).confirms_airborne(0.95, 1.0));
         assert!(s(Some(FLYING), None).confirms_airborne(1.1, 1.0));
         assert!(s(None, Some(36000.0)).confirms_airborne(1.0, 1.0), "older firmware: thrust alone");

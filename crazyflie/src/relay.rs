@@ -4,7 +4,7 @@
 //! CRTP connection: it connects, takes off, streams setpoints, lands, and reconnects after a loss.
 
 use crate::session;
-use links::{Link, LinkPhase};
+use links::{Link, LinkPhase, VehicleReport};
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::{Duration, Instant};
@@ -172,6 +172,8 @@ pub struct Shared {
     unconfirmed: AtomicU64,
     /// The session closed the connection on a detach and ended.
     detached: AtomicBool,
+    /// What the firmware last reported (supervisor, battery, link quality).
+    report: Mutex<VehicleReport>,
 }
 
 impl Shared {
@@ -208,6 +210,16 @@ impl Shared {
     /// confirm in time (e.g. `emergency stop not confirmed after 3 s`).
     pub fn error(&self) -> Option<String> {
         self.error.lock().unwrap_or_else(PoisonError::into_inner).clone()
+    }
+
+    /// What the firmware last reported.
+    pub fn report(&self) -> VehicleReport {
+        *self.report.lock().unwrap_or_else(PoisonError::into_inner)
+    }
+
+    /// Changes the firmware's report.
+    pub fn update_report(&self, change: impl FnOnce(&mut VehicleReport)) {
+        change(&mut self.report.lock().unwrap_or_else(PoisonError::into_inner));
     }
 
     /// Records a request given up on without the Crazyflie's confirmation.
@@ -351,5 +363,9 @@ impl Link for CrazyflieLink {
 
     fn unconfirmed_commands(&self) -> u64 {
         self.shared.unconfirmed_commands()
+    }
+
+    fn vehicle(&self) -> Option<VehicleReport> {
+        Some(self.shared.report())
     }
 }

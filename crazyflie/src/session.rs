@@ -130,6 +130,8 @@ async fn run_sessions(uri: String, config: RelayConfig, shared: Arc<Shared>, mut
             End::Detached => return,
             End::Lost(reason) => {
                 shared.set_error(Some(reason));
+                // Not connected: no quality to speak of (the supervisor's last word stays).
+                shared.update_report(|r| r.link_quality = Some(0.0));
                 if channels.urgent.is_closed() && !shared.phase().airborne() {
                     return;
                 }
@@ -308,6 +310,31 @@ fn check_confirmed(shared: &Shared, status: &Status, pending: &mut Option<Pendin
     *pending = None;
 }
 
+/// Counts the state samples of the last second against the log block's period: the link quality
+/// of [`links::VehicleReport`].
+struct QualityWindow {
+    since: Instant,
+    samples: u32,
+}
+
+impl QualityWindow {
+    fn new() -> Self {
+        Self { since: Instant::now(), samples: 0 }
+    }
+
+    /// One more sample; every second, the fraction of the expected ones that came.
+    fn sample(&mut self, shared: &Shared, period_ms: u64) {
+        self.samples += 1;
+        let elapsed = self.since.elapsed();
+        if elapsed >= Duration::from_secs(1) {
+            let expected = elapsed.as_secs_f64() * 1000.0 / period_ms.max(1) as f64;
+            let quality = (f64::from(self.samples) / expected).clamp(0.0, 1.0);
+            shared.update_report(|r| r.link_quality = Some(quality));
+            *self = Self::new();
+        }
+    }
+}
+
 /// Sets the phase to flying once the firmware confirms the take-off (then nothing waits for its
 /// deadline any more).
 fn check_airborne(
@@ -397,6 +424,7 @@ async fn fly(
     }
     let (mut urgent_open, mut setpoints_open) = (true, true);
     let mut last_sample = Instant::now();
+    let mut quality = QualityWindow::new();
     loop {
         let settled = matches!(shared.phase(), LinkPhase::Landed | LinkPhase::Stopped)
             || pending.is_some_and(|p| p.given_up);
@@ -452,6 +480,7 @@ async fn fly(
                     if let Some((p, v)) = decode(&data.data) {
                         shared.set_sample(p, v);
                         last_sample = Instant::now();
+                        quality.sample(shared, config.log_period_ms);
                         check_confirmed(shared, &status, &mut pending);
                         check_airborne(shared, &status, config, *intent, &mut phase_until);
                     }
@@ -461,6 +490,10 @@ async fn fly(
             data = next_status(status_stream.as_ref()) => match data {
                 Ok(data) => {
                     status = decode_status(&data.data);
+                    shared.update_report(|r| {
+                        r.supervisor_info = status.info.or(r.supervisor_info);
+                        r.battery_v = status.vbat.or(r.battery_v);
+                    });
                     check_confirmed(shared, &status, &mut pending);
                     check_airborne(shared, &status, config, *intent, &mut phase_until);
                 }
@@ -556,11 +589,12 @@ fn far_future() -> Instant {
 /// What one sample of the status block says (a variable missing or out of range is unknown).
 fn decode_status(data: &std::collections::HashMap<String, crazyflie_lib::Value>) -> Status {
     let value = |name: &str| data.get(name).map(|v| v.to_f64_lossy()).filter(|x| x.is_finite());
-    let [info, thrust] = STATUS_VARIABLES;
+    let [info, thrust, vbat] = STATUS_VARIABLES;
     Status {
         // u16 in the firmware; anything else is not a bitfield.
         info: value(info).filter(|x| (0.0..=f64::from(u16::MAX)).contains(x)).map(|x| x as u16),
         thrust: value(thrust),
+        vbat: value(vbat).filter(|v| *v >= 0.0),
     }
 }
 

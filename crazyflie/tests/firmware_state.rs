@@ -105,3 +105,22 @@ async fn a_locked_crazyflie_is_reported_and_not_flown() {
     drop(link);
     sim.shutdown().await;
 }
+
+/// The firmware's own report reaches the fleet's side: supervisor bits, battery, link quality.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_firmware_report_reaches_the_fleet() {
+    let sim = sim_at(0.0, 0.0);
+    let config = RelayConfig { takeoff_s: 1.0, ..RelayConfig::default() };
+    let link = CrazyflieLink::spawn(&tokio::runtime::Handle::current(), &sim.uri(), config);
+    until("flying", PATIENCE, || link.phase() == LinkPhase::Flying).await;
+    until("a link quality", PATIENCE, || link.vehicle().is_some_and(|r| r.link_quality.is_some())).await;
+    let report = link.vehicle().expect("a Crazyflie has a firmware");
+    let info = report.supervisor_info.expect("supervisor.info logged");
+    let bits = cfsim::firmware::supervisor::IS_ARMED | cfsim::firmware::supervisor::IS_FLYING;
+    assert_eq!(info & bits, bits, "armed and flying: {info:#06x}");
+    assert!(report.battery_v.is_some_and(|v| (3.0..4.3).contains(&v)), "{report:?}");
+    // Every 10 ms sample arrives on loopback; the bound allows for a loaded machine.
+    assert!(report.link_quality.is_some_and(|q| q > 0.5 && q <= 1.0), "{report:?}");
+    drop(link);
+    sim.shutdown().await;
+}

@@ -10,6 +10,18 @@ pub use uri::{LinkError, LinkRules, LinkUri, parse_link};
 /// The link of a UAV that names none: the in-process simulator.
 pub const SIM_LINK: &str = "sim";
 
+/// What a UAV's own firmware reports about itself (Crazyflies; in-process UAVs report nothing).
+/// Each field is `None` until the firmware has said it (or when it does not log it).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct VehicleReport {
+    /// The supervisor's state bitfield (`supervisor.info`: armed, flying, tumbled, locked, ...).
+    pub supervisor_info: Option<u16>,
+    /// Battery voltage (V, `pm.vbat`).
+    pub battery_v: Option<f64>,
+    /// Fraction of the expected state samples that arrived over the last second (0–1).
+    pub link_quality: Option<f64>,
+}
+
 /// Checks a link name with the default [`LinkRules`] (UDP peers on loopback only): `sim`, or a
 /// Crazyflie URI (`radio://DEV/CHANNEL/RATE/ADDRESS`, `usb://SERIAL`, `udp://HOST:PORT`; see
 /// [`uri`] for the exact forms). The error says what is wrong, e.g.
@@ -118,6 +130,10 @@ pub trait Link: Send {
     /// How many emergency stops and landings were given up on without the UAV's confirmation.
     fn unconfirmed_commands(&self) -> u64 {
         0
+    }
+    /// What the UAV's firmware last reported about itself; in-process links have no firmware.
+    fn vehicle(&self) -> Option<VehicleReport> {
+        None
     }
 }
 

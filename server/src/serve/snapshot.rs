@@ -70,6 +70,9 @@ pub struct UavSnapshot {
     /// The link's last error (why it is not connected, or a stop or landing not confirmed), null
     /// when none.
     pub link_error: Option<String>,
+    /// What its firmware reports about itself (Crazyflies only; absent for in-process UAVs).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub firmware: Option<FirmwareSnapshot>,
     /// Why a traffic rule holds it back (`single_file`, `deadlock_backoff`), null when none does.
     pub wait_reason: Option<&'static str>,
     /// CBF rows binding at u.
@@ -82,6 +85,45 @@ pub struct UavSnapshot {
     pub collision_margin_m: Option<f64>,
     /// Road margin (eq. 6, braking distance included) to the nearest wall (m).
     pub road_margin_m: f64,
+}
+
+/// What a Crazyflie's firmware reports (`firmware` in a UAV's snapshot): the supervisor's bitfield
+/// decoded (crazyflie-firmware `supervisor.c`), the battery and how much of the state log arrives.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FirmwareSnapshot {
+    /// `supervisor.info`, null until the firmware has logged it.
+    pub supervisor_info: Option<u16>,
+    /// Armed (supervisor bit 1).
+    pub armed: bool,
+    /// Flying, as the supervisor sees it (bit 4).
+    pub flying: bool,
+    /// Tumbled (bit 5).
+    pub tumbled: bool,
+    /// Locked until a reboot (bit 6): an emergency stop or a commander-watchdog timeout in flight.
+    pub locked: bool,
+    /// Crashed (bit 7).
+    pub crashed: bool,
+    /// Battery voltage (V), null until logged.
+    pub battery_v: Option<f64>,
+    /// Fraction of the expected state samples received over the last second, null until known.
+    pub link_quality: Option<f64>,
+}
+
+impl FirmwareSnapshot {
+    /// The snapshot of a link's report.
+    pub fn of(report: links::VehicleReport) -> Self {
+        let bit = |n: u16| report.supervisor_info.is_some_and(|i| i & (1 << n) != 0);
+        Self {
+            supervisor_info: report.supervisor_info,
+            armed: bit(1),
+            flying: bit(4),
+            tumbled: bit(5),
+            locked: bit(6),
+            crashed: bit(7),
+            battery_v: report.battery_v,
+            link_quality: report.link_quality,
+        }
+    }
 }
 
 /// The fleet after one tick.
@@ -224,6 +266,7 @@ impl Snapshot {
                     phase: u.phase.name(),
                     lost: u.condition == Condition::Lost,
                     link_error: u.link.error(),
+                    firmware: u.link.vehicle().map(FirmwareSnapshot::of),
                     wait_reason: u.traffic.waiting.map(|w| w.name()),
                     active_rows: l.active_rows,
                     slack: l.max_slack,

@@ -43,6 +43,14 @@ pub struct LinkCounters {
     /// Emergency stops and landings given up on without the Crazyflie's confirmation, summed over
     /// the current links.
     pub unconfirmed_commands: u64,
+    /// Crazyflies whose supervisor says locked (they fly again only after a reboot).
+    pub locked: u64,
+    /// Crazyflies whose supervisor says tumbled or crashed.
+    pub tumbled_or_crashed: u64,
+    /// The lowest battery voltage among the Crazyflies that reported one (V).
+    pub min_battery_v: Option<f64>,
+    /// The lowest link quality among the Crazyflies that reported one (0–1).
+    pub min_link_quality: Option<f64>,
 }
 
 /// The document of `GET /api/metrics`.
@@ -159,6 +167,12 @@ impl TickStats {
         for u in &snapshot.uavs {
             m.links.crazyflies += u64::from(u.link != links::SIM_LINK);
             m.links.with_error += u64::from(u.link_error.is_some());
+            if let Some(f) = &u.firmware {
+                m.links.locked += u64::from(f.locked);
+                m.links.tumbled_or_crashed += u64::from(f.tumbled || f.crashed);
+                m.links.min_battery_v = min_opt(m.links.min_battery_v, f.battery_v);
+                m.links.min_link_quality = min_opt(m.links.min_link_quality, f.link_quality);
+            }
         }
         m.min_collision_margin_m = min_opt(m.min_collision_margin_m, snapshot.min_collision_margin_m);
         m.min_road_margin_m = min_opt(m.min_road_margin_m, snapshot.min_road_margin_m);

@@ -18,6 +18,7 @@ fn uav(id: &str, p: [f64; 2], v: [f64; 2]) -> UavSnapshot {
         phase: "flying",
         lost: true,
         link_error: None,
+        firmware: None,
         wait_reason: None,
         active_rows: 0,
         slack: 0.0,
