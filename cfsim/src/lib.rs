@@ -9,6 +9,11 @@
 //! mass behind a position/velocity controller with bounded acceleration.
 //! [`SimHandle`] exposes the ground truth and switches link faults ([`Faults`]) at run time.
 //!
+//! The second simulator is physics only, for the real firmware: [`sitl`] serves N
+//! [`quadrotor::Quadrotor`]s (a rigid-body model of the Crazyflie 2.1) to the firmware's
+//! software-in-the-loop build (`cf2`), feeding it IMU, barometer and pose, taking its motor PWM
+//! and relaying everything else between it and a CRTP client.
+//!
 //! ```no_run
 //! # async fn demo() -> std::io::Result<()> {
 //! use cfsim::{SimConfig, SimCrazyflie};
@@ -28,11 +33,14 @@ pub mod log;
 pub mod logvars;
 pub mod param;
 pub mod planner;
+pub mod quadrotor;
 pub mod server;
 pub mod services;
+pub mod sitl;
 pub mod supervisor;
 pub mod toc;
 
 pub use faults::Faults;
 pub use flight::FlightMode;
 pub use server::{LinkStats, SimConfig, SimCrazyflie, SimHandle, Truth};
+pub use sitl::{SitlConfig, SitlFaults, SitlHandle};

@@ -1,0 +1,373 @@
+//! The real Crazyflie firmware (its software-in-the-loop build, `cf2`) flown on cfsim's physics:
+//! two drones, one `cf2` process each, spoken to over raw CRTP through the simulator's relay.
+//! Drone 0 keeps the PID controller, drone 1 switches to Mellinger; both arm, take off to 0.5 m
+//! with the high-level commander, hover, and land. The IMU is noisy (seeded), as a real one.
+//!
+//! Skipped unless `AIRROADS_CF_SITL` names the firmware's SITL folder (the one with `build.sh`);
+//! the firmware is built once into `${AIRROADS_CACHE:-$HOME/.cache/airroads}/cf-sitl-build`.
+
+use std::fs::File;
+use std::net::{SocketAddr, UdpSocket};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use cfsim::quadrotor::GroundTruth;
+use cfsim::sitl::{SitlConfig, SitlHandle};
+
+/// Start positions (m).
+const STARTS: [[f64; 3]; 2] = [[0.0, 0.0, 0.0], [0.5, -0.5, 0.0]];
+/// Take-off height (m) and how far from it a hover may be.
+const HEIGHT: f64 = 0.5;
+const HEIGHT_TOLERANCE: f64 = 0.1;
+/// Largest roll or pitch (degrees) of a level drone.
+const LEVEL_DEG: f64 = 5.0;
+/// Largest horizontal drift from the start (m).
+const DRIFT: f64 = 0.1;
+/// cf2 sometimes stalls at start (FreeRTOS's POSIX port): restart it after this without motor
+/// packets, up to `START_TRIES` times.
+const START_WAIT: Duration = Duration::from_secs(5);
+const START_TRIES: usize = 6;
+
+/// CRTP headers and commands used here (port << 4 | channel).
+const PARAM_MISC: u8 = 0x23;
+const PARAM_SET_BY_NAME: u8 = 0;
+const PARAM_TYPE_UINT8: u8 = 0x08;
+const SUPERVISOR_INFO: u8 = 0x90;
+const SUPERVISOR_COMMAND: u8 = 0x91;
+const SUPERVISOR_STATE_BITFIELD: u8 = 0x0c;
+const SUPERVISOR_ARM: u8 = 0x01;
+const SUPERVISOR_RESPONSE: u8 = 0x80;
+const CAN_BE_ARMED: u16 = 0x0001;
+const IS_ARMED: u16 = 0x0002;
+const HIGH_LEVEL: u8 = 0x80;
+const HL_STOP: u8 = 3;
+const HL_TAKEOFF: u8 = 7;
+const HL_LAND: u8 = 8;
+
+#[test]
+fn firmware_takes_off_hovers_and_lands_on_cfsim_physics() {
+    let Some(source) = std::env::var_os("AIRROADS_CF_SITL") else {
+        eprintln!(
+            "skipped: set AIRROADS_CF_SITL to the Crazyflie firmware SITL folder (the one holding build.sh) \
+             to fly the real firmware on cfsim's physics"
+        );
+        return;
+    };
+    let cf2 = build_firmware(Path::new(&source));
+    let run_dir = std::env::temp_dir().join(format!("airroads-cf-sitl-{}", std::process::id()));
+    std::fs::create_dir_all(&run_dir).expect("run folder");
+    // Under CPU load the emulated firmware clock can slip far enough to fail a flight: one retry.
+    let report = fly(&cf2, &run_dir).or_else(|first| {
+        eprintln!("first flight failed ({first}); retrying once with fresh processes");
+        fly(&cf2, &run_dir)
+    });
+    match report {
+        Ok(report) => {
+            println!("{report}");
+            let _ = std::fs::remove_dir_all(&run_dir);
+        }
+        Err(e) => panic!("{e} (firmware output and ground truth in {})", run_dir.display()),
+    }
+}
+
+/// The firmware binary, built on first use.
+fn build_firmware(source: &Path) -> PathBuf {
+    let cache = match std::env::var_os("AIRROADS_CACHE") {
+        Some(dir) => PathBuf::from(dir),
+        None => {
+            PathBuf::from(std::env::var_os("HOME").expect("HOME or AIRROADS_CACHE")).join(".cache/airroads")
+        }
+    };
+    let dir = cache.join("cf-sitl-build");
+    let cf2 = dir.join("cf2");
+    if !cf2.is_file() {
+        let status = Command::new("bash")
+            .arg(source.join("build.sh"))
+            .arg(&dir)
+            .status()
+            .expect("run the firmware's build.sh");
+        assert!(status.success(), "building the firmware into {} failed", dir.display());
+    }
+    assert!(cf2.is_file(), "no cf2 in {}", dir.display());
+    cf2
+}
+
+/// Child processes killed when dropped, so none outlives the test.
+#[derive(Default)]
+struct Children(Vec<Child>);
+
+impl Drop for Children {
+    fn drop(&mut self) {
+        for child in &mut self.0 {
+            let _ = child.kill();
+            let _ = child.wait();
+        }
+    }
+}
+
+/// One flight of both drones; a summary of what was measured, or what went wrong.
+fn fly(cf2: &Path, run_dir: &Path) -> Result<String, String> {
+    let config = SitlConfig {
+        positions: STARTS.to_vec(),
+        firmware_base_port: 0,
+        client_base_port: 0,
+        truth_dir: Some(run_dir.to_path_buf()),
+        noise: true,
+        ..SitlConfig::default()
+    };
+    let sitl = SitlHandle::spawn(config).map_err(|e| e.to_string())?;
+    let mut children = Children::default();
+    for i in 0..STARTS.len() {
+        start_firmware(cf2, &sitl, i, run_dir, &mut children)?;
+    }
+    let clients: Vec<Client> =
+        (0..STARTS.len()).map(|i| Client::new(sitl.client_addr(i).expect("drone"))).collect();
+    set_mellinger(&clients[1])?;
+    for (i, c) in clients.iter().enumerate() {
+        wait_until_armable(c).map_err(|e| format!("drone {i}: {e}"))?;
+    }
+    // The Kalman filter settles on the external pose within a second.
+    std::thread::sleep(Duration::from_secs(2));
+    for (i, c) in clients.iter().enumerate() {
+        arm(c).map_err(|e| format!("drone {i}: {e}"))?;
+    }
+    for c in &clients {
+        c.send(&high_level(HL_TAKEOFF, HEIGHT as f32, 2.0));
+    }
+    let hover = record(&sitl, Duration::from_secs(5));
+    let mut summary = Vec::new();
+    for (i, start) in STARTS.iter().enumerate() {
+        // The last 2 s: after the 2 s climb and a second to settle.
+        let window = &hover[i][hover[i].len().saturating_sub(200)..];
+        summary.push(check_hover(i, start, window)?);
+    }
+    for c in &clients {
+        c.send(&high_level(HL_LAND, 0.0, 2.0));
+    }
+    std::thread::sleep(Duration::from_secs(4));
+    for c in &clients {
+        c.send(&[HIGH_LEVEL, HL_STOP, 0]);
+    }
+    let landed = record(&sitl, Duration::from_secs(2));
+    for (i, samples) in landed.iter().enumerate() {
+        let last = samples.last().expect("samples");
+        let [roll, pitch, _] = last.euler.map(f64::to_degrees);
+        if !last.on_floor || roll.abs() > LEVEL_DEG || pitch.abs() > LEVEL_DEG {
+            return Err(format!("drone {i} did not land level: {last:?}"));
+        }
+        if last.pwm != [0; 4] {
+            return Err(format!("drone {i}: motors still running after the stop: {:?}", last.pwm));
+        }
+    }
+    let stats = sitl.loop_stats();
+    summary.push(format!(
+        "physics {:.1} Hz (load {:.1}%, longest tick {:.2} ms, {} resyncs)",
+        stats.physics_rate_hz(),
+        100.0 * stats.load(),
+        stats.longest_tick.as_secs_f64() * 1e3,
+        stats.resyncs
+    ));
+    drop(children);
+    sitl.shutdown().map_err(|e| e.to_string())?;
+    Ok(summary.join("\n"))
+}
+
+/// Start drone `i`'s firmware and wait for its first motor packet, restarting a stalled start.
+fn start_firmware(
+    cf2: &Path,
+    sitl: &SitlHandle,
+    i: usize,
+    run_dir: &Path,
+    children: &mut Children,
+) -> Result<(), String> {
+    let port = sitl.firmware_addr(i).expect("drone").port();
+    let log = |name: &str| {
+        File::options()
+            .create(true)
+            .append(true)
+            .open(run_dir.join(format!("fw{i}.{name}")))
+            .map_err(|e| e.to_string())
+    };
+    for attempt in 1..=START_TRIES {
+        let hellos = sitl.stats(i).expect("drone").hellos;
+        // The firmware's console is its stdout: line-buffered, so a killed process keeps its log.
+        let mut command = match which("stdbuf") {
+            Some(stdbuf) => {
+                let mut c = Command::new(stdbuf);
+                c.arg("-oL").arg(cf2);
+                c
+            }
+            None => Command::new(cf2),
+        };
+        let child = command
+            .arg(port.to_string())
+            .current_dir(run_dir)
+            .stdin(Stdio::null())
+            .stdout(log("out")?)
+            .stderr(log("err")?)
+            .spawn()
+            .map_err(|e| format!("cannot start {}: {e}", cf2.display()))?;
+        children.0.push(child);
+        let started = Instant::now();
+        while started.elapsed() < START_WAIT {
+            let s = sitl.stats(i).expect("drone");
+            if s.hellos > hellos && s.motor_packets_since_hello > 0 {
+                return Ok(());
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        eprintln!("drone {i}: firmware start {attempt} stalled, restarting it");
+        if let Some(mut stalled) = children.0.pop() {
+            let _ = stalled.kill();
+            let _ = stalled.wait();
+        }
+    }
+    Err(format!("drone {i}: the firmware did not start in {START_TRIES} tries"))
+}
+
+/// `program`'s path if it is on `PATH`.
+fn which(program: &str) -> Option<PathBuf> {
+    std::env::split_paths(&std::env::var_os("PATH")?).map(|d| d.join(program)).find(|p| p.is_file())
+}
+
+/// A CRTP client over UDP: one packet per datagram.
+struct Client(UdpSocket);
+
+impl Client {
+    fn new(peer: SocketAddr) -> Self {
+        let s = UdpSocket::bind("127.0.0.1:0").expect("bind a client socket");
+        s.connect(peer).expect("connect");
+        s.set_read_timeout(Some(Duration::from_millis(20))).expect("read timeout");
+        Self(s)
+    }
+
+    fn send(&self, datagram: &[u8]) {
+        self.0.send(datagram).expect("send to the relay");
+    }
+
+    /// Send `datagram` every 250 ms until an answer passes `accept`, for at most `timeout`.
+    fn request(&self, datagram: &[u8], timeout: Duration, accept: impl Fn(&[u8]) -> bool) -> Option<Vec<u8>> {
+        let mut buf = [0u8; 64];
+        let start = Instant::now();
+        while start.elapsed() < timeout {
+            self.send(datagram);
+            let resend = Instant::now() + Duration::from_millis(250);
+            while Instant::now() < resend {
+                if let Ok(n) = self.0.recv(&mut buf)
+                    && accept(&buf[..n])
+                {
+                    return Some(buf[..n].to_vec());
+                }
+            }
+        }
+        None
+    }
+}
+
+/// `header` without its link-layer bits.
+fn header_is(d: &[u8], header: u8) -> bool {
+    d.first().is_some_and(|h| h & 0xf3 == header)
+}
+
+/// Select the Mellinger controller: param `stabilizer.controller` = 2, set by name.
+fn set_mellinger(client: &Client) -> Result<(), String> {
+    let mut d = vec![PARAM_MISC, PARAM_SET_BY_NAME];
+    d.extend_from_slice(b"stabilizer\0controller\0");
+    let error_at = d.len();
+    d.extend_from_slice(&[PARAM_TYPE_UINT8, 2]);
+    let answer = client
+        .request(&d, Duration::from_secs(10), |a| {
+            header_is(a, PARAM_MISC) && a.len() > error_at && a[..error_at] == d[..error_at]
+        })
+        .ok_or("no answer to setting stabilizer.controller")?;
+    match answer[error_at] {
+        0 => Ok(()),
+        e => Err(format!("setting stabilizer.controller failed with error {e}")),
+    }
+}
+
+/// Poll the supervisor until it can be armed or is (this build arms itself once its checks
+/// pass).
+fn wait_until_armable(client: &Client) -> Result<(), String> {
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(20) {
+        let answer =
+            client.request(&[SUPERVISOR_INFO, SUPERVISOR_STATE_BITFIELD], Duration::from_secs(2), |a| {
+                header_is(a, SUPERVISOR_INFO)
+                    && a.len() == 4
+                    && a[1] == SUPERVISOR_RESPONSE | SUPERVISOR_STATE_BITFIELD
+            });
+        if let Some(a) = answer
+            && u16::from_le_bytes([a[2], a[3]]) & (CAN_BE_ARMED | IS_ARMED) != 0
+        {
+            return Ok(());
+        }
+        std::thread::sleep(Duration::from_millis(200));
+    }
+    Err("the supervisor never allowed arming".to_owned())
+}
+
+/// Ask the supervisor to arm until it reports armed.
+fn arm(client: &Client) -> Result<(), String> {
+    let answer = client.request(&[SUPERVISOR_COMMAND, SUPERVISOR_ARM, 1], Duration::from_secs(5), |a| {
+        header_is(a, SUPERVISOR_COMMAND)
+            && a.len() == 4
+            && a[1] == SUPERVISOR_RESPONSE | SUPERVISOR_ARM
+            && a[3] == 1
+    });
+    answer.map(|_| ()).ok_or_else(|| "arming refused".to_owned())
+}
+
+/// A high-level commander take-off or landing to `height` in `duration` seconds, all groups,
+/// keeping the current yaw.
+fn high_level(command: u8, height: f32, duration: f32) -> Vec<u8> {
+    let mut d = vec![HIGH_LEVEL, command, 0];
+    d.extend_from_slice(&height.to_le_bytes());
+    d.extend_from_slice(&0f32.to_le_bytes());
+    d.push(1);
+    d.extend_from_slice(&duration.to_le_bytes());
+    d
+}
+
+/// Every drone's ground truth at 100 Hz for `duration`.
+fn record(sitl: &SitlHandle, duration: Duration) -> Vec<Vec<GroundTruth>> {
+    let mut out = vec![Vec::new(); sitl.len()];
+    let period = Duration::from_millis(10);
+    let start = Instant::now();
+    let mut next = start;
+    while start.elapsed() < duration {
+        for (i, samples) in out.iter_mut().enumerate() {
+            samples.push(sitl.truth(i).expect("drone"));
+        }
+        next += period;
+        std::thread::sleep(next.saturating_duration_since(Instant::now()));
+    }
+    out
+}
+
+/// Whether drone `i` hovered at [`HEIGHT`], level, above its start; its height errors.
+fn check_hover(i: usize, start: &[f64; 3], window: &[GroundTruth]) -> Result<String, String> {
+    let mut worst = 0.0f64;
+    let mut sum = 0.0;
+    for t in window {
+        let error = t.position[2] - HEIGHT;
+        let [roll, pitch, _] = t.euler.map(f64::to_degrees);
+        let drift = (t.position[0] - start[0]).hypot(t.position[1] - start[1]);
+        if error.abs() > HEIGHT_TOLERANCE
+            || roll.abs() > LEVEL_DEG
+            || pitch.abs() > LEVEL_DEG
+            || drift > DRIFT
+        {
+            return Err(format!(
+                "drone {i} did not hover level at {HEIGHT} m above its start: z {:.3} m, roll {roll:.1}°, \
+                 pitch {pitch:.1}°, drift {drift:.3} m at t = {:.2} s",
+                t.position[2], t.time
+            ));
+        }
+        worst = worst.max(error.abs());
+        sum += error;
+    }
+    let mean = sum / window.len() as f64;
+    Ok(format!("drone {i}: hover height error mean {mean:+.4} m, worst {worst:.4} m over the last 2 s"))
+}
