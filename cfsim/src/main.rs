@@ -8,6 +8,7 @@ use std::net::{IpAddr, SocketAddr};
 use std::process::ExitCode;
 use std::time::Duration;
 
+use cfsim::sitl::firmware::{FirmwareProcesses, StartOptions};
 use cfsim::sitl::{SitlConfig, SitlHandle};
 use cfsim::{Faults, SimConfig, SimCrazyflie, SimHandle};
 
@@ -46,7 +47,10 @@ usage: cfsim --firmware [options]
                                 (default: forwarded only, like the real firmware)
       --loss P                  drop this fraction of client<->firmware datagrams
       --wind FX,FY,FZ           constant wind force in newtons (world frame, z up)
-      --pose-gap START,LENGTH   no pose from START s after the start, for LENGTH s";
+      --pose-gap START,LENGTH   no pose from START s after the start, for LENGTH s
+      --cf2 PATH                also start the firmware: one `PATH PORT` per drone, restarted
+                                while it stalls at start (its console: RUNDIR/fwN.out)
+      --run-dir DIR             the firmware's working folder (default: a temporary one)";
 
 /// Command-line errors.
 #[derive(Debug, thiserror::Error)]
@@ -170,6 +174,10 @@ struct FirmwareArgs {
     spacing: f64,
     positions: Option<Vec<[f64; 3]>>,
     config: SitlConfig,
+    /// The firmware binary to start for every drone, if any.
+    cf2: Option<std::path::PathBuf>,
+    /// The firmware's working folder.
+    run_dir: Option<std::path::PathBuf>,
 }
 
 /// `a,b,...` as exactly `N` numbers.
@@ -182,7 +190,14 @@ fn parse_numbers<const N: usize>(flag: &str, value: Option<String>) -> Result<[f
 }
 
 fn parse_firmware_args(mut it: impl Iterator<Item = String>) -> Result<Option<FirmwareArgs>, CliError> {
-    let mut args = FirmwareArgs { count: 1, spacing: 0.5, positions: None, config: SitlConfig::default() };
+    let mut args = FirmwareArgs {
+        count: 1,
+        spacing: 0.5,
+        positions: None,
+        config: SitlConfig::default(),
+        cf2: None,
+        run_dir: None,
+    };
     let c = &mut args.config;
     while let Some(flag) = it.next() {
         match flag.as_str() {
@@ -211,6 +226,8 @@ fn parse_firmware_args(mut it: impl Iterator<Item = String>) -> Result<Option<Fi
                 let (from, len) = seconds(start).zip(seconds(length)).ok_or_else(bad)?;
                 c.faults.pose_gap = Some((from, from.saturating_add(len)));
             }
+            "--cf2" => args.cf2 = Some(parse_value::<String>(&flag, it.next())?.into()),
+            "--run-dir" => args.run_dir = Some(parse_value::<String>(&flag, it.next())?.into()),
             "--max-accel" | "--latency-ms" | "--require-arming" => {
                 return Err(CliError::NotInFirmwareMode(flag));
             }
@@ -248,6 +265,33 @@ async fn run_firmware_physics(args: FirmwareArgs) -> ExitCode {
             p[2]
         );
     }
+    // Kept to the end: dropping it kills the firmware processes.
+    let _firmware = match &args.cf2 {
+        Some(cf2) => {
+            let run_dir = args.run_dir.clone().unwrap_or_else(|| {
+                std::env::temp_dir().join(format!("cfsim-firmware-{}", std::process::id()))
+            });
+            let started = std::fs::create_dir_all(&run_dir)
+                .map_err(|e| format!("{}: {e}", run_dir.display()))
+                .and_then(|()| {
+                    let options = StartOptions::in_dir(&run_dir);
+                    tokio::task::block_in_place(|| FirmwareProcesses::start(cf2, &sitl, &options))
+                        .map_err(|e| e.to_string())
+                });
+            match started {
+                Ok(processes) => {
+                    let _ =
+                        writeln!(out, "firmware: {} running, consoles in {}", sitl.len(), run_dir.display());
+                    Some(processes)
+                }
+                Err(e) => {
+                    let _ = writeln!(std::io::stderr(), "cfsim: {e}");
+                    return ExitCode::FAILURE;
+                }
+            }
+        }
+        None => None,
+    };
     let _ = writeln!(out, "physics of {} drone(s) for the firmware; Ctrl-C to stop", sitl.len());
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);

@@ -17,6 +17,7 @@
 //! [`SitlHandle`] reads each drone's ground truth and counters and switches faults at run time.
 
 mod drone;
+pub mod firmware;
 mod run;
 pub mod wire;
 

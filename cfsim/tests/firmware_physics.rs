@@ -6,13 +6,12 @@
 //! Skipped unless `AIRROADS_CF_SITL` names the firmware's SITL folder (the one with `build.sh`);
 //! the firmware is built once into `${AIRROADS_CACHE:-$HOME/.cache/airroads}/cf-sitl-build`.
 
-use std::fs::File;
 use std::net::{SocketAddr, UdpSocket};
 use std::path::{Path, PathBuf};
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use cfsim::quadrotor::GroundTruth;
+use cfsim::sitl::firmware::{self, FirmwareProcesses, StartOptions};
 use cfsim::sitl::{SitlConfig, SitlHandle};
 
 /// Start positions (m).
@@ -24,10 +23,6 @@ const HEIGHT_TOLERANCE: f64 = 0.1;
 const LEVEL_DEG: f64 = 5.0;
 /// Largest horizontal drift from the start (m).
 const DRIFT: f64 = 0.1;
-/// cf2 sometimes stalls at start (FreeRTOS's POSIX port): restart it after this without motor
-/// packets, up to `START_TRIES` times.
-const START_WAIT: Duration = Duration::from_secs(5);
-const START_TRIES: usize = 6;
 
 /// CRTP headers and commands used here (port << 4 | channel).
 const PARAM_MISC: u8 = 0x23;
@@ -71,7 +66,8 @@ fn firmware_takes_off_hovers_and_lands_on_cfsim_physics() {
     }
 }
 
-/// The firmware binary, built on first use.
+/// The firmware binary, built on first use into the cache (`$AIRROADS_CACHE`, else
+/// `~/.cache/airroads`).
 fn build_firmware(source: &Path) -> PathBuf {
     let cache = match std::env::var_os("AIRROADS_CACHE") {
         Some(dir) => PathBuf::from(dir),
@@ -79,31 +75,7 @@ fn build_firmware(source: &Path) -> PathBuf {
             PathBuf::from(std::env::var_os("HOME").expect("HOME or AIRROADS_CACHE")).join(".cache/airroads")
         }
     };
-    let dir = cache.join("cf-sitl-build");
-    let cf2 = dir.join("cf2");
-    if !cf2.is_file() {
-        let status = Command::new("bash")
-            .arg(source.join("build.sh"))
-            .arg(&dir)
-            .status()
-            .expect("run the firmware's build.sh");
-        assert!(status.success(), "building the firmware into {} failed", dir.display());
-    }
-    assert!(cf2.is_file(), "no cf2 in {}", dir.display());
-    cf2
-}
-
-/// Child processes killed when dropped, so none outlives the test.
-#[derive(Default)]
-struct Children(Vec<Child>);
-
-impl Drop for Children {
-    fn drop(&mut self) {
-        for child in &mut self.0 {
-            let _ = child.kill();
-            let _ = child.wait();
-        }
-    }
+    firmware::build(source, &cache.join("cf-sitl-build")).unwrap_or_else(|e| panic!("{e}"))
 }
 
 /// One flight of both drones; a summary of what was measured, or what went wrong.
@@ -117,10 +89,8 @@ fn fly(cf2: &Path, run_dir: &Path) -> Result<String, String> {
         ..SitlConfig::default()
     };
     let sitl = SitlHandle::spawn(config).map_err(|e| e.to_string())?;
-    let mut children = Children::default();
-    for i in 0..STARTS.len() {
-        start_firmware(cf2, &sitl, i, run_dir, &mut children)?;
-    }
+    let children =
+        FirmwareProcesses::start(cf2, &sitl, &StartOptions::in_dir(run_dir)).map_err(|e| e.to_string())?;
     let clients: Vec<Client> =
         (0..STARTS.len()).map(|i| Client::new(sitl.client_addr(i).expect("drone"))).collect();
     set_mellinger(&clients[1])?;
@@ -171,64 +141,6 @@ fn fly(cf2: &Path, run_dir: &Path) -> Result<String, String> {
     drop(children);
     sitl.shutdown().map_err(|e| e.to_string())?;
     Ok(summary.join("\n"))
-}
-
-/// Start drone `i`'s firmware and wait for its first motor packet, restarting a stalled start.
-fn start_firmware(
-    cf2: &Path,
-    sitl: &SitlHandle,
-    i: usize,
-    run_dir: &Path,
-    children: &mut Children,
-) -> Result<(), String> {
-    let port = sitl.firmware_addr(i).expect("drone").port();
-    let log = |name: &str| {
-        File::options()
-            .create(true)
-            .append(true)
-            .open(run_dir.join(format!("fw{i}.{name}")))
-            .map_err(|e| e.to_string())
-    };
-    for attempt in 1..=START_TRIES {
-        let hellos = sitl.stats(i).expect("drone").hellos;
-        // The firmware's console is its stdout: line-buffered, so a killed process keeps its log.
-        let mut command = match which("stdbuf") {
-            Some(stdbuf) => {
-                let mut c = Command::new(stdbuf);
-                c.arg("-oL").arg(cf2);
-                c
-            }
-            None => Command::new(cf2),
-        };
-        let child = command
-            .arg(port.to_string())
-            .current_dir(run_dir)
-            .stdin(Stdio::null())
-            .stdout(log("out")?)
-            .stderr(log("err")?)
-            .spawn()
-            .map_err(|e| format!("cannot start {}: {e}", cf2.display()))?;
-        children.0.push(child);
-        let started = Instant::now();
-        while started.elapsed() < START_WAIT {
-            let s = sitl.stats(i).expect("drone");
-            if s.hellos > hellos && s.motor_packets_since_hello > 0 {
-                return Ok(());
-            }
-            std::thread::sleep(Duration::from_millis(50));
-        }
-        eprintln!("drone {i}: firmware start {attempt} stalled, restarting it");
-        if let Some(mut stalled) = children.0.pop() {
-            let _ = stalled.kill();
-            let _ = stalled.wait();
-        }
-    }
-    Err(format!("drone {i}: the firmware did not start in {START_TRIES} tries"))
-}
-
-/// `program`'s path if it is on `PATH`.
-fn which(program: &str) -> Option<PathBuf> {
-    std::env::split_paths(&std::env::var_os("PATH")?).map(|d| d.join(program)).find(|p| p.is_file())
 }
 
 /// A CRTP client over UDP: one packet per datagram.
