@@ -276,3 +276,16 @@ fn stress_reports_time_to_arrival_and_saves_unfinished_cases_with_save_failing()
         assert_eq!(rerun.status.code(), Some(1), "{f} replays as unfinished: {scenario:.80}");
     }
 }
+
+/// `run --link firmware` needs the firmware binary: without one it says so and exits 2 before
+/// anything runs.
+#[test]
+fn a_run_over_the_firmware_needs_its_binary() {
+    let scenario = repo().join("scenarios/lab3.json");
+    for extra in [&[][..], &["--cf2", "/nonexistent/cf2"][..]] {
+        let run = airroads(&[&["run", scenario.to_str().unwrap(), "--link", "firmware"][..], extra].concat());
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{stderr}");
+        assert!(stderr.contains("--link firmware needs --cf2 PATH"), "{stderr}");
+    }
+}

@@ -31,14 +31,18 @@ const PATIENCE: f64 = 60.0;
 /// Above this height a Crazyflie is airborne for the margins (m).
 const AIRBORNE_M: f64 = 0.3;
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn lab3_flies_through_three_real_firmware_processes() {
+/// One firmware flight at a time: three firmware processes already take most of two cores.
+static ONE_FLIGHT: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
+
+/// The firmware built from `AIRROADS_CF_SITL` (once, into the cache), or `None` with a message
+/// saying how to run the test.
+async fn firmware_binary(what: &str) -> Option<PathBuf> {
     let Some(source) = std::env::var_os("AIRROADS_CF_SITL") else {
         eprintln!(
             "skipped: set AIRROADS_CF_SITL to the Crazyflie firmware's SITL folder (the one holding \
-             build.sh) to fly scenarios/lab3.json through the real firmware"
+             build.sh) to fly {what} through the real firmware"
         );
-        return;
+        return None;
     };
     let cache = std::env::var_os("AIRROADS_CACHE").map(PathBuf::from).unwrap_or_else(|| {
         PathBuf::from(std::env::var_os("HOME").expect("HOME or AIRROADS_CACHE")).join(".cache/airroads")
@@ -48,6 +52,64 @@ async fn lab3_flies_through_three_real_firmware_processes() {
         .await
         .expect("build task")
         .unwrap_or_else(|e| panic!("{e}"));
+    Some(cf2)
+}
+
+/// `airroads run --link firmware` writes METRICS.json with exactly the keys of any run, its
+/// margins measured on the physics, and exits 0 for a safe run where every UAV arrived.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_run_over_the_firmware_writes_the_same_report() {
+    let _alone = ONE_FLIGHT.lock().await;
+    let Some(cf2) = firmware_binary("`airroads run scenarios/lab3.json`").await else { return };
+    let out = std::env::temp_dir().join(format!("airroads-firmware-metrics-{}.json", std::process::id()));
+    let scenario = support::repo().join("scenarios/lab3.json");
+    let mut tries = Vec::new();
+    // One retry, as for the flight above: the firmware's clock can slip under load.
+    for _ in 0..2 {
+        let run = std::process::Command::new(env!("CARGO_BIN_EXE_airroads"))
+            .args(["run", scenario.to_str().unwrap(), "--link", "firmware", "--cf2", cf2.to_str().unwrap()])
+            .args(["--out", out.to_str().unwrap()])
+            .output()
+            .expect("airroads runs");
+        let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
+        if run.status.code() == Some(0) {
+            assert!(stdout.contains("firmware loop") && stdout.contains("SAFE"), "{stdout}");
+            let metrics: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+            let mut keys: Vec<&str> = metrics.as_object().unwrap().keys().map(String::as_str).collect();
+            keys.sort();
+            assert_eq!(
+                keys,
+                [
+                    "all_arrived",
+                    "arrival_time_s",
+                    "max_stall_s",
+                    "min_collision_margin_m",
+                    "min_road_margin_m",
+                    "min_separation_m",
+                    "min_wall_distance_m",
+                    "qp",
+                    "safe",
+                    "scenario",
+                    "sim_time_s",
+                    "stall_s",
+                    "steps_outside_road",
+                    "ticks"
+                ]
+            );
+            assert!(metrics["min_separation_m"].as_f64().is_some_and(|d| d >= 0.3), "{metrics}");
+            assert!(metrics["min_wall_distance_m"].as_f64().is_some_and(|d| d >= 0.1), "{metrics}");
+            let _ = std::fs::remove_file(&out);
+            return;
+        }
+        tries.push(format!("{:?}: {stdout}{}", run.status.code(), String::from_utf8_lossy(&run.stderr)));
+    }
+    panic!("the run over the firmware failed twice:\n{}", tries.join("\n"));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn lab3_flies_through_three_real_firmware_processes() {
+    let _alone = ONE_FLIGHT.lock().await;
+    let Some(cf2) = firmware_binary("scenarios/lab3.json with the server").await else { return };
     let run_dir = std::env::temp_dir().join(format!("airroads-lab3-firmware-{}", std::process::id()));
     std::fs::create_dir_all(&run_dir).expect("run folder");
     let report = match fly(&cf2, &run_dir).await {

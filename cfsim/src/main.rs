@@ -295,15 +295,25 @@ async fn run_firmware_physics(args: FirmwareArgs) -> ExitCode {
     let _ = writeln!(out, "physics of {} drone(s) for the firmware; Ctrl-C to stop", sitl.len());
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);
+    let motor_packets = |sitl: &SitlHandle| -> Vec<u64> {
+        (0..sitl.len()).map(|i| sitl.stats(i).map_or(0, |d| d.motor_packets)).collect()
+    };
+    let mut before = (std::time::Instant::now(), motor_packets(&sitl));
     loop {
         tokio::select! {
             _ = &mut ctrl_c => break,
             () = tokio::time::sleep(STATUS_EVERY) => {
                 let s = sitl.loop_stats();
                 let up = (0..sitl.len()).filter(|&i| sitl.stats(i).is_some_and(|d| d.motor_packets_since_hello > 0)).count();
+                let now = (std::time::Instant::now(), motor_packets(&sitl));
+                let seconds = (now.0 - before.0).as_secs_f64().max(1e-9);
+                let rates = now.1.iter().zip(&before.1).map(|(a, b)| a.saturating_sub(*b) as f64 / seconds);
+                let (lo, hi) = rates.fold((f64::INFINITY, 0.0_f64), |(lo, hi), r| (lo.min(r), hi.max(r)));
+                before = now;
                 let _ = writeln!(
                     out,
-                    "physics {:.1} Hz, load {:.1}%, longest tick {:.2} ms, {} resyncs; firmware running {up}/{}",
+                    "physics {:.1} Hz, load {:.1}%, longest tick {:.2} ms, {} resyncs; firmware running {up}/{}, \
+                     motor packets {lo:.0}-{hi:.0}/s",
                     s.physics_rate_hz(), 100.0 * s.load(), s.longest_tick.as_secs_f64() * 1e3, s.resyncs, sitl.len()
                 );
             }

@@ -42,7 +42,10 @@ pub use histogram::DurationHistogram;
 pub use margins::{collision_margin, road_margin, road_margin_in};
 pub use metrics::{MetricsRecorder, QpMetrics, RunMetrics, Stall};
 pub use ragged::Ragged;
-pub use run::{RunOptions, RunOutcome, TAKEOFF_TIMEOUT_S, TRAJECTORY_HEADER, run_scenario, run_scenario_on};
+pub use run::{
+    RunOptions, RunOutcome, TAKEOFF_TIMEOUT_S, TRAJECTORY_HEADER, run_scenario, run_scenario_on,
+    run_scenario_on_truth,
+};
 /// The reach disk of a neighbour that does not run the filter (moved to `safety`; kept here for users of `fleet`).
 pub use safety::{ReachDisk, WATCHDOG_HOLD_S, flown_reach_disk, obstacle_row, point_disk, reach_disk};
 pub use scenario::{Scenario, ScenarioError, ScenarioUav, UavSpec, ValidScenario};

@@ -134,12 +134,27 @@ impl MetricsRecorder {
 
     /// Records the states the fleet read in its last tick (time `t`) and what the filter did.
     pub fn record(&mut self, fleet: &Fleet, t: f64) {
+        self.record_with(fleet, t, None);
+    }
+
+    /// Records what the filter did in the fleet's last tick (time `t`) and the margins of `truth`,
+    /// the UAVs' true states in the fleet's order (a physics simulation's ground truth), instead of
+    /// the states the fleet read. A `truth` of another length is ignored (the fleet's are used).
+    pub fn record_truth(&mut self, fleet: &Fleet, t: f64, truth: &[UavState]) {
+        self.record_with(fleet, t, Some(truth));
+    }
+
+    fn record_with(&mut self, fleet: &Fleet, t: f64, truth: Option<&[UavState]>) {
         let p = fleet.config.params;
         let road = fleet.road();
         let uavs = fleet.uavs();
         let lists = fleet.neighbour_lists();
         self.states.clear();
-        self.states.extend(uavs.iter().map(|u| (u.state, u.nav.tracker.current)));
+        match truth.filter(|truth| truth.len() == uavs.len()) {
+            // No segment hint: the estimate's segment need not hold the true position.
+            Some(truth) => self.states.extend(truth.iter().map(|s| (*s, None))),
+            None => self.states.extend(uavs.iter().map(|u| (u.state, u.nav.tracker.current))),
+        }
         let states = &self.states;
         // Each UAV's margins on its own (in parallel for large fleets; a minimum does not depend on
         // the order).

@@ -59,10 +59,24 @@ pub const TAKEOFF_TIMEOUT_S: f64 = 30.0;
 /// from there, and every UAV is landed at the end.
 pub fn run_scenario_on(
     scenario: &ValidScenario,
+    options: RunOptions,
+    policies: PolicyRegistry,
+    make_link: &mut dyn FnMut(&UavSpec, UavState) -> Box<dyn Link>,
+    wait_tick: &mut dyn FnMut(),
+) -> std::io::Result<RunOutcome> {
+    run_scenario_on_truth(scenario, options, policies, make_link, wait_tick, &mut || None)
+}
+
+/// [`run_scenario_on`] with the margins of METRICS.json measured on `truth`: the UAVs' true
+/// states in the scenario's order, read after every tick (e.g. a physics simulation's ground
+/// truth; `None` measures that tick on the states the fleet read).
+pub fn run_scenario_on_truth(
+    scenario: &ValidScenario,
     mut options: RunOptions,
     policies: PolicyRegistry,
     make_link: &mut dyn FnMut(&UavSpec, UavState) -> Box<dyn Link>,
     wait_tick: &mut dyn FnMut(),
+    truth: &mut dyn FnMut() -> Option<Vec<UavState>>,
 ) -> std::io::Result<RunOutcome> {
     let mut config = options.config;
     config.params = scenario.params;
@@ -103,7 +117,10 @@ pub fn run_scenario_on(
         let t = tick as f64 * params.dt;
         wait_tick();
         let arrived = fleet.tick();
-        recorder.record(&fleet, t);
+        match truth() {
+            Some(states) => recorder.record_truth(&fleet, t, &states),
+            None => recorder.record(&fleet, t),
+        }
         if let Some(p) = paths.as_mut() {
             p.record(&fleet, t + params.dt);
         }

@@ -19,6 +19,7 @@ pub fn main(args: BenchArgs) -> ExitCode {
         BenchTarget::Fleet => return crate::bench_fleet::main(&args),
         BenchTarget::Scale => return crate::bench_scale::main(&args),
         BenchTarget::Regions => return crate::bench_regions::main(&args),
+        BenchTarget::Firmware => return crate::bench_firmware::main(&args),
         BenchTarget::Solver => return crate::bench_solver::main(args.instances, args.seed),
     }
     ExitCode::SUCCESS

@@ -248,9 +248,14 @@ pub struct RunArgs {
     pub plot: Option<PathBuf>,
     /// `sim`: the in-process simulator, as fast as it computes. `cfsim`: every UAV a simulated
     /// Crazyflie flown through the real CRTP path over UDP, in real time (take-off first, landing
-    /// after); the metrics count from the moment all fly.
-    #[arg(long, default_value = "sim", value_parser = ["sim", "cfsim"])]
+    /// after); the metrics count from the moment all fly. `firmware`: every UAV a real Crazyflie
+    /// firmware process (`--cf2`) on cfsim's physics of a Crazyflie 2.1, the margins measured on
+    /// the physics' ground truth.
+    #[arg(long, default_value = "sim", value_parser = ["sim", "cfsim", "firmware"])]
     pub link: String,
+    /// The Crazyflie firmware's SITL build (`cf2`) that `--link firmware` runs, one process per UAV.
+    #[arg(long, value_name = "PATH")]
+    pub cf2: Option<PathBuf>,
     /// Flight options.
     #[command(flatten)]
     pub flight: FlightArgs,
@@ -343,6 +348,9 @@ pub struct BenchArgs {
     /// Join the regions over plain TCP instead of TLS with certificates (`regions`; loopback).
     #[arg(long = "zenoh-insecure")]
     pub zenoh_insecure: bool,
+    /// The Crazyflie firmware's SITL build (`firmware`): one process per UAV.
+    #[arg(long, value_name = "PATH")]
+    pub cf2: Option<PathBuf>,
 }
 
 /// Benchmarks.
@@ -366,6 +374,9 @@ pub enum BenchTarget {
     /// `--regions` region servers in one process over Zenoh (loopback TCP) flying the trunk road's
     /// `--uavs` UAVs: bytes per second each publishes, the age of the foreign states used, ticks.
     Regions,
+    /// Real Crazyflie firmware processes (`--cf2`) on cfsim's physics flying a swap of `--uavs`
+    /// UAVs in real time: firmware loop rate, arrivals, true margins.
+    Firmware,
     /// Tick p50/p99 and each stage's time for UAVs flying both ways along a long winding trunk road
     /// (1.2 km per 1,000 UAVs), for each `--uavs` size, and how the per-UAV cost grows.
     Scale,

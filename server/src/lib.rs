@@ -2,4 +2,5 @@
 //! persistence). The binary adds the command line and the headless subcommands.
 
 pub mod cfsim_fleet;
+pub mod firmware_fleet;
 pub mod serve;

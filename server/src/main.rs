@@ -13,6 +13,7 @@ macro_rules! say {
 mod bench;
 mod bench_crazyflie;
 mod bench_durability;
+mod bench_firmware;
 mod bench_fleet;
 mod bench_regions;
 mod bench_scale;

@@ -2,7 +2,10 @@
 
 use crate::cli::RunArgs;
 use anyhow::Context;
-use fleet::{RunMetrics, RunOptions, Scenario, ScenarioError, ValidScenario, run_scenario, run_scenario_on};
+use fleet::{
+    RunMetrics, RunOptions, Scenario, ScenarioError, ValidScenario, run_scenario, run_scenario_on,
+    run_scenario_on_truth,
+};
 use policies::PolicyRegistry;
 use std::path::Path;
 use std::process::ExitCode;
@@ -79,6 +82,11 @@ pub fn main(args: RunArgs) -> ExitCode {
             return ExitCode::from(EXIT_INVALID);
         }
     };
+    if args.link == "firmware" && !args.cf2.as_deref().is_some_and(Path::is_file) {
+        let given = args.cf2.as_ref().map_or("none".into(), |p| p.display().to_string());
+        eprintln!("error: --link firmware needs --cf2 PATH, the firmware's SITL build (given: {given})");
+        return ExitCode::from(EXIT_INVALID);
+    }
     let policies = match args.flight.policies(scenario.params.delta) {
         Ok(p) => p,
         Err(msg) => {
@@ -117,18 +125,8 @@ fn run_on_cfsim(
         let uri = u.link.as_deref().unwrap_or_default();
         Box::new(crazyflie::CrazyflieLink::spawn(&handle, uri, relay))
     };
-    // Ticks at 1/dt of wall time, like the server's loop (late ticks are not made up).
-    let period = std::time::Duration::from_secs_f64(dt);
-    let mut next = std::time::Instant::now();
-    let mut wait_tick = || {
-        next += period;
-        let now = std::time::Instant::now();
-        if next > now {
-            std::thread::sleep(next - now);
-        } else {
-            next = now;
-        }
-    };
+    // Ticks at 1/dt of wall time, like the server's loop.
+    let mut wait_tick = real_time_ticks(dt);
     let outcome = run_scenario_on(&scenario, options, policies, &mut make_link, &mut wait_tick)
         .context("flying the simulated Crazyflies")?;
     runtime.block_on(async {
@@ -137,6 +135,77 @@ fn run_on_cfsim(
         }
     });
     Ok(outcome)
+}
+
+/// Above this height every Crazyflie is airborne and the margins are measured on the physics (m).
+const AIRBORNE_M: f64 = 0.3;
+
+/// Flies `scenario` with one real firmware process per UAV on cfsim's physics, in real time; the
+/// margins are measured on the physics' ground truth.
+pub fn run_on_firmware(
+    scenario: &ValidScenario,
+    options: RunOptions,
+    policies: PolicyRegistry,
+    cf2: &Path,
+) -> anyhow::Result<fleet::RunOutcome> {
+    let runtime = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    let mut scenario = scenario.clone();
+    let firmware = airroads::firmware_fleet::FirmwareFleet::start(&mut scenario, cf2)?;
+    say!(
+        "flying {} Crazyflie firmware processes ({}) on cfsim's physics (take-off first; consoles in {})",
+        scenario.uavs.len(),
+        cf2.display(),
+        firmware.run_dir.display()
+    );
+    let dt = scenario.params.dt;
+    let relay = crazyflie::RelayConfig { dt, ..Default::default() };
+    let handle = runtime.handle().clone();
+    let mut make_link = |u: &fleet::UavSpec, _| -> Box<dyn links::Link> {
+        let uri = u.link.as_deref().unwrap_or_default();
+        Box::new(crazyflie::CrazyflieLink::spawn(&handle, uri, relay))
+    };
+    let mut wait_tick = real_time_ticks(dt);
+    let mut first: Option<(std::time::Instant, Vec<u64>)> = None;
+    let mut truth = || {
+        let states = firmware.truth(AIRBORNE_M);
+        if states.is_some() && first.is_none() {
+            first = Some(firmware.motor_packets());
+        }
+        states
+    };
+    let outcome =
+        run_scenario_on_truth(&scenario, options, policies, &mut make_link, &mut wait_tick, &mut truth)
+            .context("flying the Crazyflie firmware")?;
+    if let Some((since, before)) = first {
+        let (now, after) = firmware.motor_packets();
+        let seconds = (now - since).as_secs_f64().max(1e-9);
+        let rates: Vec<f64> = after.iter().zip(&before).map(|(a, b)| (a - b) as f64 / seconds).collect();
+        let lowest = rates.iter().copied().fold(f64::INFINITY, f64::min);
+        let stats = firmware.physics.loop_stats();
+        say!(
+            "  firmware loop    {lowest:.0} Hz at the slowest of {} (1000: real time), physics {:.0} Hz, {} resyncs",
+            rates.len(),
+            stats.physics_rate_hz(),
+            stats.resyncs
+        );
+    }
+    drop(firmware);
+    Ok(outcome)
+}
+
+/// A `wait_tick` for real time: sleeps until the next multiple of `dt` (late ticks are not made up).
+fn real_time_ticks(dt: f64) -> impl FnMut() {
+    let period = std::time::Duration::from_secs_f64(dt);
+    let mut next = std::time::Instant::now();
+    move || {
+        next += period;
+        let now = std::time::Instant::now();
+        if next > now {
+            std::thread::sleep(next - now);
+        } else {
+            next = now;
+        }
+    }
 }
 
 fn execute(args: &RunArgs, scenario: &ValidScenario, policies: PolicyRegistry) -> anyhow::Result<RunMetrics> {
@@ -156,6 +225,10 @@ fn execute(args: &RunArgs, scenario: &ValidScenario, policies: PolicyRegistry) -
     };
     let outcome = if args.link == "cfsim" {
         run_on_cfsim(scenario, options, policies)?
+    } else if args.link == "firmware" {
+        // Checked in `main` before anything runs.
+        let cf2 = args.cf2.as_deref().context("--link firmware needs --cf2 PATH")?;
+        run_on_firmware(scenario, options, policies, cf2)?
     } else {
         run_scenario(scenario, options, policies).context("writing the trajectory")?
     };

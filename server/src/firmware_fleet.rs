@@ -1,0 +1,69 @@
+//! Real Crazyflie firmware for a scenario (`airroads run --link firmware --cf2 PATH`): one firmware
+//! process (`cf2`, the crazyflie-firmware SITL build) per UAV on cfsim's physics of a Crazyflie
+//! 2.1, standing on the ground at the UAV's start with the UAV's link pointed at it; the physics
+//! gives the ground truth the run's margins are measured on.
+
+use anyhow::Context as _;
+use cfsim::sitl::firmware::{FirmwareProcesses, StartOptions};
+use cfsim::sitl::{SitlConfig, SitlHandle};
+use fleet::ValidScenario;
+use std::path::{Path, PathBuf};
+use uav::{UavState, Vec2};
+
+/// The physics and the firmware processes of a scenario's UAVs (killed when dropped).
+pub struct FirmwareFleet {
+    /// The physics of every UAV, in the scenario's order.
+    pub physics: SitlHandle,
+    /// Where each firmware's console is written (`fwN.out`).
+    pub run_dir: PathBuf,
+    firmware: FirmwareProcesses,
+}
+
+impl FirmwareFleet {
+    /// Starts the physics and one `cf2` per UAV of `scenario` (each until its stabilizer runs),
+    /// and points the UAVs' links at them.
+    pub fn start(scenario: &mut ValidScenario, cf2: &Path) -> anyhow::Result<Self> {
+        let run_dir = std::env::temp_dir().join(format!("airroads-firmware-{}", std::process::id()));
+        std::fs::create_dir_all(&run_dir).with_context(|| format!("{}", run_dir.display()))?;
+        let config = SitlConfig {
+            positions: scenario.uavs.iter().map(|u| [u.start.x, u.start.y, 0.0]).collect(),
+            firmware_base_port: 0,
+            client_base_port: 0,
+            noise: true,
+            ..SitlConfig::default()
+        };
+        let physics = SitlHandle::spawn(config).context("the physics of the firmware")?;
+        let firmware = FirmwareProcesses::start(cf2, &physics, &StartOptions::in_dir(&run_dir))
+            .with_context(|| format!("starting {} (consoles in {})", cf2.display(), run_dir.display()))?;
+        for (i, uav) in scenario.uavs.iter_mut().enumerate() {
+            uav.link = Some(physics.uri(i).context("a drone per UAV")?);
+        }
+        Ok(Self { physics, run_dir, firmware })
+    }
+
+    /// Every UAV's true horizontal state, in the scenario's order, while every one is airborne
+    /// (above `airborne_m`); `None` otherwise (take-off, landing: the margins are for flight).
+    pub fn truth(&self, airborne_m: f64) -> Option<Vec<UavState>> {
+        (0..self.physics.len())
+            .map(|i| {
+                let t = self.physics.truth(i)?;
+                (t.position[2] > airborne_m).then(|| UavState {
+                    p: Vec2::new(t.position[0], t.position[1]),
+                    v: Vec2::new(t.velocity[0], t.velocity[1]),
+                })
+            })
+            .collect()
+    }
+
+    /// Motor packets received from each UAV's firmware so far (one per firmware loop, 1 kHz when
+    /// it keeps real time), with the time they were read.
+    pub fn motor_packets(&self) -> (std::time::Instant, Vec<u64>) {
+        let now = std::time::Instant::now();
+        (now, (0..self.physics.len()).map(|i| self.physics.stats(i).map_or(0, |s| s.motor_packets)).collect())
+    }
+
+    /// The firmware processes (to kill one, as a fault).
+    pub fn firmware(&mut self) -> &mut FirmwareProcesses {
+        &mut self.firmware
+    }
+}
