@@ -175,10 +175,17 @@ pub struct DroneStats {
     pub motor_packets: u64,
     /// Motor packets received since the last hello (0: the stabilizer has not run yet).
     pub motor_packets_since_hello: u64,
+    /// Times the motors were stopped because the firmware sent no motor packet for 100 ms (a
+    /// killed or frozen firmware; a real Crazyflie's watchdog resets it).
+    pub motor_watchdog_cuts: u64,
     /// Datagrams relayed from the firmware to the client.
     pub to_client: u64,
     /// Datagrams relayed from the client to the firmware.
     pub to_firmware: u64,
+    /// Generic setpoints (CRTP port 7) among them.
+    pub setpoints: u64,
+    /// When the last of those was relayed (the loop reads its sockets every physics tick, 1 ms).
+    pub last_setpoint: Option<Instant>,
     /// Relayed datagrams dropped towards the client by [`SitlFaults::link_loss`].
     pub dropped_to_client: u64,
     /// Relayed datagrams dropped towards the firmware by [`SitlFaults::link_loss`].

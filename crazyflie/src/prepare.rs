@@ -32,6 +32,10 @@ const SUPERVISOR_WAIT: Duration = Duration::from_millis(500);
 /// Longest wait for the armed bit after an arming request.
 const ARM_WAIT: Duration = Duration::from_secs(1);
 
+/// Longest wait for the supervisor to let the motors run (a firmware that has just booted passes
+/// its pre-flight checks within a second or two).
+const READY_WAIT: Duration = Duration::from_secs(5);
+
 /// Sets `controller` if the firmware has the parameter and another value, then reads it back.
 /// Returns the value read back (`None`: the firmware has no such parameter, e.g. very old).
 pub async fn set_controller(cf: &Crazyflie, controller: Controller) -> Result<Option<u8>, String> {
@@ -57,33 +61,53 @@ async fn supervisor(cf: &Crazyflie) -> Option<SupervisorInfo> {
     timeout(SUPERVISOR_WAIT, cf.supervisor.read_bitfield()).await.ok()?.ok()
 }
 
-/// Clears the previous session's low-level setpoint and checks (and if needed arms) the
-/// supervisor. Returns the supervisor bits last read, if the firmware has a supervisor.
+/// Clears the previous session's low-level setpoint, checks (and if needed arms) the supervisor
+/// and waits until it lets the motors run ("can fly": its pre-flight checks passed, armed; a
+/// take-off before that is refused by the high-level commander, which the supervisor keeps
+/// blocked). Returns the supervisor bits last read, if the firmware has a supervisor.
 pub async fn ready_for_take_off(cf: &Crazyflie) -> Result<Option<u16>, String> {
     cf.commander.notify_setpoint_stop(0).await.map_err(|e| format!("setpoint stop: {e}"))?;
-    let Some(info) = supervisor(cf).await else { return Ok(None) };
+    let Some(mut info) = supervisor(cf).await else { return Ok(None) };
     check_not_locked(&info)?;
-    if info.is_armed() || info.is_auto_armed() {
-        return Ok(Some(info.raw));
+    if !info.is_armed() && !info.is_auto_armed() {
+        cf.supervisor.send_arming_request(true).await.map_err(|e| format!("arming request: {e}"))?;
+        info = until_supervisor(cf, info, ARM_WAIT, SupervisorInfo::is_armed).await.map_err(|last| {
+            format!(
+                "not armed {} ms after the arming request (supervisor.info {last:#06x})",
+                ARM_WAIT.as_millis()
+            )
+        })?;
     }
-    cf.supervisor.send_arming_request(true).await.map_err(|e| format!("arming request: {e}"))?;
-    let deadline = Instant::now() + ARM_WAIT;
-    let mut last = info;
-    while Instant::now() < deadline {
+    let ready = until_supervisor(cf, info, READY_WAIT, SupervisorInfo::can_fly).await.map_err(|last| {
+        format!(
+            "the supervisor does not let the motors run after {} s (supervisor.info {last:#06x})",
+            READY_WAIT.as_secs()
+        )
+    })?;
+    Ok(Some(ready.raw))
+}
+
+/// Reads the supervisor every 50 ms until `done` holds (at once if it holds for `info`), for at
+/// most `wait`; the error is the last bitfield read (a lock ends the wait at once).
+async fn until_supervisor(
+    cf: &Crazyflie,
+    mut info: SupervisorInfo,
+    wait: Duration,
+    done: fn(&SupervisorInfo) -> bool,
+) -> Result<SupervisorInfo, u16> {
+    let deadline = Instant::now() + wait;
+    loop {
+        if done(&info) {
+            return Ok(info);
+        }
+        if Instant::now() >= deadline || check_not_locked(&info).is_err() {
+            return Err(info.raw);
+        }
         sleep(Duration::from_millis(50)).await;
-        if let Some(info) = supervisor(cf).await {
-            check_not_locked(&info)?;
-            if info.is_armed() {
-                return Ok(Some(info.raw));
-            }
-            last = info;
+        if let Some(read) = supervisor(cf).await {
+            info = read;
         }
     }
-    Err(format!(
-        "not armed {} ms after the arming request (supervisor.info {:#06x})",
-        ARM_WAIT.as_millis(),
-        last.raw
-    ))
 }
 
 /// A locked or crashed Crazyflie cannot take off until it is rebooted (or recovered).

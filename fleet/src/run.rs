@@ -91,11 +91,14 @@ pub fn run_scenario_on_truth(
     fleet.set_hold(true);
     while fleet.uavs().iter().any(|u| u.link.phase() != LinkPhase::Flying) {
         if preflight > TAKEOFF_TIMEOUT_S {
-            let waiting: Vec<&str> = fleet
+            let waiting: Vec<String> = fleet
                 .uavs()
                 .iter()
                 .filter(|u| u.link.phase() != LinkPhase::Flying)
-                .map(|u| u.id.as_str())
+                .map(|u| match u.link.error() {
+                    Some(e) => format!("{} ({}: {e})", u.id, u.link.phase().name()),
+                    None => format!("{} ({})", u.id, u.link.phase().name()),
+                })
                 .collect();
             return Err(std::io::Error::other(format!(
                 "not flying after {TAKEOFF_TIMEOUT_S} s: {}",

@@ -375,7 +375,7 @@ pub enum BenchTarget {
     /// `--uavs` UAVs: bytes per second each publishes, the age of the foreign states used, ticks.
     Regions,
     /// Real Crazyflie firmware processes (`--cf2`) on cfsim's physics flying a swap of `--uavs`
-    /// UAVs in real time: firmware loop rate, arrivals, true margins.
+    /// UAVs in real time: how the firmware kept up, arrivals, true margins.
     Firmware,
     /// Tick p50/p99 and each stage's time for UAVs flying both ways along a long winding trunk road
     /// (1.2 km per 1,000 UAVs), for each `--uavs` size, and how the per-UAV cost grows.

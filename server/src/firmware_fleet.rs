@@ -23,7 +23,8 @@ impl FirmwareFleet {
     /// Starts the physics and one `cf2` per UAV of `scenario` (each until its stabilizer runs),
     /// and points the UAVs' links at them.
     pub fn start(scenario: &mut ValidScenario, cf2: &Path) -> anyhow::Result<Self> {
-        let run_dir = std::env::temp_dir().join(format!("airroads-firmware-{}", std::process::id()));
+        let run_dir =
+            std::env::temp_dir().join(format!("airroads-firmware-{}-{}", std::process::id(), scenario.name));
         std::fs::create_dir_all(&run_dir).with_context(|| format!("{}", run_dir.display()))?;
         let config = SitlConfig {
             positions: scenario.uavs.iter().map(|u| [u.start.x, u.start.y, 0.0]).collect(),
@@ -55,11 +56,30 @@ impl FirmwareFleet {
             .collect()
     }
 
-    /// Motor packets received from each UAV's firmware so far (one per firmware loop, 1 kHz when
-    /// it keeps real time), with the time they were read.
+    /// Motor packets received from each UAV's firmware so far (500 per second from an idle
+    /// machine's firmware), with the time they were read.
     pub fn motor_packets(&self) -> (std::time::Instant, Vec<u64>) {
         let now = std::time::Instant::now();
         (now, (0..self.physics.len()).map(|i| self.physics.stats(i).map_or(0, |s| s.motor_packets)).collect())
+    }
+
+    /// Setpoints relayed to each UAV's firmware so far, and when the last one was.
+    pub fn setpoints(&self) -> Vec<(u64, Option<std::time::Instant>)> {
+        (0..self.physics.len())
+            .map(|i| self.physics.stats(i).map_or((0, None), |s| (s.setpoints, s.last_setpoint)))
+            .collect()
+    }
+
+    /// How often the firmware consoles said their own loops were late so far: the stabilizer's and
+    /// the Kalman filter's rate supervisors (`... rate is off`), summed over every UAV. An idle
+    /// machine shows a few at start (the POSIX port's emulated clock).
+    pub fn rate_warnings(&self) -> usize {
+        (0..self.physics.len())
+            .filter_map(|i| std::fs::read_to_string(self.run_dir.join(format!("fw{i}.out"))).ok())
+            .map(|console| {
+                console.lines().filter(|l| l.contains("rate is off") || l.contains("rate off")).count()
+            })
+            .sum()
     }
 
     /// The firmware processes (to kill one, as a fault).

@@ -164,7 +164,23 @@ pub fn run_on_firmware(
         let uri = u.link.as_deref().unwrap_or_default();
         Box::new(crazyflie::CrazyflieLink::spawn(&handle, uri, relay))
     };
-    let mut wait_tick = real_time_ticks(dt);
+    // Setpoint latency: from the start of a tick to its setpoint's arrival at the firmware's
+    // socket, read before the next tick (by then every setpoint of the tick has arrived).
+    let mut latencies_us = Vec::new();
+    let mut sleep = real_time_ticks(dt);
+    let mut tick_start: Option<(std::time::Instant, Vec<u64>)> = None;
+    let mut wait_tick = || {
+        sleep();
+        let setpoints = firmware.setpoints();
+        if let Some((start, before)) = &tick_start {
+            for ((count, at), before) in setpoints.iter().zip(before) {
+                if let Some(at) = at.filter(|_| count > before) {
+                    latencies_us.push(at.saturating_duration_since(*start).as_secs_f64() * 1e6);
+                }
+            }
+        }
+        tick_start = Some((std::time::Instant::now(), setpoints.iter().map(|s| s.0).collect()));
+    };
     let mut first: Option<(std::time::Instant, Vec<u64>)> = None;
     let mut truth = || {
         let states = firmware.truth(AIRBORNE_M);
@@ -180,15 +196,25 @@ pub fn run_on_firmware(
         let (now, after) = firmware.motor_packets();
         let seconds = (now - since).as_secs_f64().max(1e-9);
         let rates: Vec<f64> = after.iter().zip(&before).map(|(a, b)| (a - b) as f64 / seconds).collect();
-        let lowest = rates.iter().copied().fold(f64::INFINITY, f64::min);
+        let (lo, hi) = rates.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), r| (lo.min(*r), hi.max(*r)));
         let stats = firmware.physics.loop_stats();
         say!(
-            "  firmware loop    {lowest:.0} Hz at the slowest of {} (1000: real time), physics {:.0} Hz, {} resyncs",
+            "  firmware         motor packets {lo:.0}-{hi:.0}/s per Crazyflie (500 on an idle machine), {} \
+             loop-rate warnings in {} consoles; physics {:.0} Hz, {} resyncs",
+            firmware.rate_warnings(),
             rates.len(),
             stats.physics_rate_hz(),
             stats.resyncs
         );
     }
+    let latency = airroads::serve::stats::percentiles(&mut latencies_us);
+    say!(
+        "  setpoints        {} arrived, latency from the tick p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms",
+        latencies_us.len(),
+        latency.p50_us / 1e3,
+        latency.p99_us / 1e3,
+        latency.max_us / 1e3
+    );
     drop(firmware);
     Ok(outcome)
 }

@@ -56,6 +56,10 @@ impl TruthFile {
     }
 }
 
+/// Physics ticks (1 ms) without a motor packet after which the motors stop: the STM32's
+/// independent watchdog resets a Crazyflie whose firmware hangs; the SITL build has none.
+pub(super) const MOTOR_WATCHDOG_TICKS: u64 = 100;
+
 /// One simulated drone and its link to a firmware process and a client.
 pub(super) struct Drone {
     pub(super) firmware_socket: UdpSocket,
@@ -67,6 +71,8 @@ pub(super) struct Drone {
     loss_rng: Prng,
     answer_null: bool,
     pose_phase: f64,
+    /// Physics ticks since the firmware's last motor packet (see [`MOTOR_WATCHDOG_TICKS`]).
+    ticks_without_motors: u64,
     pub(super) stats: DroneStats,
     truth_file: Option<TruthFile>,
     /// The first error writing the ground-truth file (the file is abandoned then).
@@ -96,6 +102,7 @@ impl Drone {
             loss_rng: Prng::new(loss_seed),
             answer_null,
             pose_phase: 0.0,
+            ticks_without_motors: 0,
             stats: DroneStats::default(),
             truth_file,
             truth_error: None,
@@ -138,6 +145,7 @@ impl Drone {
         }
         if let Some(pwm) = wire::motor_pwm(datagram) {
             self.quad.set_pwm(pwm);
+            self.ticks_without_motors = 0;
             self.stats.motor_packets += 1;
             self.stats.motor_packets_since_hello += 1;
             return;
@@ -180,6 +188,10 @@ impl Drone {
                 } else {
                     self.send_to_firmware(datagram);
                     self.stats.to_firmware += 1;
+                    if datagram.first().is_some_and(|h| h >> 4 == wire::SETPOINT_PORT) {
+                        self.stats.setpoints += 1;
+                        self.stats.last_setpoint = Some(std::time::Instant::now());
+                    }
                 }
             }
         }
@@ -202,6 +214,13 @@ impl Drone {
     /// model steps, then the firmware gets its sensors and the truth file its row.
     pub(super) fn tick(&mut self, tick: u64, dt: f64, elapsed: f64, faults: &SitlFaults, pose_hz: f64) {
         self.quad.external_force = faults.wind_force;
+        // A firmware that stopped commanding its motors (killed, frozen) is reset by the
+        // microcontroller's watchdog on a real Crazyflie: the motors stop, it falls.
+        self.ticks_without_motors = self.ticks_without_motors.saturating_add(1);
+        if self.ticks_without_motors == MOTOR_WATCHDOG_TICKS && self.quad.pwm() != [0; 4] {
+            self.quad.set_pwm([0; 4]);
+            self.stats.motor_watchdog_cuts += 1;
+        }
         self.quad.step(dt);
         if self.firmware.is_some() {
             let imu = self.quad.imu(self.noise.as_mut());

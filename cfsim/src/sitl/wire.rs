@@ -13,6 +13,8 @@ pub const CLIENT_CLOSE: u8 = 0xf4;
 pub const NULL_PACKET: u8 = 0xff;
 /// The CRTP port of sensor and motor packets in the protocol-12 SITL firmware.
 pub const SIM_PORT: u8 = 10;
+/// The CRTP port of generic setpoints (the client's full-state setpoints among them).
+pub const SETPOINT_PORT: u8 = 7;
 /// Header of sensor and motor packets: [`SIM_PORT`], channel 0.
 pub const SIM_HEADER: u8 = SIM_PORT << 4;
 /// Sensor type of an IMU packet.
