@@ -2,8 +2,8 @@
 //! SITL build) per drone, built from its source folder with the folder's own `build.sh`.
 //!
 //! The firmware's FreeRTOS POSIX port sometimes stalls at start (the hello completes but the
-//! stabilizer never runs): a drone counts as started once its first motor packet arrived since its
-//! hello, and a stalled start is killed and started again. Every process is killed when the
+//! stabilizer never runs, or stops soon after): a drone counts as started once half a second of
+//! motor commands arrived since its hello, and a stalled start is killed and started again. Every process is killed when the
 //! [`FirmwareProcesses`] is dropped, so none outlives its user.
 
 use super::SitlHandle;
@@ -11,6 +11,10 @@ use std::fs::File;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
+
+/// Motor commands since its hello after which a firmware counts as started: half a second of its
+/// 500 per second (one alone also came from firmware that stalled right after).
+const STARTED_AFTER: u64 = 250;
 
 /// Errors building or starting the firmware.
 #[derive(Debug, thiserror::Error)]
@@ -170,7 +174,10 @@ fn start_one(
             .map_err(|e| fail(format!("cannot start {}: {e}", cf2.display())))?;
         let started = Instant::now();
         while started.elapsed() < options.wait {
-            if sitl.stats(drone).is_some_and(|s| s.hellos > hellos && s.motor_packets_since_hello > 0) {
+            if sitl
+                .stats(drone)
+                .is_some_and(|s| s.hellos > hellos && s.motor_packets_since_hello >= STARTED_AFTER)
+            {
                 return Ok(child);
             }
             std::thread::sleep(Duration::from_millis(50));
