@@ -8,6 +8,8 @@
 //! one Crazyflie and stops the others. Checked on the physics: every UAV arrives, the true
 //! separation stays ≥ D_c and the true wall distance ≥ D_s while airborne, the landed one is on the
 //! floor with its motors off, the stopped ones have their motors off and their firmware locked.
+//! Beside it: a run over the firmware writes the usual METRICS.json, and a firmware killed in
+//! flight degrades only its own Crazyflie.
 //!
 //! Skipped (with a message) unless `AIRROADS_CF_SITL` names the firmware's SITL folder (the one
 //! holding `build.sh`); the firmware is built once into
@@ -16,44 +18,10 @@
 
 mod support;
 
-use cfsim::sitl::firmware::{self, FirmwareProcesses, StartOptions};
-use cfsim::sitl::{SitlConfig, SitlHandle};
 use serde_json::Value;
-use std::path::{Path, PathBuf};
-use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
-use support::{Running, scenario, shipped, start};
+use support::firmware::{ONE_FLIGHT, Rig, firmware_binary, uavs, until, with_one_retry};
 use uav::Vec2;
-
-/// Deadline for each phase that takes seconds on an idle machine (s).
-const PATIENCE: f64 = 60.0;
-
-/// Above this height a Crazyflie is airborne for the margins (m).
-const AIRBORNE_M: f64 = 0.3;
-
-/// One firmware flight at a time: three firmware processes already take most of two cores.
-static ONE_FLIGHT: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
-
-/// The firmware built from `AIRROADS_CF_SITL` (once, into the cache), or `None` with a message
-/// saying how to run the test.
-async fn firmware_binary(what: &str) -> Option<PathBuf> {
-    let Some(source) = std::env::var_os("AIRROADS_CF_SITL") else {
-        eprintln!(
-            "skipped: set AIRROADS_CF_SITL to the Crazyflie firmware's SITL folder (the one holding \
-             build.sh) to fly {what} through the real firmware"
-        );
-        return None;
-    };
-    let cache = std::env::var_os("AIRROADS_CACHE").map(PathBuf::from).unwrap_or_else(|| {
-        PathBuf::from(std::env::var_os("HOME").expect("HOME or AIRROADS_CACHE")).join(".cache/airroads")
-    });
-    let build = cache.join("cf-sitl-build");
-    let cf2 = tokio::task::spawn_blocking(move || firmware::build(Path::new(&source), &build))
-        .await
-        .expect("build task")
-        .unwrap_or_else(|e| panic!("{e}"));
-    Some(cf2)
-}
 
 /// `airroads run --link firmware` writes METRICS.json with exactly the keys of any run, its
 /// margins measured on the physics, and exits 0 for a safe run where every UAV arrived.
@@ -73,7 +41,7 @@ async fn a_run_over_the_firmware_writes_the_same_report() {
             .expect("airroads runs");
         let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
         if run.status.code() == Some(0) {
-            assert!(stdout.contains("firmware loop") && stdout.contains("SAFE"), "{stdout}");
+            assert!(stdout.contains("motor packets") && stdout.contains("SAFE"), "{stdout}");
             let metrics: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
             let mut keys: Vec<&str> = metrics.as_object().unwrap().keys().map(String::as_str).collect();
             keys.sort();
@@ -110,75 +78,73 @@ async fn a_run_over_the_firmware_writes_the_same_report() {
 async fn lab3_flies_through_three_real_firmware_processes() {
     let _alone = ONE_FLIGHT.lock().await;
     let Some(cf2) = firmware_binary("scenarios/lab3.json with the server").await else { return };
-    let run_dir = std::env::temp_dir().join(format!("airroads-lab3-firmware-{}", std::process::id()));
-    std::fs::create_dir_all(&run_dir).expect("run folder");
-    let report = match fly(&cf2, &run_dir).await {
-        Ok(report) => Ok(report),
-        Err(first) => {
-            eprintln!("first flight failed ({first}); retrying once with fresh processes");
-            fly(&cf2, &run_dir).await
-        }
-    };
-    match report {
-        Ok(report) => {
-            println!("{report}");
-            let _ = std::fs::remove_dir_all(&run_dir);
-        }
-        Err(e) => panic!("{e} (firmware consoles and ground truth in {})", run_dir.display()),
-    }
+    let report = with_one_retry(&cf2, "lab3-firmware", |rig| async move {
+        let outcome = flight(&rig).await;
+        (rig, outcome)
+    })
+    .await;
+    println!("{report}");
 }
 
-/// What the physics saw while the fleet flew: the closest true pair and the closest true wall
-/// among airborne Crazyflies.
-#[derive(Debug, Clone, Copy)]
-struct Margins {
-    separation_m: f64,
-    wall_m: f64,
+/// A firmware killed in flight: the physics stops its motors (as a real Crazyflie's watchdog
+/// would) and it falls where it was; the server reports it lost and the others keep their true
+/// margins; once the operator removes it, the others arrive.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_firmware_killed_in_flight_degrades_only_its_crazyflie() {
+    let _alone = ONE_FLIGHT.lock().await;
+    let Some(cf2) = firmware_binary("a firmware killed in flight").await else { return };
+    let report = with_one_retry(&cf2, "lab3-firmware-killed", |mut rig| async move {
+        let outcome = killed_flight(&mut rig).await;
+        (rig, outcome)
+    })
+    .await;
+    println!("{report}");
 }
 
-/// One flight of lab3 through fresh firmware processes and a fresh server.
-async fn fly(cf2: &Path, run_dir: &Path) -> Result<String, String> {
-    let mut json = shipped("lab3.json");
-    let starts: Vec<[f64; 3]> = json["uavs"]
-        .as_array()
-        .expect("uavs")
-        .iter()
-        .map(|u| [u["start"][0].as_f64().unwrap(), u["start"][1].as_f64().unwrap(), 0.0])
-        .collect();
-    let config = SitlConfig {
-        positions: starts.clone(),
-        firmware_base_port: 0,
-        client_base_port: 0,
-        truth_dir: Some(run_dir.to_path_buf()),
-        noise: true,
-        ..SitlConfig::default()
-    };
-    let sitl = Arc::new(SitlHandle::spawn(config).map_err(|e| e.to_string())?);
-    let (cf2, options, physics) = (cf2.to_path_buf(), StartOptions::in_dir(run_dir), sitl.clone());
-    let processes = tokio::task::spawn_blocking(move || FirmwareProcesses::start(&cf2, &physics, &options))
-        .await
-        .map_err(|e| e.to_string())?
-        .map_err(|e| e.to_string())?;
-    for (i, uav) in json["uavs"].as_array_mut().expect("uavs").iter_mut().enumerate() {
-        uav["link"] = Value::String(sitl.uri(i).expect("drone"));
+async fn killed_flight(rig: &mut Rig) -> Result<String, String> {
+    let server = &rig.server;
+    until(server, "every UAV flying", |s| uavs(s).iter().all(|u| u["phase"] == "flying")).await?;
+    let state = server.get("/api/state").await;
+    let (d_c, d_s) = (state["d_c"].as_f64().expect("d_c"), state["d_s"].as_f64().expect("d_s"));
+    let watch = rig.watch();
+    // Under way for 3 s, then cf1's firmware dies.
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let at = rig.sitl.truth(0).expect("drone").position;
+    rig.processes.kill(0);
+    let killed = Instant::now();
+    while !rig.sitl.truth(0).is_some_and(|t| t.on_floor && t.pwm == [0; 4]) {
+        if killed.elapsed() > Duration::from_secs(5) {
+            return Err(format!("cf1 still up 5 s after its firmware died: {:?}", rig.sitl.truth(0)));
+        }
+        tokio::time::sleep(Duration::from_millis(10)).await;
     }
-    let road = scenario(&json).road;
-    let policies = policies::PolicyRegistry::standard(5.0).map_err(|e| e.to_string())?;
-    let config = airroads::serve::ServeConfig::new(
-        fleet::FleetConfig::default(),
-        policies,
-        "rl".into(),
-        scenario(&json),
-    );
-    let server = start(config).await;
-    let result = flight(&server, &sitl, &road).await;
-    server.stop().await;
-    drop(processes);
-    result
+    let fell_after = killed.elapsed();
+    let down = rig.sitl.truth(0).expect("drone").position;
+    let drift = Vec2::new(down[0] - at[0], down[1] - at[1]).norm();
+    until(server, "cf1 reported lost", |s| uavs(s)[0]["lost"] == true).await?;
+    // The others fly on; cf1 stays an obstacle until the operator removes it.
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let (status, body) = server.call("DELETE", "/api/uavs/cf1", None).await;
+    if status != 204 {
+        return Err(format!("remove cf1: {status} {body}"));
+    }
+    until(server, "cf2 and cf3 arrived", |s| uavs(s).iter().all(|u| u["arrived"] == true)).await?;
+    let seen = watch.margins();
+    if seen.separation_m < d_c || seen.wall_m < d_s {
+        return Err(format!("true margins {seen:?} below D_c = {d_c} m / D_s = {d_s} m"));
+    }
+    Ok(format!(
+        "firmware of cf1 killed in flight: down {:.1} s later, {drift:.2} m from where it was; cf2 and cf3 \
+         arrived; true separation ≥ {:.3} m, wall distance ≥ {:.3} m",
+        fell_after.as_secs_f64(),
+        seen.separation_m,
+        seen.wall_m
+    ))
 }
 
 /// The flight itself, once the server and the firmware run.
-async fn flight(server: &Running, sitl: &Arc<SitlHandle>, road: &roads::Road) -> Result<String, String> {
+async fn flight(rig: &Rig) -> Result<String, String> {
+    let (server, sitl) = (&rig.server, &rig.sitl);
     let t0 = Instant::now();
     until(server, "every UAV flying (take-off confirmed by the firmware)", |s| {
         uavs(s).iter().all(|u| u["phase"] == "flying")
@@ -193,11 +159,10 @@ async fn flight(server: &Running, sitl: &Arc<SitlHandle>, road: &roads::Road) ->
             return Err(format!("drone {i} reported flying at a true height of {z:.3} m"));
         }
     }
-    let margins = Arc::new(Mutex::new(Margins { separation_m: f64::INFINITY, wall_m: f64::INFINITY }));
-    let watcher = tokio::spawn(watch_margins(sitl.clone(), road.clone(), margins.clone()));
+    let watch = rig.watch();
     let arrived = until(server, "every UAV arrived", |s| uavs(s).iter().all(|u| u["arrived"] == true)).await;
-    watcher.abort();
-    let seen = *margins.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+    let seen = watch.margins();
+    drop(watch);
     arrived?;
     let flown = t0.elapsed();
     if seen.separation_m < d_c || seen.wall_m < d_s {
@@ -252,46 +217,4 @@ async fn flight(server: &Running, sitl: &Arc<SitlHandle>, road: &roads::Road) ->
         stats.physics_rate_hz(),
         stats.resyncs
     ))
-}
-
-/// Reads the physics every 5 ms and keeps the smallest true separation and wall distance among
-/// airborne Crazyflies (horizontal, the plane the fleet flies in).
-async fn watch_margins(sitl: Arc<SitlHandle>, road: roads::Road, margins: Arc<Mutex<Margins>>) {
-    loop {
-        let up: Vec<Vec2> = (0..sitl.len())
-            .filter_map(|i| sitl.truth(i))
-            .filter(|t| t.position[2] > AIRBORNE_M)
-            .map(|t| Vec2::new(t.position[0], t.position[1]))
-            .collect();
-        {
-            let mut m = margins.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-            for (k, a) in up.iter().enumerate() {
-                m.wall_m = m.wall_m.min(road.boundary_distance(a));
-                for b in &up[k + 1..] {
-                    m.separation_m = m.separation_m.min((a - b).norm());
-                }
-            }
-        }
-        tokio::time::sleep(Duration::from_millis(5)).await;
-    }
-}
-
-/// The UAVs of a snapshot.
-fn uavs(state: &Value) -> &Vec<Value> {
-    state["uavs"].as_array().expect("uavs")
-}
-
-/// Polls the snapshot every 20 ms until `done` holds, for at most [`PATIENCE`] s.
-async fn until(server: &Running, what: &str, done: impl Fn(&Value) -> bool) -> Result<(), String> {
-    let deadline = Instant::now() + Duration::from_secs_f64(PATIENCE);
-    loop {
-        let state = server.get("/api/state").await;
-        if done(&state) {
-            return Ok(());
-        }
-        if Instant::now() > deadline {
-            return Err(format!("not {what} within {PATIENCE} s: {state}"));
-        }
-        tokio::time::sleep(Duration::from_millis(20)).await;
-    }
 }

@@ -4,6 +4,7 @@
 #![allow(dead_code)]
 
 pub mod crazyflies;
+pub mod firmware;
 pub mod procs;
 
 use airroads::serve::{ServeConfig, Server};
