@@ -2,6 +2,7 @@
 //! [`CrazyflieLink`], the fleet's [`links::Link`] to one Crazyflie.
 
 pub mod confirm;
+pub mod machine;
 mod prepare;
 mod relay;
 mod session;

@@ -127,6 +127,16 @@ pub struct Setpoint {
 }
 
 impl RelayConfig {
+    /// A state older than this is stale ([`RelayConfig::stale_after`]).
+    pub fn stale(&self) -> Duration {
+        Duration::from_secs_f64(self.stale_after.clamp(0.0, 3600.0))
+    }
+
+    /// How often an unconfirmed stop or landing is sent again (at least every 10 ms).
+    pub fn resend_period(&self) -> Duration {
+        Duration::from_secs_f64(self.resend_every.clamp(0.01, 3600.0))
+    }
+
     /// How long a take-off may wait for the firmware's confirmation before it is given up.
     pub fn takeoff_bound(&self) -> Duration {
         Duration::from_secs_f64((self.takeoff_s + self.takeoff_margin_s).clamp(0.0, 3600.0))

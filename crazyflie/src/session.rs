@@ -4,7 +4,8 @@
 //! (an error, even a panic inside the client library) ends one session, never the server: the
 //! supervisor records it, waits and reconnects.
 
-use crate::confirm::{ON_GROUND_M, STATUS_VARIABLES, Status};
+use crate::confirm::{STATUS_VARIABLES, Status};
+use crate::machine::{Action, End, Event, Intent, Machine};
 use crate::prepare::{SharedTocCache, ready_for_take_off, set_controller};
 use crate::relay::{RelayConfig, Setpoint, Shared, Urgent};
 use crate::transport::open;
@@ -49,24 +50,6 @@ async fn detach_asked(detach: &mut watch::Receiver<bool>) {
     if detach.wait_for(|asked| *asked).await.is_err() {
         std::future::pending::<()>().await;
     }
-}
-
-/// How a session ended.
-enum End {
-    /// The link was dropped and the Crazyflie is down: stop for good.
-    Done,
-    /// The connection was lost or failed: reconnect.
-    Lost(String),
-    /// The link asked to be closed without landing (a handover to another server): stop for good.
-    Detached,
-}
-
-/// What the operator asked for, kept across reconnections.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum Intent {
-    Fly,
-    Land,
-    Stop,
 }
 
 /// The operator's words for a session task that ended without returning (a panic in the client
@@ -232,82 +215,12 @@ async fn next_status(
     }
 }
 
-/// A stop or a landing sent and not yet confirmed by the Crazyflie.
-#[derive(Debug, Clone, Copy)]
-struct Pending {
-    request: Urgent,
-    since: Instant,
-    /// When to send it again.
-    resend_at: Instant,
-    /// When to give up.
-    deadline: Instant,
-    /// The bound passed without a confirmation: reported, no longer resent.
-    given_up: bool,
-}
-
-impl Pending {
-    /// The next time something has to happen: a resend or giving up.
-    fn wake_at(&self) -> Option<Instant> {
-        (!self.given_up).then(|| self.resend_at.min(self.deadline))
-    }
-}
-
-/// The phase shown while `request` waits for its confirmation, and once confirmed.
-fn phases(request: Urgent) -> (LinkPhase, LinkPhase) {
-    match request {
-        Urgent::Stop => (LinkPhase::Stopping, LinkPhase::Stopped),
-        Urgent::Land => (LinkPhase::Landing, LinkPhase::Landed),
-    }
-}
-
 /// Sends `request` once.
 async fn send(cf: &Crazyflie, config: RelayConfig, request: Urgent) -> Result<(), String> {
     match request {
         Urgent::Stop => emergency_stop(cf).await,
         Urgent::Land => land(cf, config).await,
     }
-}
-
-/// Sends `request` and waits for the Crazyflie to confirm it (the phase says so meanwhile).
-async fn start(
-    cf: &Crazyflie,
-    config: RelayConfig,
-    shared: &Shared,
-    request: Urgent,
-) -> Result<Pending, String> {
-    let (waiting, _) = phases(request);
-    // The phase first: whatever happens to the packets, the operator never sees less than this.
-    shared.set_phase(waiting);
-    send(cf, config, request).await?;
-    let now = Instant::now();
-    Ok(Pending {
-        request,
-        since: now,
-        resend_at: now + Duration::from_secs_f64(config.resend_every.max(0.01)),
-        deadline: now + config.confirm_bound(request),
-        given_up: false,
-    })
-}
-
-/// Sets the confirmed phase if the Crazyflie's log confirms the pending request.
-fn check_confirmed(shared: &Shared, status: &Status, pending: &mut Option<Pending>) {
-    let Some(p) = *pending else { return };
-    let confirmed = match p.request {
-        Urgent::Stop => status.confirms_stop(),
-        Urgent::Land => shared.sample().is_some_and(|s| status.confirms_landed(s.p[2])),
-    };
-    if !confirmed {
-        return;
-    }
-    shared.set_phase(phases(p.request).1);
-    if p.given_up {
-        let after = p.since.elapsed().as_secs_f64();
-        shared.set_error(Some(format!(
-            "{} confirmed late, {after:.1} s after the request",
-            p.request.describe()
-        )));
-    }
-    *pending = None;
 }
 
 /// Counts the state samples of the last second against the log block's period: the link quality
@@ -335,26 +248,29 @@ impl QualityWindow {
     }
 }
 
-/// Sets the phase to flying once the firmware confirms the take-off (then nothing waits for its
-/// deadline any more).
-fn check_airborne(
-    shared: &Shared,
-    status: &Status,
-    config: RelayConfig,
-    intent: Intent,
-    until: &mut Option<Instant>,
-) {
-    if shared.phase() != LinkPhase::TakingOff || intent != Intent::Fly {
-        return;
+/// The connect preparation of a Crazyflie on the ground ([`Action::Prepare`]): the controller,
+/// then the commander and the supervisor (`crate::prepare`).
+async fn prepare(cf: &Crazyflie, config: RelayConfig) -> Result<(), String> {
+    if let Some(controller) = config.controller {
+        set_controller(cf, controller).await?;
     }
-    if shared.sample().is_some_and(|s| status.confirms_airborne(s.p[2], config.altitude)) {
-        shared.set_phase(LinkPhase::Flying);
-        *until = None;
+    ready_for_take_off(cf).await.map(|_| ())
+}
+
+/// Resolves with the preparation's result, or never without one.
+async fn prepared(preparing: &mut Option<Preparing<'_>>) -> Result<(), String> {
+    match preparing {
+        Some(future) => future.await,
+        None => std::future::pending().await,
     }
 }
 
-/// Flies one connected session; returns when the connection is lost or the link is dropped and
-/// the Crazyflie is down (or a stop or landing was given up on).
+/// A running [`prepare`].
+type Preparing<'a> = std::pin::Pin<Box<dyn std::future::Future<Output = Result<(), String>> + Send + 'a>>;
+
+/// Flies one connected session: the shell of [`Machine`]. It turns the Crazyflie's log, the
+/// link's channels and the time into events and carries out the machine's actions; returns when
+/// the machine ends the session or an I/O call fails (the connection is lost).
 async fn fly(
     cf: &Crazyflie,
     config: RelayConfig,
@@ -370,192 +286,93 @@ async fn fly(
         Ok(s) => s,
         Err(e) => return End::Lost(e),
     };
-    let stale = Duration::from_secs_f64(config.stale_after);
-    // The first sample tells whether it is on the ground (a first connection or after a crash) or
-    // still in the air (a reconnection within the watchdog's time).
-    let first = match timeout(stale.max(Duration::from_secs(1)), stream.next()).await {
-        Ok(Ok(data)) => data,
-        Ok(Err(e)) => return End::Lost(format!("log: {e}")),
-        Err(_) => return End::Lost("no state from the log block".into()),
-    };
-    let Some((p, v)) = decode(&first.data) else { return End::Lost("log data without the state".into()) };
-    shared.set_sample(p, v);
-    shared.set_error(None);
-    let hl = &cf.high_level_commander;
-    let mut phase_until = None;
-    // What the Crazyflie said in this session; nothing is confirmed before it speaks.
-    let mut status = Status::default();
-    let mut pending: Option<Pending> = None;
-    let on_ground = p[2] < ON_GROUND_M;
-    let request = match (*intent, on_ground) {
-        (Intent::Fly, true) if !ch.urgent.is_closed() => {
-            if let Some(controller) = config.controller
-                && let Err(e) = set_controller(cf, controller).await
-            {
-                return End::Lost(e);
-            }
-            if let Err(e) = ready_for_take_off(cf).await {
-                return End::Lost(e);
-            }
-            if let Err(e) = hl.take_off(config.altitude as f32, None, config.takeoff_s as f32, None).await {
-                return End::Lost(format!("take-off: {e}"));
-            }
-            shared.set_phase(LinkPhase::TakingOff);
-            phase_until = Some(Instant::now() + config.takeoff_bound());
-            None
-        }
-        (Intent::Fly, false) => {
-            shared.set_phase(LinkPhase::Flying);
-            None
-        }
-        // Stopped before (or during) a loss: stop again; a Crazyflie still locked confirms at once.
-        (Intent::Stop, _) => Some(Urgent::Stop),
-        // Landed, landing, or on the ground with the link dropped: landed once it says so.
-        (Intent::Land | Intent::Fly, _) => {
-            *intent = Intent::Land;
-            Some(Urgent::Land)
-        }
-    };
-    if let Some(request) = request {
-        match start(cf, config, shared, request).await {
-            Ok(p) => pending = Some(p),
-            Err(e) => return End::Lost(e),
-        }
-    }
-    let (mut urgent_open, mut setpoints_open) = (true, true);
-    let mut last_sample = Instant::now();
+    let mut machine =
+        Machine::new(config, *intent, shared.phase(), !ch.urgent.is_closed(), Instant::now().into());
     let mut quality = QualityWindow::new();
+    let mut preparing: Option<Preparing<'_>> = None;
+    let mut actions = Vec::new();
     loop {
-        let settled = matches!(shared.phase(), LinkPhase::Landed | LinkPhase::Stopped)
-            || pending.is_some_and(|p| p.given_up);
-        if !urgent_open && settled {
-            return End::Done;
-        }
-        let wake_at = pending.and_then(|p| p.wake_at());
-        tokio::select! {
+        let deadline = Instant::from_std(machine.next_deadline());
+        let event = tokio::select! {
             biased;
-            request = ch.urgent.recv(), if urgent_open => {
-                let request = match request {
-                    Some(r) => r,
-                    None => {
-                        // The link was dropped (UAV removed, server shutting down): land.
-                        urgent_open = false;
-                        Urgent::Land
-                    }
-                };
-                let phase = shared.phase();
-                let restart = match request {
-                    // A stop outranks everything, and is never replaced by a landing.
-                    Urgent::Stop => {
-                        *intent = Intent::Stop;
-                        match pending {
-                            // Already on its way: one more copy now, the bound runs from the first.
-                            Some(p) if p.request == Urgent::Stop && !p.given_up => {
-                                if let Err(e) = send(cf, config, Urgent::Stop).await {
-                                    return End::Lost(e);
-                                }
-                                false
-                            }
-                            _ => phase != LinkPhase::Stopped,
-                        }
-                    }
-                    Urgent::Land if *intent == Intent::Stop => false,
-                    Urgent::Land => {
-                        *intent = Intent::Land;
-                        // Taking off or flying; or asked again after a landing was given up on.
-                        matches!(phase, LinkPhase::TakingOff | LinkPhase::Flying)
-                            || pending.is_some_and(|p| p.request == Urgent::Land && p.given_up)
-                    }
-                };
-                if restart {
-                    match start(cf, config, shared, request).await {
-                        Ok(p) => pending = Some(p),
-                        Err(e) => return End::Lost(e),
-                    }
-                    check_confirmed(shared, &status, &mut pending);
-                }
-            }
+            request = ch.urgent.recv(), if machine.urgent_open() => match request {
+                Some(request) => Event::Urgent(request),
+                None => Event::LinkDropped,
+            },
             data = stream.next() => match data {
                 Ok(data) => {
-                    if let Some((p, v)) = decode(&data.data) {
-                        shared.set_sample(p, v);
-                        last_sample = Instant::now();
-                        quality.sample(shared, config.log_period_ms);
-                        check_confirmed(shared, &status, &mut pending);
-                        check_airborne(shared, &status, config, *intent, &mut phase_until);
-                    }
+                    let Some((p, v)) = decode(&data.data) else { continue };
+                    shared.set_sample(p, v);
+                    quality.sample(shared, config.log_period_ms);
+                    Event::Sample { z: p[2] }
                 }
                 Err(e) => return End::Lost(format!("log: {e}")),
             },
             data = next_status(status_stream.as_ref()) => match data {
                 Ok(data) => {
-                    status = decode_status(&data.data);
+                    let status = decode_status(&data.data);
                     shared.update_report(|r| {
                         r.supervisor_info = status.info.or(r.supervisor_info);
                         r.battery_v = status.vbat.or(r.battery_v);
                     });
-                    check_confirmed(shared, &status, &mut pending);
-                    check_airborne(shared, &status, config, *intent, &mut phase_until);
+                    Event::Status(status)
                 }
                 Err(e) => return End::Lost(format!("status log: {e}")),
             },
-            _ = sleep_until(last_sample + stale) => {
-                return End::Lost(format!("no state for {} ms", stale.as_millis()));
+            result = prepared(&mut preparing) => {
+                preparing = None;
+                Event::Prepared(result)
             }
-            _ = sleep_until(wake_at.unwrap_or_else(far_future)), if wake_at.is_some() => {
-                let Some(p) = pending.as_mut() else { continue };
-                let now = Instant::now();
-                if now >= p.deadline {
-                    // Reported, never shown confirmed: the phase stays stopping/landing.
-                    p.given_up = true;
-                    let bound = config.confirm_bound(p.request).as_secs_f64();
-                    shared.set_error(Some(format!("{} not confirmed after {bound} s", p.request.describe())));
-                    shared.record_unconfirmed();
-                } else {
-                    p.resend_at = now + Duration::from_secs_f64(config.resend_every.max(0.01));
-                    if let Err(e) = send(cf, config, p.request).await {
-                        return End::Lost(e);
-                    }
-                }
-            }
-            changed = ch.setpoints.changed(), if setpoints_open => {
-                if changed.is_err() {
-                    // The link is gone (its urgent channel closes with it): no more setpoints.
-                    setpoints_open = false;
-                    continue;
-                }
-                let setpoint = *ch.setpoints.borrow_and_update();
-                let fresh = shared.sample().is_some_and(|s| s.at.elapsed() <= stale);
-                if let (Some(sp), LinkPhase::Flying, true) = (setpoint, shared.phase(), fresh) {
-                    let sent = cf.commander.setpoint_full_state(sp.p, sp.v, sp.a, LEVEL, [0.0; 3]).await;
-                    if let Err(e) = sent {
-                        return End::Lost(format!("setpoint: {e}"));
-                    }
-                }
-            }
+            () = sleep_until(deadline) => Event::Time,
+            changed = ch.setpoints.changed(), if machine.setpoints_open() => match changed {
+                Err(_) => Event::SetpointsClosed,
+                Ok(()) => match *ch.setpoints.borrow_and_update() {
+                    Some(sp) => Event::Setpoint(sp),
+                    None => continue,
+                },
+            },
             Some(position) = ch.external.recv() => {
                 if let Err(e) = cf.localization.external_pose.send_external_position(position).await {
                     return End::Lost(format!("external position: {e}"));
                 }
+                continue;
             }
-            _ = sleep_until(phase_until.unwrap_or_else(far_future)), if phase_until.is_some() => {
-                phase_until = None;
-                if shared.phase() == LinkPhase::TakingOff && *intent == Intent::Fly {
-                    // The firmware never said it was up: bring it down rather than fly it.
-                    let z = shared.sample().map_or(f64::NAN, |s| s.p[2]);
-                    shared.set_error(Some(format!(
-                        "take-off not confirmed after {} s (height {z:.2} m, supervisor.info {}, thrust {})",
-                        config.takeoff_bound().as_secs_f64(),
-                        status.info.map_or("not logged".into(), |i| format!("{i:#06x}")),
-                        status.thrust.map_or("not logged".into(), |t| format!("{t:.0}")),
-                    )));
-                    shared.record_unconfirmed();
-                    *intent = Intent::Land;
-                    match start(cf, config, shared, Urgent::Land).await {
-                        Ok(p) => pending = Some(p),
-                        Err(e) => return End::Lost(e),
-                    }
+        };
+        machine.handle(Instant::now().into(), event, &mut actions);
+        *intent = machine.intent();
+        for action in actions.drain(..) {
+            let done = match action {
+                Action::Prepare => {
+                    preparing = Some(Box::pin(prepare(cf, config)));
+                    Ok(())
                 }
+                Action::TakeOff => cf
+                    .high_level_commander
+                    .take_off(config.altitude as f32, None, config.takeoff_s as f32, None)
+                    .await
+                    .map_err(|e| format!("take-off: {e}")),
+                Action::Send(request) => send(cf, config, request).await,
+                Action::SendSetpoint(sp) => cf
+                    .commander
+                    .setpoint_full_state(sp.p, sp.v, sp.a, LEVEL, [0.0; 3])
+                    .await
+                    .map_err(|e| format!("setpoint: {e}")),
+                Action::SetPhase(phase) => {
+                    shared.set_phase(phase);
+                    Ok(())
+                }
+                Action::SetError(error) => {
+                    shared.set_error(error);
+                    Ok(())
+                }
+                Action::RecordUnconfirmed => {
+                    shared.record_unconfirmed();
+                    Ok(())
+                }
+                Action::End(end) => return end,
+            };
+            if let Err(e) = done {
+                return End::Lost(e);
             }
         }
     }
@@ -580,10 +397,6 @@ async fn land(cf: &Crazyflie, config: RelayConfig) -> Result<(), String> {
         .await
         .map_err(|e| format!("land: {e}"))?;
     cf.commander.notify_setpoint_stop(0).await.map_err(|e| format!("setpoint stop: {e}"))
-}
-
-fn far_future() -> Instant {
-    Instant::now() + Duration::from_secs(3600)
 }
 
 /// What one sample of the status block says (a variable missing or out of range is unknown).

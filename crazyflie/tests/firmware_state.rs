@@ -124,3 +124,20 @@ async fn the_firmware_report_reaches_the_fleet() {
     drop(link);
     sim.shutdown().await;
 }
+
+/// A firmware built to need arming (`CONFIG_MOTORS_REQUIRE_ARMING`, the Crazyflie 2.1 Brushless)
+/// is armed through the supervisor before the take-off.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_crazyflie_that_needs_arming_is_armed_then_flown() {
+    let config =
+        SimConfig { initial_position: [0.0, 0.0, 0.0], require_arming: true, ..SimConfig::default() };
+    let sim = SimCrazyflie::spawn("127.0.0.1:0".parse().unwrap(), config).unwrap();
+    let relay = RelayConfig { takeoff_s: 1.0, ..RelayConfig::default() };
+    let link = CrazyflieLink::spawn(&tokio::runtime::Handle::current(), &sim.uri(), relay);
+    until("flying", PATIENCE, || link.phase() == LinkPhase::Flying).await;
+    let info = link.vehicle().and_then(|r| r.supervisor_info).expect("supervisor.info");
+    assert_ne!(info & cfsim::firmware::supervisor::IS_ARMED, 0, "armed: {info:#06x}");
+    assert!((sim.truth().position[2] - 1.0).abs() < 0.15, "{:?}", sim.truth());
+    drop(link);
+    sim.shutdown().await;
+}
