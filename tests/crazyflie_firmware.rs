@@ -8,8 +8,8 @@
 //! one Crazyflie and stops the others. Checked on the physics: every UAV arrives, the true
 //! separation stays ≥ D_c and the true wall distance ≥ D_s while airborne, the landed one is on the
 //! floor with its motors off, the stopped ones have their motors off and their firmware locked.
-//! Beside it: a run over the firmware writes the usual METRICS.json, and a firmware killed in
-//! flight degrades only its own Crazyflie.
+//! Beside it: a run over the firmware writes the usual METRICS.json, a firmware killed in flight
+//! degrades only its own Crazyflie, and lost packets and motion-capture gaps keep the fleet safe.
 //!
 //! Skipped (with a message) unless `AIRROADS_CF_SITL` names the firmware's SITL folder (the one
 //! holding `build.sh`); the firmware is built once into
@@ -18,6 +18,7 @@
 
 mod support;
 
+use cfsim::sitl::SitlFaults;
 use serde_json::Value;
 use std::time::{Duration, Instant};
 use support::firmware::{ONE_FLIGHT, Rig, firmware_binary, uavs, until, with_one_retry};
@@ -99,6 +100,51 @@ async fn a_firmware_killed_in_flight_degrades_only_its_crazyflie() {
     })
     .await;
     println!("{report}");
+}
+
+/// Link and motion-capture faults on every Crazyflie at once, after the take-off: 20 % of cf1's
+/// packets lost in each direction, a 200 ms motion-capture gap on cf2, both on cf3 (10 % loss).
+/// Every UAV still arrives and the true margins hold.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn lost_packets_and_motion_capture_gaps_keep_the_fleet_safe() {
+    let _alone = ONE_FLIGHT.lock().await;
+    let Some(cf2) = firmware_binary("lab3 with lost packets and motion-capture gaps").await else { return };
+    let report = with_one_retry(&cf2, "lab3-firmware-faults", |rig| async move {
+        let outcome = faulty_flight(&rig).await;
+        (rig, outcome)
+    })
+    .await;
+    println!("{report}");
+}
+
+async fn faulty_flight(rig: &Rig) -> Result<String, String> {
+    let server = &rig.server;
+    until(server, "every UAV flying", |s| uavs(s).iter().all(|u| u["phase"] == "flying")).await?;
+    let state = server.get("/api/state").await;
+    let (d_c, d_s) = (state["d_c"].as_f64().expect("d_c"), state["d_s"].as_f64().expect("d_s"));
+    let watch = rig.watch();
+    let gap = |after: f64| {
+        let from = rig.sitl.elapsed() + Duration::from_secs_f64(after);
+        Some((from, from + Duration::from_millis(200)))
+    };
+    rig.sitl.set_faults(0, SitlFaults { link_loss: 0.2, ..SitlFaults::default() });
+    rig.sitl.set_faults(1, SitlFaults { pose_gap: gap(2.0), ..SitlFaults::default() });
+    rig.sitl.set_faults(2, SitlFaults { link_loss: 0.1, pose_gap: gap(4.0), ..SitlFaults::default() });
+    until(server, "every UAV arrived", |s| uavs(s).iter().all(|u| u["arrived"] == true)).await?;
+    let seen = watch.margins();
+    if seen.separation_m < d_c || seen.wall_m < d_s {
+        return Err(format!("true margins {seen:?} below D_c = {d_c} m / D_s = {d_s} m"));
+    }
+    let dropped: u64 =
+        (0..3).filter_map(|i| rig.sitl.stats(i)).map(|s| s.dropped_to_client + s.dropped_to_firmware).sum();
+    if dropped == 0 {
+        return Err("no packet was dropped: the fault did not apply".into());
+    }
+    Ok(format!(
+        "lab3 with faults: {dropped} packets dropped, two 200 ms motion-capture gaps; all arrived; true \
+         separation ≥ {:.3} m, wall distance ≥ {:.3} m",
+        seen.separation_m, seen.wall_m
+    ))
 }
 
 async fn killed_flight(rig: &mut Rig) -> Result<String, String> {
