@@ -9,7 +9,8 @@
 //! separation stays ≥ D_c and the true wall distance ≥ D_s while airborne, the landed one is on the
 //! floor with its motors off, the stopped ones have their motors off and their firmware locked.
 //! Beside it: a run over the firmware writes the usual METRICS.json, a firmware killed in flight
-//! degrades only its own Crazyflie, and lost packets and motion-capture gaps keep the fleet safe.
+//! degrades only its own Crazyflie, as does one its firmware locks in flight, and lost packets and
+//! motion-capture gaps keep the fleet safe.
 //!
 //! Skipped (with a message) unless `AIRROADS_CF_SITL` names the firmware's SITL folder (the one
 //! holding `build.sh`); the firmware is built once into
@@ -144,6 +145,68 @@ async fn faulty_flight(rig: &Rig) -> Result<String, String> {
         "lab3 with faults: {dropped} packets dropped, two 200 ms motion-capture gaps; all arrived; true \
          separation ≥ {:.3} m, wall distance ≥ {:.3} m",
         seen.separation_m, seen.wall_m
+    ))
+}
+
+/// A Crazyflie cut off for 3 s in flight: its firmware's commander watchdog levels it out, then
+/// locks it ("free falling!", "Locked, reboot required") and it falls where it was. The server
+/// reports it lost and never shows it flying again (the SITL firmware also stops answering once
+/// locked this way: the link's error says so); the others keep their true margins.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_crazyflie_that_locks_in_flight_falls_and_is_never_flown_again() {
+    let _alone = ONE_FLIGHT.lock().await;
+    let Some(cf2) = firmware_binary("a Crazyflie that locks in flight").await else { return };
+    let report = with_one_retry(&cf2, "lab3-firmware-locked", |rig| async move {
+        let outcome = locked_flight(&rig).await;
+        (rig, outcome)
+    })
+    .await;
+    println!("{report}");
+}
+
+async fn locked_flight(rig: &Rig) -> Result<String, String> {
+    let server = &rig.server;
+    until(server, "every UAV flying", |s| uavs(s).iter().all(|u| u["phase"] == "flying")).await?;
+    let state = server.get("/api/state").await;
+    let (d_c, d_s) = (state["d_c"].as_f64().expect("d_c"), state["d_s"].as_f64().expect("d_s"));
+    let watch = rig.watch();
+    tokio::time::sleep(Duration::from_secs(2)).await;
+    let at = rig.sitl.truth(0).expect("drone").position;
+    rig.sitl.set_faults(0, SitlFaults { link_loss: 1.0, ..SitlFaults::default() });
+    until(server, "cf1 reported lost", |s| uavs(s)[0]["lost"] == true).await?;
+    tokio::time::sleep(Duration::from_secs(3)).await;
+    let truth = rig.sitl.truth(0).expect("drone");
+    if !truth.on_floor || truth.pwm != [0; 4] {
+        return Err(format!("cf1 still flying 3 s after its link was cut: {truth:?}"));
+    }
+    let drift = Vec2::new(truth.position[0] - at[0], truth.position[1] - at[1]).norm();
+    rig.sitl.set_faults(0, SitlFaults::default());
+    // The link is back: for 5 s more, cf1 is never shown flying and stays on the floor.
+    let until = Instant::now() + Duration::from_secs(5);
+    while Instant::now() < until {
+        let cf1 = uavs(&server.get("/api/state").await)[0].clone();
+        if ["taking_off", "flying"].contains(&cf1["phase"].as_str().unwrap_or_default())
+            || cf1["lost"] != true
+        {
+            return Err(format!("cf1 shown {} after its lock: {cf1}", cf1["phase"]));
+        }
+        if !rig.sitl.truth(0).is_some_and(|t| t.on_floor) {
+            return Err("cf1 left the floor after its lock".into());
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+    let cf1 = uavs(&server.get("/api/state").await)[0].clone();
+    if cf1["link_error"].is_null() {
+        return Err(format!("cf1 is down with no link error: {cf1}"));
+    }
+    let seen = watch.margins();
+    if seen.separation_m < d_c || seen.wall_m < d_s {
+        return Err(format!("true margins {seen:?} below D_c = {d_c} m / D_s = {d_s} m"));
+    }
+    Ok(format!(
+        "cf1 cut off in flight: its firmware locked it, it fell {drift:.2} m from where it was, shown lost \
+         ({}); true separation ≥ {:.3} m, wall distance ≥ {:.3} m",
+        cf1["link_error"], seen.separation_m, seen.wall_m
     ))
 }
 
