@@ -222,9 +222,11 @@ impl TickPipeline {
     /// Evaluates each policy once on the batch of UAVs that use it.
     fn run_policies(&mut self, fleet: &mut Fleet) {
         let (delta, dt) = (fleet.config.params.delta, fleet.config.params.dt);
+        // Every UAV brakes unless its policy gives a finite action; a fallback is counted only for
+        // a UAV whose policy ran and gave none (one that is not flying runs no policy).
         for uav in &mut fleet.uavs {
             uav.last.u_ref = braking_input(uav.state.v, delta, dt);
-            uav.last.policy_fallback = !fleet.hold;
+            uav.last.policy_fallback = false;
         }
         if fleet.hold {
             return;
@@ -233,8 +235,9 @@ impl TickPipeline {
             self.batch.clear();
             self.observations.clear();
             for (k, uav) in
-                fleet.uavs.iter().enumerate().filter(|(_, u)| u.policy == name && u.condition.flying())
+                fleet.uavs.iter_mut().enumerate().filter(|(_, u)| u.policy == name && u.condition.flying())
             {
+                uav.last.policy_fallback = true;
                 self.batch.push(k);
                 self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
             }

@@ -67,3 +67,39 @@ fn garbage_policy_output_brakes_only_its_uavs() {
     assert!(garbage_speed < 1e-9, "garbage UAVs end stopped, not drifting: {garbage_speed}");
     assert!(fleet.uavs()[2].state.p.x > 8.0, "the pd UAV keeps flying towards its goal");
 }
+
+/// A link still taking off: its UAV is an obstacle the fleet brakes, not flown by a policy.
+struct TakingOff(UavState);
+
+impl links::Link for TakingOff {
+    fn state(&mut self) -> Option<UavState> {
+        Some(self.0)
+    }
+
+    fn send(&mut self, _u: Vec2) {}
+
+    fn phase(&self) -> links::LinkPhase {
+        links::LinkPhase::TakingOff
+    }
+}
+
+/// A UAV that is not flying (taking off, landing, lost) runs no policy: braking it is no policy
+/// fallback, which counts only policies that gave no finite action.
+#[test]
+fn a_uav_that_is_not_flying_is_no_policy_fallback() {
+    let road = Road::new(RoadLayout::straight(0.0, 40.0, 6.0, 4)).unwrap();
+    let mut fleet = Fleet::new(FleetConfig::default(), road, PolicyRegistry::with_pd(5.0));
+    let at = |x: f64| UavState { p: Vec2::new(x, 0.0), v: Vec2::zeros() };
+    fleet.add("up".into(), "pd".into(), Box::new(TakingOff(at(5.0))), at(5.0), Some(Vec2::new(35.0, 0.0)));
+    fleet.add(
+        "on".into(),
+        "pd".into(),
+        Box::new(SimLink::new(at(10.0), 0.05)),
+        at(10.0),
+        Some(Vec2::new(35.0, 0.0)),
+    );
+    for _ in 0..10 {
+        fleet.tick();
+        assert!(fleet.uavs().iter().all(|u| !u.last.policy_fallback), "no policy gave garbage");
+    }
+}
