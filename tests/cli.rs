@@ -1,5 +1,7 @@
 //! End-to-end tests of the `airroads` command line: exit codes, METRICS.json keys, error messages.
 
+mod support;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -47,25 +49,7 @@ fn shipped_lab_scenario_is_safe_and_writes_exactly_the_metrics_keys() {
     let metrics: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     let mut keys: Vec<&str> = metrics.as_object().unwrap().keys().map(String::as_str).collect();
     keys.sort();
-    assert_eq!(
-        keys,
-        [
-            "all_arrived",
-            "arrival_time_s",
-            "max_stall_s",
-            "min_collision_margin_m",
-            "min_road_margin_m",
-            "min_separation_m",
-            "min_wall_distance_m",
-            "qp",
-            "safe",
-            "scenario",
-            "sim_time_s",
-            "stall_s",
-            "steps_outside_road",
-            "ticks"
-        ]
-    );
+    assert_eq!(keys, support::METRICS_KEYS);
     let mut qp: Vec<&str> = metrics["qp"].as_object().unwrap().keys().map(String::as_str).collect();
     qp.sort();
     assert_eq!(qp, ["failures", "max_slack", "p50_us", "p99_us", "slack_used", "solves"]);

@@ -47,25 +47,7 @@ async fn a_run_over_the_firmware_writes_the_same_report() {
             let metrics: Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
             let mut keys: Vec<&str> = metrics.as_object().unwrap().keys().map(String::as_str).collect();
             keys.sort();
-            assert_eq!(
-                keys,
-                [
-                    "all_arrived",
-                    "arrival_time_s",
-                    "max_stall_s",
-                    "min_collision_margin_m",
-                    "min_road_margin_m",
-                    "min_separation_m",
-                    "min_wall_distance_m",
-                    "qp",
-                    "safe",
-                    "scenario",
-                    "sim_time_s",
-                    "stall_s",
-                    "steps_outside_road",
-                    "ticks"
-                ]
-            );
+            assert_eq!(keys, support::METRICS_KEYS);
             assert!(metrics["min_separation_m"].as_f64().is_some_and(|d| d >= 0.3), "{metrics}");
             assert!(metrics["min_wall_distance_m"].as_f64().is_some_and(|d| d >= 0.1), "{metrics}");
             let _ = std::fs::remove_file(&out);

@@ -119,12 +119,7 @@ fn run_on_cfsim(
     };
     say!("flying {} simulated Crazyflies over CRTP/UDP (take-off first)", sims.len());
     let dt = scenario.params.dt;
-    let relay = crazyflie::RelayConfig { dt, ..Default::default() };
-    let handle = runtime.handle().clone();
-    let mut make_link = |u: &fleet::UavSpec, _| -> Box<dyn links::Link> {
-        let uri = u.link.as_deref().unwrap_or_default();
-        Box::new(crazyflie::CrazyflieLink::spawn(&handle, uri, relay))
-    };
+    let mut make_link = crazyflie_links(runtime.handle(), dt);
     // Ticks at 1/dt of wall time, like the server's loop.
     let mut wait_tick = real_time_ticks(dt);
     let outcome = run_scenario_on(&scenario, options, policies, &mut make_link, &mut wait_tick)
@@ -158,12 +153,7 @@ pub fn run_on_firmware(
         firmware.run_dir.display()
     );
     let dt = scenario.params.dt;
-    let relay = crazyflie::RelayConfig { dt, ..Default::default() };
-    let handle = runtime.handle().clone();
-    let mut make_link = |u: &fleet::UavSpec, _| -> Box<dyn links::Link> {
-        let uri = u.link.as_deref().unwrap_or_default();
-        Box::new(crazyflie::CrazyflieLink::spawn(&handle, uri, relay))
-    };
+    let mut make_link = crazyflie_links(runtime.handle(), dt);
     // Setpoint latency: from the start of a tick to its setpoint's arrival at the firmware's
     // socket, read before the next tick (by then every setpoint of the tick has arrived).
     let mut latencies_us = Vec::new();
@@ -217,6 +207,18 @@ pub fn run_on_firmware(
     );
     drop(firmware);
     Ok(outcome)
+}
+
+/// A `make_link` that flies each UAV through the relay to the Crazyflie its `link` names.
+fn crazyflie_links(
+    runtime: &tokio::runtime::Handle,
+    dt: f64,
+) -> impl FnMut(&fleet::UavSpec, uav::UavState) -> Box<dyn links::Link> + use<> {
+    let relay = crazyflie::RelayConfig { dt, ..Default::default() };
+    let handle = runtime.clone();
+    move |u, _| {
+        Box::new(crazyflie::CrazyflieLink::spawn(&handle, u.link.as_deref().unwrap_or_default(), relay))
+    }
 }
 
 /// A `wait_tick` for real time: sleeps until the next multiple of `dt` (late ticks are not made up).

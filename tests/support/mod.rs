@@ -13,6 +13,24 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use tokio::sync::oneshot;
 
+/// The keys of METRICS.json, sorted: a public contract (README "Headless runs").
+pub const METRICS_KEYS: [&str; 14] = [
+    "all_arrived",
+    "arrival_time_s",
+    "max_stall_s",
+    "min_collision_margin_m",
+    "min_road_margin_m",
+    "min_separation_m",
+    "min_wall_distance_m",
+    "qp",
+    "safe",
+    "scenario",
+    "sim_time_s",
+    "stall_s",
+    "steps_outside_road",
+    "ticks",
+];
+
 /// The repository root.
 pub fn repo() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("..")
