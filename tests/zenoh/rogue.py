@@ -52,6 +52,13 @@ def release(target, sender, uav_id, p):
     })
 
 
+def offer(target, sender, uav_id, seq, p):
+    return json.dumps({
+        "kind": "offer", "from": sender, "to": target, "id": uav_id, "seq": seq,
+        "uav": {"p": p, "v": [0.0, 0.0], "goal": None, "policy": "pd", "link": None, "airborne": True},
+    })
+
+
 def phantom_states(region, count, x0):
     """A state message (wire format 1) of `count` UAVs in a line at x0.. (the review's wall)."""
     import struct
@@ -103,6 +110,11 @@ def main():
             (t, "selfish", [19.0, -0.5]),
         ]):
             session.put(f"{p}/region/{t}/handover/{sender}", release(t, sender, uav_id, pos))
+        # 3b. 250 forged offers as the sender, at safe places in the target's region (a grid 0.5 m
+        #     apart): they may reserve room for a while, but not keep a real handover out.
+        for k in range(250):
+            pos = [1.0 + 0.5 * (k % 36), -1.5 + 0.5 * (k // 36)]
+            session.put(f"{p}/region/{t}/handover/{me}", offer(t, me, f"offered{k}", 1000 + k, pos))
         # 4. Oversized and invented: one message of 300,000 UAVs (12 MiB) as the sender, and 200
         #    regions the road does not have.
         session.put(f"{p}/region/{me}/state", phantom_states(me, 300_000, 9000.0))
