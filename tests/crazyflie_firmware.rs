@@ -26,19 +26,21 @@ use support::firmware::{ONE_FLIGHT, Rig, firmware_binary, uavs, until, with_one_
 use uav::Vec2;
 
 /// `airroads run --link firmware` writes METRICS.json with exactly the keys of any run, its
-/// margins measured on the physics, and exits 0 for a safe run where every UAV arrived.
+/// margins measured on the physics, and a trajectory with the true states, and exits 0 for a safe
+/// run where every UAV arrived.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_run_over_the_firmware_writes_the_same_report() {
     let _alone = ONE_FLIGHT.lock().await;
     let Some(cf2) = firmware_binary("`airroads run scenarios/lab3.json`").await else { return };
     let out = std::env::temp_dir().join(format!("airroads-firmware-metrics-{}.json", std::process::id()));
+    let trajectory = out.with_extension("csv");
     let scenario = support::repo().join("scenarios/lab3.json");
     let mut tries = Vec::new();
     // One retry, as for the flight above: the firmware's clock can slip under load.
     for _ in 0..2 {
         let run = std::process::Command::new(env!("CARGO_BIN_EXE_airroads"))
             .args(["run", scenario.to_str().unwrap(), "--link", "firmware", "--cf2", cf2.to_str().unwrap()])
-            .args(["--out", out.to_str().unwrap()])
+            .args(["--out", out.to_str().unwrap(), "--trajectory", trajectory.to_str().unwrap()])
             .output()
             .expect("airroads runs");
         let stdout = String::from_utf8_lossy(&run.stdout).into_owned();
@@ -50,6 +52,18 @@ async fn a_run_over_the_firmware_writes_the_same_report() {
             assert_eq!(keys, support::METRICS_KEYS);
             assert!(metrics["min_separation_m"].as_f64().is_some_and(|d| d >= 0.3), "{metrics}");
             assert!(metrics["min_wall_distance_m"].as_f64().is_some_and(|d| d >= 0.1), "{metrics}");
+            // The trajectory carries the physics' true state, from which `scripts/model-error`
+            // derives the allowances of docs/safety.md §12.
+            let csv = std::fs::read_to_string(&trajectory).unwrap();
+            assert!(csv.lines().next().unwrap().ends_with(",true_x,true_y,true_vx,true_vy"), "{csv:.200}");
+            let model_error = std::process::Command::new("python3")
+                .arg(support::repo().join("scripts/model-error"))
+                .arg(&trajectory)
+                .output()
+                .expect("python3 runs scripts/model-error");
+            let printed = String::from_utf8_lossy(&model_error.stdout);
+            assert!(model_error.status.success() && printed.contains("\"eta_v\""), "{printed}");
+            let _ = std::fs::remove_file(&trajectory);
             let _ = std::fs::remove_file(&out);
             return;
         }

@@ -107,7 +107,7 @@ pub struct MetricsRecorder {
     ongoing: Vec<Option<StallRecord>>,
     stalls: Vec<StallRecord>,
     /// Scratch: each UAV's state and tracked segment, and its margins, this tick.
-    states: Vec<(UavState, Option<usize>)>,
+    states: Vec<(Option<UavState>, Option<usize>)>,
     margins: Vec<UavMargins>,
 }
 
@@ -139,12 +139,13 @@ impl MetricsRecorder {
 
     /// Records what the filter did in the fleet's last tick (time `t`) and the margins of `truth`,
     /// the UAVs' true states in the fleet's order (a physics simulation's ground truth), instead of
-    /// the states the fleet read. A `truth` of another length is ignored (the fleet's are used).
-    pub fn record_truth(&mut self, fleet: &Fleet, t: f64, truth: &[UavState]) {
+    /// the states the fleet read; `None` for a UAV not in the air (landed, or fallen after a fault),
+    /// which has no margins. A `truth` of another length is ignored (the fleet's are used).
+    pub fn record_truth(&mut self, fleet: &Fleet, t: f64, truth: &[Option<UavState>]) {
         self.record_with(fleet, t, Some(truth));
     }
 
-    fn record_with(&mut self, fleet: &Fleet, t: f64, truth: Option<&[UavState]>) {
+    fn record_with(&mut self, fleet: &Fleet, t: f64, truth: Option<&[Option<UavState>]>) {
         let p = fleet.config.params;
         let road = fleet.road();
         let uavs = fleet.uavs();
@@ -153,12 +154,15 @@ impl MetricsRecorder {
         match truth.filter(|truth| truth.len() == uavs.len()) {
             // No segment hint: the estimate's segment need not hold the true position.
             Some(truth) => self.states.extend(truth.iter().map(|s| (*s, None))),
-            None => self.states.extend(uavs.iter().map(|u| (u.state, u.nav.tracker.current))),
+            None => self.states.extend(uavs.iter().map(|u| (Some(u.state), u.nav.tracker.current))),
         }
         let states = &self.states;
         // Each UAV's margins on its own (in parallel for large fleets; a minimum does not depend on
         // the order).
-        let margins_of = |(k, &(state, hint)): (usize, &(UavState, Option<usize>))| {
+        let margins_of = |(k, &(state, hint)): (usize, &(Option<UavState>, Option<usize>))| {
+            let Some(state) = state else {
+                return UavMargins { wall: f64::INFINITY, road_margin: f64::INFINITY, closest: None };
+            };
             let wall = match hint {
                 Some(segment) => road.boundary_distance_in(segment, &state.p),
                 None => road.boundary_distance(&state.p),
@@ -166,8 +170,13 @@ impl MetricsRecorder {
             let road_margin = road_margin_at(road, hint, &state, p.delta, wall);
             // The pairs of this tick's neighbour search: any other pair is farther apart than the
             // activation radius at twice the fleet's top speed, so its S_kd exceeds D_c.
-            let pairs = lists.get(k).into_iter().flatten().filter(|&&d| d > k).filter_map(|&d| states.get(d));
-            let closest = pairs.fold(None, |closest: Option<(f64, f64)>, (other, _)| {
+            let pairs = lists
+                .get(k)
+                .into_iter()
+                .flatten()
+                .filter(|&&d| d > k)
+                .filter_map(|&d| states.get(d)?.0.as_ref());
+            let closest = pairs.fold(None, |closest: Option<(f64, f64)>, other| {
                 let (m, sep) = (collision_margin(&state, other, 2.0 * p.delta), (state.p - other.p).norm());
                 Some(closest.map_or((m, sep), |(a, b)| (a.min(m), b.min(sep))))
             });

@@ -106,8 +106,9 @@ impl TickPipeline {
         self.velocities.extend(fleet.uavs.iter().map(|u| u.state.v));
         self.velocities.extend(fleet.foreign.iter().map(|f| f.state.v));
         let v_max = self.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
-        let reach = activation_radius(params.d_c, 2.0 * v_max, 2.0 * params.delta)
-            .max(YIELD_RADIUS_IN_DC * params.d_c)
+        let (d_c, eta_v) = (params.d_c + 2.0 * params.eta_p, 2.0 * params.eta_v);
+        let reach = activation_radius(d_c, 2.0 * v_max + eta_v, 2.0 * params.delta)
+            .max(YIELD_RADIUS_IN_DC * params.kept_d_c())
             + fleet.max_stale_reach().max(foreign_reach);
         self.neighbours.update_with_foreign(&self.positions, fleet.uavs.len(), reach);
     }
@@ -154,7 +155,7 @@ impl TickPipeline {
 
     /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::yielding`]).
     fn make_way(&mut self, fleet: &mut Fleet) {
-        let d_c = fleet.config.params.d_c;
+        let d_c = fleet.config.params.kept_d_c();
         for k in 0..fleet.uavs.len() {
             let me = &fleet.uavs[k];
             let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { continue };
@@ -192,7 +193,7 @@ impl TickPipeline {
             };
             let parked =
                 self.neighbours.lists[k].iter().filter(|&&d| stuck[d]).map(|&d| fleet.uavs[d].state.p);
-            if let Some(c) = pass_point(me.state.p, me.last.target, parked, params.d_c, clear) {
+            if let Some(c) = pass_point(me.state.p, me.last.target, parked, params.kept_d_c(), clear) {
                 fleet.uavs[k].last.target = c;
             }
         }
@@ -262,7 +263,8 @@ impl TickPipeline {
     /// neighbours' states from plain copies (a link is not shared across threads): in parallel for
     /// large fleets, with the same result on any number of threads.
     fn limit_speeds(&mut self, fleet: &mut Fleet) {
-        let (d_c, delta, dt) = (fleet.config.params.d_c, fleet.config.params.delta, fleet.config.params.dt);
+        let params = &fleet.config.params;
+        let (d_c, delta, dt) = (params.kept_d_c(), params.delta, params.dt);
         let (positions, velocities) = (&self.positions, &self.velocities);
         let (traffic, lists) = (&fleet.traffic, &self.neighbours.lists);
         let limit = |(k, me): (usize, &mut Uav)| {

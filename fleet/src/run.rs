@@ -64,19 +64,38 @@ pub fn run_scenario_on(
     make_link: &mut dyn FnMut(&UavSpec, UavState) -> Box<dyn Link>,
     wait_tick: &mut dyn FnMut(),
 ) -> std::io::Result<RunOutcome> {
-    run_scenario_on_truth(scenario, options, policies, make_link, wait_tick, &mut || None)
+    run_with(scenario, options, policies, make_link, wait_tick, None)
 }
 
-/// [`run_scenario_on`] with the margins of METRICS.json measured on `truth`: the UAVs' true
-/// states in the scenario's order, read after every tick (e.g. a physics simulation's ground
-/// truth; `None` measures that tick on the states the fleet read).
+/// The UAVs' true states in the scenario's order (`None` for one not in the air), read after
+/// every tick; `None` for a tick without them.
+pub type TruthSource<'a> = &'a mut dyn FnMut() -> Option<Vec<Option<UavState>>>;
+
+/// Columns the trajectory CSV of a run with ground truth adds: each UAV's true state (empty while
+/// it is not in the air).
+pub const TRUTH_COLUMNS: &str = ",true_x,true_y,true_vx,true_vy";
+
+/// [`run_scenario_on`] with the margins of METRICS.json measured on `truth` (e.g. a physics
+/// simulation's ground truth; a tick without it is measured on the states the fleet read), and
+/// the trajectory CSV with [`TRUTH_COLUMNS`].
 pub fn run_scenario_on_truth(
+    scenario: &ValidScenario,
+    options: RunOptions,
+    policies: PolicyRegistry,
+    make_link: &mut dyn FnMut(&UavSpec, UavState) -> Box<dyn Link>,
+    wait_tick: &mut dyn FnMut(),
+    truth: TruthSource,
+) -> std::io::Result<RunOutcome> {
+    run_with(scenario, options, policies, make_link, wait_tick, Some(truth))
+}
+
+fn run_with(
     scenario: &ValidScenario,
     mut options: RunOptions,
     policies: PolicyRegistry,
     make_link: &mut dyn FnMut(&UavSpec, UavState) -> Box<dyn Link>,
     wait_tick: &mut dyn FnMut(),
-    truth: &mut dyn FnMut() -> Option<Vec<UavState>>,
+    mut truth: Option<TruthSource>,
 ) -> std::io::Result<RunOutcome> {
     let mut config = options.config;
     config.params = scenario.params;
@@ -111,7 +130,8 @@ pub fn run_scenario_on_truth(
     }
     fleet.set_hold(false);
     if let Some(w) = options.trajectory.as_mut() {
-        writeln!(w, "{TRAJECTORY_HEADER}")?;
+        let extra = if truth.is_some() { TRUTH_COLUMNS } else { "" };
+        writeln!(w, "{TRAJECTORY_HEADER}{extra}")?;
     }
     let mut recorder = MetricsRecorder::new();
     let mut paths = options.paths.then(|| PathRecorder::new(&fleet));
@@ -120,17 +140,18 @@ pub fn run_scenario_on_truth(
         let t = tick as f64 * params.dt;
         wait_tick();
         let arrived = fleet.tick();
-        match truth() {
-            Some(states) => recorder.record_truth(&fleet, t, &states),
+        let true_states = truth.as_mut().and_then(|truth| truth());
+        match &true_states {
+            Some(states) => recorder.record_truth(&fleet, t, states),
             None => recorder.record(&fleet, t),
         }
         if let Some(p) = paths.as_mut() {
             p.record(&fleet, t + params.dt);
         }
         if let Some(w) = options.trajectory.as_mut() {
-            for u in fleet.uavs() {
+            for (k, u) in fleet.uavs().iter().enumerate() {
                 let (s, l) = (&u.state, &u.last);
-                writeln!(
+                write!(
                     w,
                     "{t:.3},{},{},{},{},{},{},{},{},{},{},{},{:e},{}",
                     u.id,
@@ -147,6 +168,12 @@ pub fn run_scenario_on_truth(
                     l.max_slack,
                     u.nav.arrived
                 )?;
+                match true_states.as_ref().map(|states| states.get(k).copied().flatten()) {
+                    Some(Some(s)) => writeln!(w, ",{},{},{},{}", s.p.x, s.p.y, s.v.x, s.v.y)?,
+                    Some(None) => writeln!(w, ",,,,")?,
+                    None if truth.is_some() => writeln!(w, ",,,,")?,
+                    None => writeln!(w)?,
+                }
             }
         }
         if arrived == n {

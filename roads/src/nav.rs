@@ -184,10 +184,11 @@ pub struct Navigator<'a> {
 }
 
 impl<'a> Navigator<'a> {
-    /// A navigator on `road` with the parameters of `params`.
+    /// A navigator on `road` with the parameters of `params`; its D_s and D_c are the distances the
+    /// filter keeps at rest, with the model-error allowances (`Params::kept_d_s`, `kept_d_c`).
     pub fn new(road: &'a Road, mode: NavMode, params: &Params) -> Self {
         let (r_s, epsilon, d_s, d_c, delta) =
-            (params.r_s, params.epsilon, params.d_s, params.d_c, params.delta);
+            (params.r_s, params.epsilon, params.kept_d_s(), params.kept_d_c(), params.delta);
         Self { road, mode, r_s, epsilon, d_s, d_c, delta }
     }
 

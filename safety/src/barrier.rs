@@ -11,6 +11,38 @@ pub const H_MIN: f64 = 1e-3;
 /// (docs/safety.md §4.3).
 pub const MIN_DISTANCE_M: f64 = 1e-12;
 
+/// The clearance a barrier keeps: the distance D (D_c or D_s) and the model-error allowances η_p, η_v
+/// of docs/safety.md §12 (0 for the exact double integrator). The barrier is
+/// `b = √(2δ(n − D − η_p)) + ṅ − η_v`: braking at δ from a state with b ≥ 0 stops at least D away
+/// even if the true distance is η_p shorter and the true closing speed up to η_v faster.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Clearance {
+    /// The distance to keep, D (m).
+    pub d: f64,
+    /// Position allowance η_p (m).
+    pub eta_p: f64,
+    /// Closing-speed allowance η_v (m/s).
+    pub eta_v: f64,
+}
+
+impl Clearance {
+    /// D with no model-error allowance (the double integrator of docs/safety.md §1–§11).
+    pub fn exact(d: f64) -> Self {
+        Self { d, eta_p: 0.0, eta_v: 0.0 }
+    }
+
+    /// The distance h and the rates are measured from: D + η_p.
+    pub fn boundary(&self) -> f64 {
+        self.d + self.eta_p
+    }
+}
+
+impl From<f64> for Clearance {
+    fn from(d: f64) -> Self {
+        Self::exact(d)
+    }
+}
+
 /// What a row protects against.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum RowKind {
@@ -40,33 +72,65 @@ fn braking_term(delta: f64, rate: f64, h: f64, b: f64) -> f64 {
     if h >= H_MIN { delta * rate / h } else { (-delta + delta * b / H_MIN).min(0.0) }
 }
 
+/// Gain κ_η (1/s) with which a barrier that only the allowance η_v makes negative is brought back
+/// (docs/safety.md §12).
+pub const RECOVERY_GAIN: f64 = 4.0;
+
+/// What the allowance adds to the class-K term ζb³, with b = b_std − η_v (docs/safety.md §12):
+/// above 0, enough to make it `ζ((b + η_v)³ − η_v³)`, the exact model's term at the same distance
+/// less its value on the new boundary (ζb³ alone left a crawl towards a wall: 0.003 m/s² at a goal
+/// 0.35 m from it, and a stronger linear term let a lagging UAV push through the allowance); below
+/// 0, where the state is safe for the model but not with its errors, κ_η·max(b, −η_v), which brings
+/// it back (ζb³ alone let a persistent estimate error keep a pair closing at 0.26 m/s). 0 whenever
+/// η_v = 0, so the exact model's rows are unchanged.
+fn allowance_term(b: f64, zeta: f64, eta_v: f64) -> f64 {
+    if b >= 0.0 {
+        zeta * ((b + eta_v).powi(3) - b.powi(3) - eta_v.powi(3))
+    } else {
+        RECOVERY_GAIN * b.max(-eta_v)
+    }
+}
+
 /// Collision row of UAV k against neighbour d (docs/safety.md §1, §2; paper eq. 4, 11, 14):
 /// b_kd = √(2δΣ(‖p_kd‖ − D_c)) + p̂_kdᵀv_kd, row
-/// `−p̂ᵀu_k ≤ δ_k/δΣ · (δΣ ṅ/h + ‖v_⊥‖²/n + ζ b_kd³)`, with δΣ = δ_k + δ_d.
+/// `−p̂ᵀu_k ≤ δ_k/δΣ · (δΣ ṅ/h + ‖v_⊥‖²/n + ζ b_kd³)`, with δΣ = δ_k + δ_d; with model-error
+/// allowances D_c + η_p in h and b_kd − η_v in the class-K term (§12).
 pub fn collision_row(
     p_kd: Vec2,
     v_kd: Vec2,
     delta_k: f64,
     delta_d: f64,
-    d_c: f64,
+    d_c: impl Into<Clearance>,
     zeta: f64,
     kind: RowKind,
 ) -> Row {
+    let d_c = d_c.into();
     let n_raw = p_kd.norm();
     let n = n_raw.max(MIN_DISTANCE_M);
     let p_hat = if n_raw >= MIN_DISTANCE_M { p_kd / n_raw } else { Vec2::new(1.0, 0.0) };
     let n_dot = p_hat.dot(&v_kd);
     let v_perp2 = (v_kd.norm_squared() - n_dot * n_dot).max(0.0);
     let delta_sum = delta_k + delta_d;
-    let h = (2.0 * delta_sum * (n - d_c).max(0.0)).sqrt();
-    let b = h + n_dot;
-    let rhs = braking_term(delta_sum, n_dot, h, b) + v_perp2 / n + zeta * b.powi(3);
+    let h = (2.0 * delta_sum * (n - d_c.boundary()).max(0.0)).sqrt();
+    let b = h + n_dot - d_c.eta_v;
+    let rhs = braking_term(delta_sum, n_dot, h, h + n_dot)
+        + v_perp2 / n
+        + zeta * b.powi(3)
+        + allowance_term(b, zeta, d_c.eta_v);
     Row { a: -p_hat, c: delta_k / delta_sum * rhs, b, kind }
 }
 
 /// End-point barrier of a finite wall (docs/safety.md §5 R2): the collision barrier with a static
 /// obstacle at `vertex` (δ_d = 0, D_c → D_s), for a UAV at `p` with velocity `v`.
-pub fn point_row(p: Vec2, v: Vec2, vertex: Vec2, delta: f64, d_s: f64, zeta: f64, kind: RowKind) -> Row {
+pub fn point_row(
+    p: Vec2,
+    v: Vec2,
+    vertex: Vec2,
+    delta: f64,
+    d_s: impl Into<Clearance>,
+    zeta: f64,
+    kind: RowKind,
+) -> Row {
     collision_row(p - vertex, v, delta, 0.0, d_s, zeta, kind)
 }
 
@@ -89,7 +153,7 @@ pub fn pair_row(
     v_kd: Vec2,
     delta_k: f64,
     delta_d: f64,
-    d_c: f64,
+    d_c: impl Into<Clearance>,
     zeta: f64,
     kind: RowKind,
 ) -> Row {
@@ -102,17 +166,35 @@ pub fn pair_row(
 /// ζb³. It still keeps b ≥ 0 and is the paper's row below b₀; above b₀ it no longer throttles a UAV
 /// flying past V (along a wall that V ends, or through the mouth of a narrowing) to a crawl while
 /// its braking margin to V is large.
-pub fn vertex_row(p: Vec2, v: Vec2, vertex: Vec2, delta: f64, d_s: f64, zeta: f64, kind: RowKind) -> Row {
+pub fn vertex_row(
+    p: Vec2,
+    v: Vec2,
+    vertex: Vec2,
+    delta: f64,
+    d_s: impl Into<Clearance>,
+    zeta: f64,
+    kind: RowKind,
+) -> Row {
     let row = point_row(p, v, vertex, delta, d_s, zeta, kind);
     Row { c: row.c + linear_class_k(row.b), ..row }
 }
 
 /// Signed line barrier (docs/safety.md §3, E5): with s = n̂_inᵀ(p − a) and ṡ = n̂_inᵀv,
-/// b_kij = √(2δ(s − D_s)) + ṡ, row `−n̂_inᵀu ≤ δṡ/g + ζb³`. `n_in` must be a unit vector.
-pub fn line_row(s: f64, s_dot: f64, n_in: Vec2, delta: f64, d_s: f64, zeta: f64, kind: RowKind) -> Row {
-    let g = (2.0 * delta * (s - d_s).max(0.0)).sqrt();
-    let b = g + s_dot;
-    let c = braking_term(delta, s_dot, g, b) + zeta * b.powi(3);
+/// b_kij = √(2δ(s − D_s)) + ṡ, row `−n̂_inᵀu ≤ δṡ/g + ζb³`; with model-error allowances D_s + η_p in
+/// g and b_kij − η_v in the class-K term (§12). `n_in` must be a unit vector.
+pub fn line_row(
+    s: f64,
+    s_dot: f64,
+    n_in: Vec2,
+    delta: f64,
+    d_s: impl Into<Clearance>,
+    zeta: f64,
+    kind: RowKind,
+) -> Row {
+    let d_s = d_s.into();
+    let g = (2.0 * delta * (s - d_s.boundary()).max(0.0)).sqrt();
+    let b = g + s_dot - d_s.eta_v;
+    let c = braking_term(delta, s_dot, g, g + s_dot) + zeta * b.powi(3) + allowance_term(b, zeta, d_s.eta_v);
     Row { a: -n_in, c, b, kind }
 }
 
@@ -124,25 +206,27 @@ pub fn braking_margin(dist: f64, rate: f64, delta: f64) -> f64 {
 }
 
 /// The largest acceleration (m/s²) towards an obstacle that, held for one tick `dt`, leaves the
-/// braking margin non-negative at the next sample (docs/safety.md §4.4), for a UAV `gap` (m) beyond
-/// its clearance (taken as 0 inside it) moving away at `rate` (m/s). Negative: it must accelerate away.
+/// barrier non-negative at the next sample (docs/safety.md §4.4, §12), for a UAV `gap` (m) beyond
+/// its boundary D + η_p (taken as 0 inside it) moving away at `rate` (m/s), with closing-speed
+/// allowance `eta_v` (m/s). Negative: it must accelerate away.
 ///
-/// With e = gap, w = rate + a·dt after a push a: the margin `e + (rate + w)dt/2 − min(w, 0)²/(2δ)` is
-/// increasing in w, so the bound is its root; it is ≥ −δ whenever the margin is ≥ 0 now, which is
-/// b ≥ 0, so full braking still meets it.
-pub fn held_push_limit(gap: f64, rate: f64, delta: f64, dt: f64) -> f64 {
-    let coast = gap.max(0.0) + rate * dt / 2.0;
+/// With e = gap, w = rate + a·dt after a push a: the next sample's gap is `e + (rate + w)dt/2` and
+/// the barrier there asks `w − η_v ≥ −√(2δ·gap)`; the bound is the root of that, increasing in w.
+/// It is ≥ −δ whenever the barrier is ≥ 0 now, so full braking still meets it. With η_v = 0 it is
+/// the braking margin `e + (rate + w)dt/2 − min(w, 0)²/(2δ) ≥ 0` of §4.4.
+pub fn held_push_limit(gap: f64, rate: f64, delta: f64, dt: f64, eta_v: f64) -> f64 {
+    let coast = gap.max(0.0) + (rate + eta_v) * dt / 2.0;
     let w_min = if coast >= 0.0 {
-        (delta * dt - (delta * delta * dt * dt + 8.0 * delta * coast).sqrt()) / 2.0
+        eta_v + (delta * dt - (delta * delta * dt * dt + 8.0 * delta * coast).sqrt()) / 2.0
     } else {
-        -2.0 * coast / dt
+        -2.0 * (gap.max(0.0) + rate * dt / 2.0) / dt
     };
     (rate - w_min) / dt
 }
 
-/// `row` tightened so that its input, held for `dt`, keeps the braking margin ≥ 0 at the next sample
+/// `row` tightened so that its input, held for `dt`, keeps the barrier ≥ 0 at the next sample
 /// ([`held_push_limit`]); `bend` (m/s²) is the rate's own change at zero input (‖v_⊥‖²/n for a point,
 /// 0 for a line).
-pub fn held_for(row: Row, gap: f64, rate: f64, bend: f64, delta: f64, dt: f64) -> Row {
-    Row { c: row.c.min(bend + held_push_limit(gap, rate, delta, dt)), ..row }
+pub fn held_for(row: Row, gap: f64, rate: f64, bend: f64, delta: f64, dt: f64, eta_v: f64) -> Row {
+    Row { c: row.c.min(bend + held_push_limit(gap, rate, delta, dt, eta_v)), ..row }
 }

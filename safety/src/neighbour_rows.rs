@@ -15,7 +15,7 @@
 //! also pays for the disk's growth ρ̇ = δτ and ρ̈ = δ while t < T_hold. After the horizon the disk
 //! freezes (the motors are off). The lost UAV itself brakes and no longer runs the filter.
 
-use crate::barrier::{Row, RowKind, collision_row, pair_row};
+use crate::barrier::{Clearance, Row, RowKind, collision_row, pair_row};
 use crate::road_rows::activation_radius;
 use uav::{Params, UavState, Vec2};
 
@@ -72,7 +72,9 @@ pub fn obstacle_row(me: UavState, disk: &ReachDisk, clearance: f64, params: &Par
     let p_hat = if n > 0.0 { p_kd / n } else { Vec2::new(1.0, 0.0) };
     // The boundary approaches k at ρ̇: as if the centre moved towards k at that speed.
     let v_kd = me.v - disk.velocity - p_hat * disk.growth;
-    let mut row = collision_row(p_kd, v_kd, params.delta, 0.0, clearance + disk.radius, params.zeta, kind);
+    // k's own model error (docs/safety.md §12); the disk holds the other's.
+    let clearance = Clearance { d: clearance + disk.radius, eta_p: params.eta_p, eta_v: params.eta_v };
+    let mut row = collision_row(p_kd, v_kd, params.delta, 0.0, clearance, params.zeta, kind);
     row.c -= disk.growth_rate;
     row
 }
@@ -108,12 +110,15 @@ pub fn neighbour_rows(
     // dense jams the filtered inputs alternate from tick to tick; the filter keeps twice that,
     // δΣ·dt², beyond D_c.
     let d_c = p.d_c + delta_sum * p.dt * p.dt;
+    // Both UAVs' model errors add up (docs/safety.md §12).
+    let pair = Clearance { d: d_c, eta_p: 2.0 * p.eta_p, eta_v: 2.0 * p.eta_v };
     for (d, other) in neighbours {
         match other {
             Neighbour::Cooperating(other) => {
                 let (p_kd, v_kd) = (me.p - other.p, me.v - other.v);
-                if p_kd.norm() <= activation_radius(p.d_c, v_kd.norm(), delta_sum) {
-                    out.push(pair_row(p_kd, v_kd, p.delta, p.delta, d_c, p.zeta, RowKind::Collision(d)));
+                let radius = activation_radius(pair.boundary(), v_kd.norm() + pair.eta_v, delta_sum);
+                if p_kd.norm() <= radius {
+                    out.push(pair_row(p_kd, v_kd, p.delta, p.delta, pair, p.zeta, RowKind::Collision(d)));
                 }
             }
             Neighbour::Obstacle(disk) => out.push(obstacle_row(me, &disk, d_c, p, RowKind::Collision(d))),

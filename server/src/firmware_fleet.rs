@@ -17,6 +17,8 @@ pub struct FirmwareFleet {
     /// Where each firmware's console is written (`fwN.out`).
     pub run_dir: PathBuf,
     firmware: FirmwareProcesses,
+    /// Whether every UAV has been airborne at once (from then on, truth is reported).
+    flown: std::cell::Cell<bool>,
 }
 
 impl FirmwareFleet {
@@ -39,13 +41,14 @@ impl FirmwareFleet {
         for (i, uav) in scenario.uavs.iter_mut().enumerate() {
             uav.link = Some(physics.uri(i).context("a drone per UAV")?);
         }
-        Ok(Self { physics, run_dir, firmware })
+        Ok(Self { physics, run_dir, firmware, flown: Default::default() })
     }
 
-    /// Every UAV's true horizontal state, in the scenario's order, while every one is airborne
-    /// (above `airborne_m`); `None` otherwise (take-off, landing: the margins are for flight).
-    pub fn truth(&self, airborne_m: f64) -> Option<Vec<UavState>> {
-        (0..self.physics.len())
+    /// Every UAV's true horizontal state, in the scenario's order: `None` for one below
+    /// `airborne_m` (on the ground, taking off, landing or fallen: it has no margins); `None`
+    /// altogether until every UAV has been above it once (the margins are for flight).
+    pub fn truth(&self, airborne_m: f64) -> Option<Vec<Option<UavState>>> {
+        let states: Vec<Option<UavState>> = (0..self.physics.len())
             .map(|i| {
                 let t = self.physics.truth(i)?;
                 (t.position[2] > airborne_m).then(|| UavState {
@@ -53,7 +56,25 @@ impl FirmwareFleet {
                     v: Vec2::new(t.velocity[0], t.velocity[1]),
                 })
             })
-            .collect()
+            .collect();
+        if states.iter().all(Option::is_some) {
+            self.flown.set(true);
+        }
+        self.flown.get().then_some(states)
+    }
+
+    /// Kills UAV `i`'s firmware (a firmware that dies in flight).
+    pub fn kill(&mut self, i: usize) {
+        self.firmware.kill(i);
+    }
+
+    /// Freezes UAV `i`'s firmware (SIGSTOP: a hung microcontroller); it stays frozen until the
+    /// fleet is dropped.
+    pub fn freeze(&self, i: usize) -> std::io::Result<()> {
+        let pid = self.firmware.pid(i).and_then(|p| rustix::process::Pid::from_raw(p as i32));
+        let pid = pid.ok_or_else(|| std::io::Error::other(format!("firmware {i} is not running")))?;
+        rustix::process::kill_process(pid, rustix::process::Signal::STOP)?;
+        Ok(())
     }
 
     /// Motor packets received from each UAV's firmware so far (500 per second from an idle

@@ -210,7 +210,7 @@ pub fn run_on_firmware(
 }
 
 /// A `make_link` that flies each UAV through the relay to the Crazyflie its `link` names.
-fn crazyflie_links(
+pub fn crazyflie_links(
     runtime: &tokio::runtime::Handle,
     dt: f64,
 ) -> impl FnMut(&fleet::UavSpec, uav::UavState) -> Box<dyn links::Link> + use<> {
@@ -222,7 +222,7 @@ fn crazyflie_links(
 }
 
 /// A `wait_tick` for real time: sleeps until the next multiple of `dt` (late ticks are not made up).
-fn real_time_ticks(dt: f64) -> impl FnMut() {
+pub fn real_time_ticks(dt: f64) -> impl FnMut() {
     let period = std::time::Duration::from_secs_f64(dt);
     let mut next = std::time::Instant::now();
     move || {

@@ -25,11 +25,29 @@ pub struct Params {
     pub epsilon: f64,
     /// Simulated time limit of a headless run (s). Default 120.
     pub t_max: f64,
+    /// Model-error allowance η_p (m): how much closer than it reads a UAV may truly be to a wall
+    /// (twice to another UAV), docs/safety.md §12. Default 0: the simulated double integrator is
+    /// exact; real quadrotors need it (README "Crazyflies").
+    pub eta_p: f64,
+    /// Model-error allowance η_v (m/s): how much faster than the double integrator predicts a UAV
+    /// may truly close in while it brakes (lag, estimate, gusts), docs/safety.md §12. Default 0.
+    pub eta_v: f64,
 }
 
 impl Default for Params {
     fn default() -> Self {
-        Self { dt: 0.05, delta: 5.0, r_s: 5.0, d_s: 0.1, d_c: 0.3, zeta: 0.05, epsilon: 0.1, t_max: 120.0 }
+        Self {
+            dt: 0.05,
+            delta: 5.0,
+            r_s: 5.0,
+            d_s: 0.1,
+            d_c: 0.3,
+            zeta: 0.05,
+            epsilon: 0.1,
+            t_max: 120.0,
+            eta_p: 0.0,
+            eta_v: 0.0,
+        }
     }
 }
 
@@ -66,7 +84,7 @@ impl ParamError {
 impl Params {
     /// Checks that every parameter is finite and within a physically meaningful range.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let checks: [(&'static str, f64, f64, f64); 8] = [
+        let checks: [(&'static str, f64, f64, f64); 10] = [
             ("dt", self.dt, MIN_DT_S, MAX_DT_S),
             ("delta", self.delta, 1e-3, 100.0),
             ("r_s", self.r_s, 1e-2, 1e3),
@@ -75,6 +93,8 @@ impl Params {
             ("zeta", self.zeta, 0.0, 1e3),
             ("epsilon", self.epsilon, 1e-4, 100.0),
             ("t_max", self.t_max, 1e-3, 1e6),
+            ("eta_p", self.eta_p, 0.0, 1.0),
+            ("eta_v", self.eta_v, 0.0, 10.0),
         ];
         for (field, value, min, max) in checks {
             if !value.is_finite() {
@@ -89,6 +109,19 @@ impl Params {
             return Err(ParamError { field: "D_s", reason: "must be positive, within", value, min, max });
         }
         Ok(())
+    }
+
+    /// The distance (m) the filter keeps between two UAVs at rest: D_c with both UAVs' model-error
+    /// allowances, D_c + 2η_p + (2η_v)²/(2·2δ) (docs/safety.md §12); D_c when they are 0. The
+    /// traffic rules space UAVs by it.
+    pub fn kept_d_c(&self) -> f64 {
+        self.d_c + 2.0 * self.eta_p + self.eta_v * self.eta_v / self.delta
+    }
+
+    /// The distance (m) the filter keeps from a wall at rest: D_s + η_p + η_v²/(2δ) (docs/safety.md
+    /// §12); D_s when the allowances are 0.
+    pub fn kept_d_s(&self) -> f64 {
+        self.d_s + self.eta_p + self.eta_v * self.eta_v / (2.0 * self.delta)
     }
 
     /// Number of control ticks in `t_max`.
@@ -127,6 +160,22 @@ mod tests {
             p.validate().unwrap_err().to_string(),
             "params.D_s: must be positive, within 0..=100 (got 0)"
         );
+    }
+
+    #[test]
+    fn allowances_default_to_zero_and_are_checked() {
+        let p: Params = serde_json::from_str(r#"{"eta_p": 0.07, "eta_v": 0.5}"#).unwrap();
+        assert_eq!((p.eta_p, p.eta_v), (0.07, 0.5));
+        assert_eq!((Params::default().eta_p, Params::default().eta_v), (0.0, 0.0));
+        assert_eq!((Params::default().kept_d_c(), Params::default().kept_d_s()), (0.3, 0.1));
+        let kept = (p.kept_d_c(), p.kept_d_s());
+        assert!(
+            (kept.0 - (0.3 + 0.14 + 0.05)).abs() < 1e-12 && (kept.1 - (0.1 + 0.07 + 0.025)).abs() < 1e-12
+        );
+        let e = Params { eta_p: -0.01, ..Params::default() }.validate().unwrap_err();
+        assert_eq!(e.to_string(), "params.eta_p: is outside its valid range 0..=1 (got -0.01)");
+        let e = Params { eta_v: f64::NAN, ..Params::default() }.validate().unwrap_err();
+        assert_eq!(e.field, "eta_v");
     }
 
     #[test]

@@ -3,6 +3,8 @@
 
 #![allow(dead_code)]
 
+pub mod roads;
+
 use uav::Vec2;
 
 /// Feasibility tolerance of the oracle's candidates.
