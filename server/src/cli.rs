@@ -284,9 +284,18 @@ pub struct StressArgs {
     /// (`--save-failing` saves those too, as stress-SEED-unfinished.json, unless this is given).
     #[arg(long)]
     pub save_unfinished: Option<PathBuf>,
-    /// Worker threads (default: all cores).
+    /// Worker threads (default: all cores; with `--link firmware`, flights at once, default 3).
     #[arg(long)]
     pub jobs: Option<usize>,
+    /// `sim`: the in-process double integrator; `firmware`: random faulty flights of 2–3 real
+    /// Crazyflie firmware processes on cfsim's physics on the lab road (needs `--cf2`), judged on
+    /// ground truth (`--family` does not apply; `--save-failing` saves the scenarios of violating
+    /// and unfinished cases, to fly again with `run --link firmware`).
+    #[arg(long, default_value = "sim", value_parser = ["sim", "firmware"])]
+    pub link: String,
+    /// The Crazyflie firmware's SITL build (`cf2`) that `--link firmware` runs.
+    #[arg(long, value_name = "PATH")]
+    pub cf2: Option<PathBuf>,
     /// Flight options.
     #[command(flatten)]
     pub flight: FlightArgs,

@@ -25,6 +25,7 @@ mod plot;
 mod run_cmd;
 mod serve_cmd;
 mod stress_cmd;
+mod stress_firmware;
 mod track;
 
 use clap::Parser;

@@ -16,6 +16,18 @@ struct CaseResult {
 
 /// Runs the subcommand.
 pub fn main(args: StressArgs) -> ExitCode {
+    if args.link == "firmware" {
+        return match args.cf2.as_deref().filter(|p| p.is_file()) {
+            Some(cf2) => crate::stress_firmware::main(&args, cf2),
+            None => {
+                let given = args.cf2.as_ref().map_or("nothing".into(), |p| p.display().to_string());
+                eprintln!(
+                    "error: --link firmware needs --cf2 PATH, the firmware's SITL build (given: {given})"
+                );
+                ExitCode::from(2)
+            }
+        };
+    }
     if let Err(msg) = args.flight.policies(5.0) {
         eprintln!("error: {msg}");
         return ExitCode::from(2);
