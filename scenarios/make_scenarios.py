@@ -49,9 +49,9 @@ def write(name, params, segments, uavs, regions=None):
 # Lab scale (the paper flew three Crazyflies): an L-shaped road 1.4 m wide in a 6 m x 5 m room. The
 # model-error allowances cover what `scripts/model-error` measured on flights of the real firmware
 # (docs/safety.md §12; BENCHMARKS.md).
-write("lab3", {"delta": 2.0, "r_s": 1.0, "t_max": 60, "eta_p": 0.07, "eta_v": 0.5},
+write("lab3", {"delta": 2.0, "r_s": 1.0, "t_max": 90, "eta_p": 0.07, "eta_v": 0.5},
       road([[0.0, 0.0], [2.0, 0.0], [4.0, 0.0], [4.0, 2.0], [4.0, 4.0]], 1.4),
-      [("cf1", [0.4, -0.3], [4.35, 2.6]), ("cf2", [0.4, 0.3], [3.65, 2.6]), ("cf3", [1.2, 0.0], [4.0, 3.6])])
+      [("cf1", [0.4, -0.3], [4.3, 2.4]), ("cf2", [0.4, 0.3], [3.7, 2.9]), ("cf3", [1.2, 0.0], [4.0, 3.6])])
 
 # The paper's kind of run: a winding one-way road (10 segments, 3 m wide, bends of 37-90 degrees and
 # a hairpin) with 10 UAVs starting in two rows at its entry and spreading over its far end.

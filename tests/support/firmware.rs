@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use uav::Vec2;
 
 /// Deadline for each phase that takes seconds on an idle machine (s).
-pub const PATIENCE: f64 = 60.0;
+pub const PATIENCE: f64 = 90.0;
 
 /// Above this height a Crazyflie is airborne for the margins (m).
 pub const AIRBORNE_M: f64 = 0.3;
