@@ -284,7 +284,7 @@ pub struct StressArgs {
     /// (`--save-failing` saves those too, as stress-SEED-unfinished.json, unless this is given).
     #[arg(long)]
     pub save_unfinished: Option<PathBuf>,
-    /// Worker threads (default: all cores; with `--link firmware`, flights at once, default 3).
+    /// Worker threads (default: all cores; with `--link firmware`, flights at once, default 1).
     #[arg(long)]
     pub jobs: Option<usize>,
     /// `sim`: the in-process double integrator; `firmware`: random faulty flights of 2–3 real

@@ -14,6 +14,33 @@ struct CaseResult {
     metrics: RunMetrics,
 }
 
+/// Runs `case` for every seed of `args` (`--seed`, the next `--scenarios` - 1) on `jobs` threads,
+/// each taking the next seed; the results in seed order.
+pub fn each_seed<T: Send>(args: &StressArgs, jobs: usize, case: impl Fn(u64) -> T + Sync) -> Vec<T> {
+    let next = AtomicU64::new(0);
+    let results = Mutex::new(Vec::new());
+    std::thread::scope(|scope| {
+        for _ in 0..jobs.max(1) {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    if i >= args.scenarios {
+                        break;
+                    }
+                    let result = case(args.seed.wrapping_add(i));
+                    // A poisoned lock means another worker panicked; the scope re-raises that panic.
+                    if let Ok(mut r) = results.lock() {
+                        r.push((i, result));
+                    }
+                }
+            });
+        }
+    });
+    let mut results = results.into_inner().unwrap_or_default();
+    results.sort_by_key(|r| r.0);
+    results.into_iter().map(|r| r.1).collect()
+}
+
 /// Runs the subcommand.
 pub fn main(args: StressArgs) -> ExitCode {
     if args.link == "firmware" {
@@ -34,28 +61,7 @@ pub fn main(args: StressArgs) -> ExitCode {
     }
     let jobs =
         args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).max(1);
-    let next = AtomicU64::new(0);
-    let results = Mutex::new(Vec::new());
-    std::thread::scope(|scope| {
-        for _ in 0..jobs {
-            scope.spawn(|| {
-                loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    if i >= args.scenarios {
-                        break;
-                    }
-                    let seed = args.seed.wrapping_add(i);
-                    let result = run_case(&args, seed);
-                    // A poisoned lock means another worker panicked; the scope re-raises that panic.
-                    if let Ok(mut r) = results.lock() {
-                        r.push(result);
-                    }
-                }
-            });
-        }
-    });
-    let mut results = results.into_inner().unwrap_or_default();
-    results.sort_by_key(|r| r.seed);
+    let results = each_seed(&args, jobs, |seed| run_case(&args, seed));
     report(&args, &results)
 }
 
