@@ -291,9 +291,19 @@ async fn flight(rig: &Rig) -> Result<String, String> {
         return Err(format!("land cf1: {status} {body}"));
     }
     until(server, "cf1 landed", |s| uavs(s)[0]["phase"] == "landed").await?;
+    // Motors off and within the firmware's last centimetres at once (it cuts them once its landing
+    // trajectory ends, a few millimetres up), resting on the floor a moment later.
     let truth = sitl.truth(0).expect("drone");
-    if !truth.on_floor || truth.pwm != [0; 4] {
+    if truth.pwm != [0; 4] || truth.position[2] > 0.05 {
         return Err(format!("cf1 shown landed but its truth is {truth:?}"));
+    }
+    let shown_landed = Instant::now();
+    while !sitl.truth(0).expect("drone").on_floor {
+        if shown_landed.elapsed() > Duration::from_secs(1) {
+            let truth = sitl.truth(0).expect("drone");
+            return Err(format!("cf1 not on the floor 1 s after it was shown landed: {truth:?}"));
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
     }
     // The emergency stop: cf2 and cf3 stopped, their firmware locked, their motors off.
     let (status, body) = server.call("POST", "/api/fleet/stop", None).await;
