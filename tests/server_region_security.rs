@@ -151,6 +151,7 @@ async fn a_rogue_peer_without_a_certificate_or_with_another_regions_cannot_comma
     assert_eq!(seen["stop_as_sender"], 401, "{seen}");
     assert_eq!(seen["audit_read"], 401, "{seen}");
     assert_eq!(seen["stop_as_target"], Value::Null, "{seen}");
+    assert_eq!(seen["stop_on_the_bare_key"], Value::Null, "nothing answers on the old API key: {seen}");
     let state = get(west, "/api/state?scope=region").await;
     assert_eq!(uav_ids(&state), ["w1", "w2"], "nothing adopted, nothing removed");
     assert!(

@@ -90,8 +90,10 @@ def main():
         while time.time() < deadline and not list(session.info.peers_zid()):
             time.sleep(0.05)
         seen["connected"] = bool(list(session.info.peers_zid()))
-        # 1. Commands without the token, as the sender region and as the target itself.
+        # 1. Commands without the token: on the API key as it was before regions were secured
+        #    (`PREFIX/region/NAME/api`), as the sender region, and as the target itself.
         stop = {"method": "POST", "uri": "/api/fleet/stop", "body": ""}
+        seen["stop_on_the_bare_key"] = ask(session, f"{p}/region/{t}/api", stop)
         seen["stop_as_sender"] = ask(session, f"{p}/region/{t}/api/{me}", stop)
         seen["stop_as_target"] = ask(session, f"{p}/region/{t}/api/{t}", stop)
         seen["audit_read"] = ask(session, f"{p}/region/{t}/api/{me}", {"method": "GET", "uri": "/api/audit"})
