@@ -88,7 +88,7 @@ write("bends10", {"t_max": 120},
       [(f"u{i}", s, g) for i, (s, g) in enumerate(zip(starts, goals))]
       + [(f"v{i}", [g[0], g[1]], [s[0], s[1]]) for i, (s, g) in enumerate(zip(starts, goals))])
 
-# Three regions for `serve --region` (README "Regions over Zenoh"): a straight road 60 m long, 4 m
+# Three regions for `serve --region` (docs/regions.md): a straight road 60 m long, 4 m
 # wide, in regions a (segments 0-3), b (4-7) and c (8-11), with six UAVs flying each way through all.
 three = []
 for k in range(6):

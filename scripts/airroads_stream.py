@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""A small reader of airroads' binary stream (`GET /ws?format=bin`, format version 1; README
-"Binary stream"), with nothing but the Python standard library.
+"""A small reader of airroads' binary stream (`GET /ws?format=bin`, format version 1; docs/streams.md,
+Binary stream), with nothing but the Python standard library.
 
     python3 scripts/airroads_stream.py ws://127.0.0.1:8080/ws?format=bin [--frames 20]
     python3 scripts/airroads_stream.py --check http://127.0.0.1:8080

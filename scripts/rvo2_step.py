@@ -1,7 +1,7 @@
 """RVO2/ORCA (its C++ core, through the `pyrvo` package) on an airroads scenario file.
 
 Run by scripts/rvo2-bench inside its throw-away virtualenv; standard library only besides pyrvo.
-For each scenario file (README.md "Scenario files"; `airroads bench scale --write-scenarios DIR`
+For each scenario file (docs/scenarios.md; `airroads bench scale --write-scenarios DIR`
 writes DIR/trunkN.json): one agent per UAV at its start, its preferred velocity pointing at its
 goal at the fleet's top speed (zero within epsilon of the goal, and no faster than reaches the
 goal in one step), agent radius D_c/2, time step dt, and the road's walls as obstacles: each

@@ -1,4 +1,4 @@
-//! `GET /ws?format=bin`: a real server's binary stream decoded by the layout README documents (not by
+//! `GET /ws?format=bin`: a real server's binary stream decoded by the layout docs/streams.md documents (not by
 //! the server's encoder) and compared with the JSON stream of the same ticks; the roster follows
 //! changes; a viewport sends only the UAVs inside it; bad parameters are refused.
 
@@ -13,7 +13,7 @@ use tokio_tungstenite::tungstenite::Message;
 
 type Socket = tokio_tungstenite::WebSocketStream<tokio_tungstenite::MaybeTlsStream<tokio::net::TcpStream>>;
 
-/// README's status table: the status byte is the index in this list.
+/// docs/streams.md's status table: the status byte is the index in this list.
 const STATUSES: [&str; 13] = [
     "flying",
     "arrived",

@@ -195,7 +195,7 @@ async fn no_input_panics_and_every_error_has_a_json_body() {
     let big = format!("X-Big: {}", "b".repeat(40 << 10));
     let w = send(&server, "GET", "/api/state", &[&big], "").await;
     assert_eq!(w.status, 431);
-    // Trailing data after a JSON document is malformed, as the README promises.
+    // Trailing data after a JSON document is malformed, as docs/api.md promises.
     let json = "Content-Type: application/json";
     let w = send(&server, "PUT", "/api/uavs/a/goal", &[json], r#"{"goal": [1, 0]} xyz"#).await;
     assert_eq!((w.status, w.json()["error"]["code"].as_str()), (400, Some("malformed_json")), "{}", w.body);

@@ -1,4 +1,4 @@
-// Decoder of the binary stream (`/ws?format=bin`, format version 1; README "Binary stream"): roster
+// Decoder of the binary stream (`/ws?format=bin`, format version 1; docs/streams.md, Binary stream): roster
 // and reservations frames are JSON after an 8-byte header; a tick frame is a 52-byte header and a
 // 40-byte little-endian record per UAV, turned here into the snapshot objects the renderer draws.
 
@@ -6,7 +6,7 @@ export const VERSION = 1;
 export const KIND_TICK = 1;
 export const KIND_ROSTER = 2;
 export const KIND_RESERVATIONS = 3;
-/** Another region's states (`serve --region`; README "Regions over Zenoh", payload). */
+/** Another region's states (`serve --region`; docs/regions.md, State payload). */
 export const KIND_REGION = 4;
 const HEADER = 52;
 const RECORD = 40;

@@ -1,4 +1,4 @@
-//! Following in a lane (README "Traffic rules"): where traffic is dense or comes the other way, a
+//! Following in a lane (docs/traffic.md): where traffic is dense or comes the other way, a
 //! UAV keeps a follow gap behind the UAV ahead of it in its lane, going the same way, instead of
 //! pressing into it. A block of UAVs funnelling into a narrower part merges one behind the other,
 //! in the order they are along the road, rather than side by side into a lane that holds one, and

@@ -1,4 +1,4 @@
-//! The fleet's traffic rules (`traffic` navigation, README "Traffic rules"), run once per tick
+//! The fleet's traffic rules (`traffic` navigation, docs/traffic.md), run once per tick
 //! before the targets are chosen, in O(UAVs + zones + neighbour pairs):
 //! - **single-file sections**: the parts of the road where two opposite lanes do not fit are
 //!   conflict zones ([`crate::zones`]); a UAV whose route crosses one holds before it until the

@@ -1,6 +1,6 @@
 //! Lanes: the road's clearance on each side of its centre line, road coordinates (arc length s and
 //! lateral offset ℓ, positive to the left of increasing s) and the clearance test of a straight path
-//! against the walls along the route (README "Traffic rules").
+//! against the walls along the route (docs/traffic.md).
 
 use crate::centerline::CenterLine;
 use crate::geometry::{Wall, WallKind, nearest_on_segment, segments_intersect};

@@ -16,7 +16,7 @@ pub const LANE_FRACTION: f64 = 0.5;
 /// How the temporary target p^r is chosen.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum NavMode {
-    /// The traffic rules (default, README "Traffic rules"): targets in a keep-right lane sized to the
+    /// The traffic rules (default, docs/traffic.md): targets in a keep-right lane sized to the
     /// road's width, reached by straight paths that keep a clearance from every wall and vertex; the
     /// fleet adds holds before single-file sections and back-offs that resolve deadlocks.
     #[default]

@@ -121,7 +121,7 @@ impl Road {
 
     /// True when the straight path from `p` (in segment `seg_p`) to `q` (in `seg_q`) crosses no wall
     /// along the route between them and comes no closer to any than `need`, or than the nearer of its
-    /// ends already is (README "Traffic rules"). Costs the walls of the segments between, not all.
+    /// ends already is (docs/traffic.md). Costs the walls of the segments between, not all.
     pub fn path_clear(&self, p: &Vec2, seg_p: usize, q: &Vec2, seg_q: usize, need: f64) -> bool {
         let (lo, hi) = (seg_p.min(seg_q), seg_p.max(seg_q));
         path_clear(p, q, need, route_walls(&self.walls, self.quads.len(), lo, hi))

@@ -1,4 +1,4 @@
-//! The `traffic` target (README "Traffic rules"): a point in the UAV's keep-right lane at most r_s
+//! The `traffic` target (docs/traffic.md): a point in the UAV's keep-right lane at most r_s
 //! of arc length ahead, the farthest one whose straight path keeps a clearance from every wall and
 //! vertex along the route, never past a hold point; the goal itself once it is that close and clear.
 

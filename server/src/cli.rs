@@ -158,12 +158,12 @@ pub struct ServeArgs {
     #[arg(long = "allow-origin", value_name = "ORIGIN")]
     pub allow_origins: Vec<String>,
     /// Fly only this region of the scenario's road (its `regions`) and share states with the
-    /// neighbouring regions' servers over Zenoh (README "Regions over Zenoh"). Needs --scenario.
+    /// neighbouring regions' servers over Zenoh (docs/regions.md). Needs --scenario.
     /// A server started while the region's owner is alive joins as its standby.
     #[arg(long, value_name = "NAME", requires = "scenario", group = "regional")]
     pub region: Option<String>,
     /// Be the hot standby of this region: mirror its owner over Zenoh and take over within 1 s
-    /// when the owner is gone (README "Regions over Zenoh"). Needs --scenario (for the road).
+    /// when the owner is gone (docs/regions.md). Needs --scenario (for the road).
     #[arg(long = "standby-for", value_name = "NAME", requires = "scenario", group = "regional")]
     pub standby_for: Option<String>,
     /// Zenoh endpoint to listen on, e.g. `tls/0.0.0.0:7447` (repeatable; with --region or

@@ -202,7 +202,7 @@ test("10,000 UAVs loaded over REST are drawn from the binary stream; one is sele
       const u = await api(url, "GET", `/api/uavs/${id}`);
       return u.arrived && u;
     }, 180000, 500);
-    // Arrived UAVs step D_c aside for neighbours that pass (README "Traffic rules").
+    // Arrived UAVs step D_c aside for neighbours that pass (docs/traffic.md).
     assert.ok(near(arrived.p, set.goal, 0.1 + 0.3), `${id} at ${arrived.p}, goal ${set.goal}`);
     await screenshot(page, "ten-thousand-arrived");
 

@@ -13,7 +13,7 @@ use std::net::SocketAddr;
 use std::path::PathBuf;
 use tokio::sync::oneshot;
 
-/// The keys of METRICS.json, sorted: a public contract (README "Headless runs").
+/// The keys of METRICS.json, sorted: a public contract (docs/runs.md).
 pub const METRICS_KEYS: [&str; 14] = [
     "all_arrived",
     "arrival_time_s",

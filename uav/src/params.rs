@@ -27,7 +27,7 @@ pub struct Params {
     pub t_max: f64,
     /// Model-error allowance η_p (m): how much closer than it reads a UAV may truly be to a wall
     /// (twice to another UAV), docs/safety.md §12. Default 0: the simulated double integrator is
-    /// exact; real quadrotors need it (README "Crazyflies").
+    /// exact; real quadrotors need it (docs/crazyflies.md).
     pub eta_p: f64,
     /// Model-error allowance η_v (m/s): how much faster than the double integrator predicts a UAV
     /// may truly close in while it brakes (lag, estimate, gusts), docs/safety.md §12. Default 0.

@@ -1,4 +1,4 @@
-//! REST handlers (`README.md`, `GET /api/openapi.json`). Reads answer from the latest published
+//! REST handlers (`docs/api.md`, `GET /api/openapi.json`). Reads answer from the latest published
 //! snapshot; changes go to the fleet loop as commands and are answered once it applied them.
 
 use super::command::{Command, Outcome};

@@ -1,4 +1,4 @@
-//! The binary stream `GET /ws?format=bin`, version 1 (README "Binary stream"): per tick one
+//! The binary stream `GET /ws?format=bin`, version 1 (docs/streams.md, Binary stream): per tick one
 //! little-endian *tick frame* of fixed-size records, a *roster frame* (ids, policies, goals, links
 //! as JSON) whenever those change and first to every new client, and a *reservations frame* (the
 //! single-file sections, JSON) likewise. Encoded once per snapshot
@@ -34,7 +34,7 @@ pub const UAV_ARRIVED: u8 = 1;
 /// Record flag: its link is lost.
 pub const UAV_LOST: u8 = 2;
 
-/// The status byte of a record (README's table; the order of [`UavStatus`]).
+/// The status byte of a record (docs/streams.md's table; the order of [`UavStatus`]).
 pub fn status_code(status: UavStatus) -> u8 {
     status as u8
 }

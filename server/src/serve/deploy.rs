@@ -1,4 +1,4 @@
-//! A road or a scenario for the whole deployment (`--region`; README "Regions over Zenoh", One
+//! A road or a scenario for the whole deployment (`--region`; docs/regions.md, One
 //! fleet): `PUT /api/road` and `POST /api/scenario` sent to any region's owner apply to every region
 //! at the same instant, or to none.
 //!

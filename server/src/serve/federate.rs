@@ -1,4 +1,4 @@
-//! One fleet to the operator (`--region`; README "Regions over Zenoh", One fleet): any region's REST
+//! One fleet to the operator (`--region`; docs/regions.md, One fleet): any region's REST
 //! API answers for every UAV of the deployment. A middleware, after the token check, looks at each
 //! request: a request about a UAV this region does not fly goes to the region that does (its owner
 //! answers; the status and body come back unchanged); `POST /api/uavs` goes to the region of the

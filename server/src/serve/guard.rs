@@ -1,4 +1,4 @@
-//! What every request passes before a handler sees it (README, "Security model"):
+//! What every request passes before a handler sees it (docs/security.md):
 //! - a request line and head of bounded size (414/431 with a JSON body);
 //! - a `Host` that names the server, whatever its port (an IP literal of its address, any IP
 //!   literal when it listens on all addresses, `localhost` on loopback, or `--allow-host`), which

@@ -1,6 +1,6 @@
 //! The newest state message of every other region, kept as received for the dashboard: the binary
 //! stream (`/ws?format=bin`) passes each one on to its clients as a kind 4 frame (the regions'
-//! own format, README "Regions over Zenoh"), so a dashboard connected to any region draws the whole
+//! own format, docs/regions.md), so a dashboard connected to any region draws the whole
 //! fleet. Nothing here is decoded or used by the fleet loop, and a message is copied out of Zenoh's
 //! buffers only when a stream client is sent it (once, whatever the number of clients).
 

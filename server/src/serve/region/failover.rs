@@ -1,4 +1,4 @@
-//! Hot standby of a region (`serve --standby-for NAME`; README "Regions over Zenoh", ARCHITECTURE.md
+//! Hot standby of a region (`serve --standby-for NAME`; docs/regions.md, ARCHITECTURE.md
 //! "Failover"): who owns a region is told by Zenoh liveliness tokens, and what the standby needs
 //! to fly on is the owner's *mirror*, its UAVs' full records after every tick.
 //!

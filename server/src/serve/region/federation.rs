@@ -1,4 +1,4 @@
-//! The Zenoh side of "one fleet to the operator" (README "Regions over Zenoh", One fleet): every
+//! The Zenoh side of "one fleet to the operator" (docs/regions.md, One fleet): every
 //! region answers REST requests from the other regions on its queryable `PREFIX/region/NAME/api/*`
 //! (region ASKER asks on `PREFIX/region/NAME/api/ASKER`; the access control lets only ASKER's
 //! certificate ask there)

@@ -1,4 +1,4 @@
-//! Handover of a UAV between two regions (README "Regions over Zenoh", ARCHITECTURE.md
+//! Handover of a UAV between two regions (docs/regions.md, ARCHITECTURE.md
 //! "Handover"): when a UAV's tracked segment lies in a neighbouring region, its owner A offers it
 //! to that region B with the whole UAV record; B reserves the id and accepts; A, at its next gap
 //! between ticks, removes the UAV from its fleet (its last command was the tick before) and releases
@@ -29,7 +29,7 @@ use std::time::{Duration, Instant};
 use uav::UavState;
 
 /// The bound on a UAV's unowned time during a handover (s): one tick and the transit (stated in
-/// README and ARCHITECTURE.md; `tests/server_regions.rs` checks it on loopback).
+/// docs/regions.md and ARCHITECTURE.md; `tests/server_regions.rs` checks it on loopback).
 pub const MAX_UNOWNED_S: f64 = 0.25;
 /// The bound on a Crazyflie's unowned time in a handover (s): the close of its old link (at most
 /// the session's 0.5 s disconnect wait), then one tick and the transit, as for [`MAX_UNOWNED_S`].

@@ -1,5 +1,5 @@
 //! What a region checks before it takes a UAV another region offers (the messages of other regions
-//! are untrusted input; README "Regions over Zenoh", Security): each refusal is the reason sent back
+//! are untrusted input; docs/regions.md, Security): each refusal is the reason sent back
 //! and is counted by name (`peer_refused`).
 
 use super::{Handover, MAX_RESERVATIONS_PER_SENDER, UavRecord};

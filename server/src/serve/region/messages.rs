@@ -1,5 +1,5 @@
 //! The handover protocol's messages (`handover`), JSON on the key `PREFIX/region/<to>/handover/<from>`
-//! (README "Regions over Zenoh", Handover): `offer`, `accept`, `refuse`, `release`.
+//! (docs/regions.md, Handover): `offer`, `accept`, `refuse`, `release`.
 
 use crate::serve::snapshot::UavSnapshot;
 use serde::{Deserialize, Serialize};

@@ -1,4 +1,4 @@
-//! Regions over Zenoh (`airroads serve --region NAME`, README "Regions over Zenoh"): this server
+//! Regions over Zenoh (`airroads serve --region NAME`, docs/regions.md): this server
 //! flies the UAVs of one region of the road; every tick it publishes their states under
 //! [`state_key`] and it subscribes to the regions next to its own, whose UAVs its fleet avoids as
 //! foreign UAVs (`fleet/src/foreign.rs`).

@@ -1,4 +1,4 @@
-//! Every message from another region is untrusted input (README "Regions over Zenoh", Security):
+//! Every message from another region is untrusted input (docs/regions.md, Security):
 //! before a neighbour's states reach the fleet they are screened as strictly as a REST body, and
 //! every refusal is counted by name in `GET /api/metrics` `region.peer_refused`.
 //!

@@ -1,4 +1,4 @@
-//! The region network's transport (README "Regions over Zenoh", Security): by default Zenoh's TLS
+//! The region network's transport (docs/regions.md, Security): by default Zenoh's TLS
 //! transport with mutual authentication against the deployment's own authority (`airroads certs`),
 //! and
 //! Zenoh's access control, which lets the certificate of region R (common name R) act only as R:

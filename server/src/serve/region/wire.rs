@@ -1,4 +1,4 @@
-//! The payload a region publishes every tick (README "Regions over Zenoh"): little-endian, a header
+//! The payload a region publishes every tick (docs/regions.md): little-endian, a header
 //! then one record per UAV. A record is the binary stream's 40-byte record (`super::super::binary`)
 //! with its roster index replaced by the UAV's id (a region's receivers have no roster): `u16` id
 //! length, the id (UTF-8), then `f32` p, v, u and target (x, y each), `u8` status (the stream's
@@ -42,7 +42,7 @@ pub struct WireUav {
     pub u: [f32; 2],
     /// Temporary target (m).
     pub target: [f32; 2],
-    /// Status code (README "Binary stream").
+    /// Status code (docs/streams.md, Binary stream).
     pub status: u8,
     /// 1 arrived, 2 lost, 4 ghost.
     pub flags: u8,
