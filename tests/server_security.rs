@@ -185,6 +185,23 @@ async fn no_input_panics_and_every_error_has_a_json_body() {
         w.body
     );
     assert!(w.header("allow").is_some_and(|a| a.contains("PUT")), "{:?}", w.headers);
+    // Methods no route takes are 405 too, with or without a JSON content type (never 415).
+    for method in ["TRACE", "PROPFIND", "BREW"] {
+        for headers in [&[][..], &["Content-Type: application/json"][..]] {
+            let w = send(&server, method, "/api/fleet/stop", headers, "").await;
+            assert_eq!(
+                (w.status, w.json()["error"]["code"].as_str()),
+                (405, Some("method_not_allowed")),
+                "{method} {headers:?}: {}",
+                w.body
+            );
+            assert!(w.header("allow").is_some_and(|a| a.contains("POST")), "{:?}", w.headers);
+        }
+    }
+    assert!(
+        server.get("/api/state").await["uavs"].as_array().unwrap().iter().all(|u| u["status"] != "stopped"),
+        "a method no route takes stopped the fleet"
+    );
     let long = format!("/api/state?x={}", "a".repeat(9000));
     let w = send(&server, "GET", &long, &[], "").await;
     assert_eq!((w.status, w.json()["error"]["code"].as_str()), (414, Some("uri_too_long")));

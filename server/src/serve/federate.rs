@@ -98,7 +98,9 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
     let owner = app.region.as_ref().is_some_and(|r| r.failover.is_owner());
     let read = request.method() == Method::GET;
     let flown = matches!(&route, Route::Uav(id) if flown_here(&app, id));
-    if local || flown || route == Route::Local || !(owner || read) {
+    // Only reads and changes travel; any other method is answered here (405 from the router).
+    let travels = read || super::guard::is_change(request.method());
+    if local || flown || route == Route::Local || !travels || !(owner || read) {
         return next.run(request).await;
     }
     let (parts, body) = request.into_parts();
