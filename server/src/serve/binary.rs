@@ -34,7 +34,7 @@ pub const UAV_ARRIVED: u8 = 1;
 /// Record flag: its link is lost.
 pub const UAV_LOST: u8 = 2;
 
-/// The status byte of a record (docs/streams.md's table; the order of [`UavStatus`]).
+/// The status byte of a record ([`UavStatus`]'s number; docs/streams.md's table).
 pub fn status_code(status: UavStatus) -> u8 {
     status as u8
 }
@@ -196,6 +196,47 @@ pub fn filter_bbox(body: &[u8], bbox: Bbox) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The quoted names of the list that follows `start` in `text`, up to its closing bracket.
+    fn quoted_list(text: &str, start: &str) -> Vec<String> {
+        let from = text.find(start).unwrap_or_else(|| panic!("`{start}` not found")) + start.len();
+        let list = &text[from..from + text[from..].find(']').expect("a closing bracket")];
+        list.split('"').skip(1).step_by(2).map(str::to_string).collect()
+    }
+
+    #[test]
+    fn every_reader_of_the_status_byte_uses_the_servers_numbers() {
+        let ours: Vec<String> = UavStatus::ALL
+            .iter()
+            .enumerate()
+            .map(|(code, status)| {
+                assert_eq!(status_code(*status) as usize, code, "{status:?}");
+                serde_json::to_value(status).unwrap().as_str().unwrap().to_string()
+            })
+            .collect();
+        let repo = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+        let read = |path: &str| std::fs::read_to_string(repo.join(path)).unwrap();
+        assert_eq!(quoted_list(&read("web/binary.js"), "export const STATUSES = ["), ours, "web/binary.js");
+        assert_eq!(
+            quoted_list(&read("scripts/airroads_stream.py"), "STATUSES = ["),
+            ours,
+            "airroads_stream.py"
+        );
+        // docs/streams.md: "Status codes: 0 flying, 1 arrived, … 12 waiting."
+        let docs = read("docs/streams.md");
+        let from = docs.find("Status codes: ").expect("the status table") + "Status codes: ".len();
+        let table = &docs[from..from + docs[from..].find('.').unwrap()];
+        let documented: Vec<String> = table
+            .split(',')
+            .enumerate()
+            .map(|(code, entry)| {
+                let (number, name) = entry.trim().split_once(' ').expect("`N name`");
+                assert_eq!(number, code.to_string(), "docs/streams.md: {entry}");
+                name.to_string()
+            })
+            .collect();
+        assert_eq!(documented, ours, "docs/streams.md");
+    }
 
     #[test]
     fn a_viewport_is_four_finite_ordered_numbers() {

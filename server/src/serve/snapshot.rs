@@ -6,36 +6,58 @@ use rayon::prelude::*;
 use serde::Serialize;
 use uav::{UavState, Vec2};
 
-/// What one UAV is doing, as the dashboard colours it.
+/// What one UAV is doing, as the dashboard colours it. The numbers are the binary stream's status
+/// byte (a public format: docs/streams.md, `web/binary.js` and `scripts/airroads_stream.py` are
+/// checked against them); a new status takes the next number, none is ever renumbered.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "snake_case")]
+#[repr(u8)]
 pub enum UavStatus {
     /// Flying its policy towards its goal (or hovering without one); no slack in use.
-    Flying,
+    Flying = 0,
     /// Within ε of its goal.
-    Arrived,
+    Arrived = 1,
     /// The filter needed slack this tick, or the fleet holds, or the policy failed: braking.
-    Braking,
+    Braking = 2,
     /// The QP failed this tick; the UAV brakes.
-    Failed,
+    Failed = 3,
     /// No fresh state from the link; its last known state was used.
-    Stale,
+    Stale = 4,
     /// No state for `stale_after` (or reconnecting while it may be airborne): neighbours avoid its reach.
-    Lost,
+    Lost = 5,
     /// Connecting to its Crazyflie.
-    Connecting,
+    Connecting = 6,
     /// Taking off to the flight altitude.
-    TakingOff,
+    TakingOff = 7,
     /// Landing.
-    Landing,
+    Landing = 8,
     /// On the ground after landing.
-    Landed,
+    Landed = 9,
     /// Motors cut by an emergency stop, as the Crazyflie confirmed.
-    Stopped,
+    Stopped = 10,
     /// Emergency stop sent, not yet confirmed by the Crazyflie: it may still be in the air.
-    Stopping,
+    Stopping = 11,
     /// Held back by a traffic rule (`wait_reason` says which).
-    Waiting,
+    Waiting = 12,
+}
+
+impl UavStatus {
+    /// Every status, in the order of their numbers.
+    pub const ALL: [UavStatus; 13] = [
+        Self::Flying,
+        Self::Arrived,
+        Self::Braking,
+        Self::Failed,
+        Self::Stale,
+        Self::Lost,
+        Self::Connecting,
+        Self::TakingOff,
+        Self::Landing,
+        Self::Landed,
+        Self::Stopped,
+        Self::Stopping,
+        Self::Waiting,
+    ];
 }
 
 /// One UAV in a snapshot. Vectors are `[x, y]` in metres, m/s and m/s².
