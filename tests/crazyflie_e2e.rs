@@ -259,7 +259,7 @@ async fn motion_capture_poses_reach_their_crazyflie_as_external_positions() {
     tokio::spawn(ingest(socket, server.mocap.clone(), counters.clone(), Vec::new()));
     // The Crazyflie links register once created; wait until cf2 is connected.
     let deadline = Instant::now() + Duration::from_secs_f64(PATIENCE);
-    while server.state().snapshots.borrow().uavs.iter().any(|u| u.phase == "connecting") {
+    while server.state().snapshots.borrow().uavs.iter().any(|u| u.phase == links::LinkPhase::Connecting) {
         assert!(Instant::now() < deadline, "the Crazyflies did not connect");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }

@@ -363,10 +363,7 @@ pub async fn land_crazyflies(state: &AppState) {
     let airborne = |s: &Snapshot| -> Vec<String> {
         s.uavs
             .iter()
-            .filter(|u| {
-                u.link != links::SIM_LINK
-                    && matches!(u.phase, "taking_off" | "flying" | "landing" | "stopping")
-            })
+            .filter(|u| u.link != links::SIM_LINK && u.phase.airborne())
             .map(|u| u.id.clone())
             .collect()
     };

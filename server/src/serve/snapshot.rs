@@ -85,8 +85,9 @@ pub struct UavSnapshot {
     pub status: UavStatus,
     /// Its link: `sim` or the Crazyflie URI.
     pub link: String,
-    /// Where it is in its flight as its link reports it (`flying` for in-process UAVs).
-    pub phase: &'static str,
+    /// Where it is in its flight as its link reports it (`flying` for in-process UAVs); its name in JSON.
+    #[serde(serialize_with = "phase_name")]
+    pub phase: LinkPhase,
     /// Its link is lost (see `status`).
     pub lost: bool,
     /// The link's last error (why it is not connected, or a stop or landing not confirmed), null
@@ -209,6 +210,11 @@ fn xy(v: &Vec2) -> [f64; 2] {
     [v.x, v.y]
 }
 
+/// A link phase as JSON: its name ([`LinkPhase::name`]).
+fn phase_name<S: serde::Serializer>(phase: &LinkPhase, serializer: S) -> Result<S::Ok, S::Error> {
+    serializer.serialize_str(phase.name())
+}
+
 fn status(u: &Uav, holding: bool) -> UavStatus {
     let l = &u.last;
     match u.condition {
@@ -285,7 +291,7 @@ impl Snapshot {
                     arrived: u.nav.arrived,
                     status: status(u, fleet.holding()),
                     link: u.link.describe().to_string(),
-                    phase: u.phase.name(),
+                    phase: u.phase,
                     lost: u.condition == Condition::Lost,
                     link_error: u.link.error(),
                     firmware: u.link.vehicle().map(FirmwareSnapshot::of),

@@ -33,7 +33,7 @@ impl UavRecord {
             goal: u.goal,
             policy: u.policy.clone(),
             link: (u.link != links::SIM_LINK).then(|| u.link.clone()),
-            airborne: u.lost || links::LinkPhase::from_name(u.phase).is_some_and(|p| p.airborne()),
+            airborne: u.lost || u.phase.airborne(),
         }
     }
 

@@ -15,7 +15,7 @@ fn uav(id: &str, p: [f64; 2], v: [f64; 2]) -> UavSnapshot {
         arrived: false,
         status: UavStatus::Waiting,
         link: "sim".into(),
-        phase: "flying",
+        phase: links::LinkPhase::Flying,
         lost: true,
         link_error: None,
         firmware: None,
