@@ -60,14 +60,14 @@ impl Fleet {
         &self.pipeline.neighbours.lists
     }
 
-    /// Hold (every UAV brakes to a hover; the filter still runs) or fly the policies again.
-    pub fn set_hold(&mut self, hold: bool) {
-        self.hold = hold;
+    /// Pause (every UAV brakes to a hover; the filter still runs) or fly the policies again.
+    pub fn set_paused(&mut self, paused: bool) {
+        self.paused = paused;
     }
 
-    /// True while the fleet holds.
-    pub fn holding(&self) -> bool {
-        self.hold
+    /// True while the fleet is paused.
+    pub fn paused(&self) -> bool {
+        self.paused
     }
 
     /// The names of the loaded policies.

@@ -183,8 +183,8 @@ pub struct Fleet {
     pub(crate) road: Road,
     pub(crate) uavs: Vec<Uav>,
     pub(crate) policies: PolicyRegistry,
-    /// Hold: every UAV brakes to a hover instead of flying its policy (the filter still runs).
-    pub(crate) hold: bool,
+    /// Paused: every UAV brakes to a hover instead of flying its policy (the filter still runs).
+    pub(crate) paused: bool,
     /// The traffic rules' sections, reservations and speed limits.
     pub(crate) traffic: TrafficRules,
     pub(crate) tick: u64,
@@ -202,7 +202,7 @@ impl Fleet {
             road,
             uavs: Vec::new(),
             policies,
-            hold: false,
+            paused: false,
             traffic: TrafficRules::default(),
             tick: 0,
             foreign: Vec::new(),

@@ -1,9 +1,9 @@
 //! The per-tick machinery of the fleet, apart from its state (the way rapier keeps its sets apart
 //! from `PhysicsPipeline`): the [`Fleet`] holds the road, the UAVs, the policies, the traffic rules'
-//! reservations and the hold; the [`TickPipeline`] holds what one tick computes and reuses from tick
-//! to tick (positions, the neighbour grid, the rows, the filter's order and solvers, the policy
-//! batches) and runs the tick as one method per stage (ARCHITECTURE.md, "One tick"):
-//! read → neighbours → navigation → policies → rows → filter → send.
+//! reservations and whether it is paused; the [`TickPipeline`] holds what one tick computes and
+//! reuses from tick to tick (positions, the neighbour grid, the rows, the filter's order and
+//! solvers, the policy batches) and runs the tick as one method per stage (ARCHITECTURE.md, "One
+//! tick"): read → neighbours → navigation → policies → rows → filter → send.
 
 use crate::condition::Condition;
 use crate::filtering::FilterStage;
@@ -121,12 +121,12 @@ impl TickPipeline {
         let nav = Navigator::new(&fleet.road, fleet.config.nav, &params);
         let mut segments = std::mem::take(&mut self.segments);
         segments.clear();
-        let hold = fleet.hold;
+        let paused = fleet.paused;
         // Per UAV and independent of the others: in parallel, with the same result on any number of
         // threads (each UAV's computation is the same; only where it runs differs).
         let locate = |uav: &mut Uav| {
             let segment = nav.locate(&mut uav.nav, uav.state.p);
-            let tracked = !hold && uav.condition.flying() && !uav.nav.arrived;
+            let tracked = !paused && uav.condition.flying() && !uav.nav.arrived;
             uav.traffic.route = uav.nav.position.filter(|_| tracked);
             uav.traffic.waiting = None;
             uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
@@ -229,7 +229,7 @@ impl TickPipeline {
             uav.last.u_ref = braking_input(uav.state.v, delta, dt);
             uav.last.policy_fallback = false;
         }
-        if fleet.hold {
+        if fleet.paused {
             return;
         }
         for (name, policy) in fleet.policies.iter_mut() {

@@ -105,9 +105,9 @@ fn run_with(
         let state = UavState::at_rest(u.start);
         fleet.add(u.id.clone(), options.policy.clone(), make_link(u, state), state, Some(u.goal));
     }
-    // Take-off: the fleet holds (every UAV brakes) until all links fly.
+    // Take-off: the fleet is paused (every UAV brakes) until all links fly.
     let mut preflight = 0.0;
-    fleet.set_hold(true);
+    fleet.set_paused(true);
     while fleet.uavs().iter().any(|u| u.link.phase() != LinkPhase::Flying) {
         if preflight > TAKEOFF_TIMEOUT_S {
             let waiting: Vec<String> = fleet
@@ -128,7 +128,7 @@ fn run_with(
         fleet.tick();
         preflight += params.dt;
     }
-    fleet.set_hold(false);
+    fleet.set_paused(false);
     if let Some(w) = options.trajectory.as_mut() {
         let extra = if truth.is_some() { TRUTH_COLUMNS } else { "" };
         writeln!(w, "{TRAJECTORY_HEADER}{extra}")?;

@@ -48,11 +48,11 @@ pub enum Undo {
         road: Road,
         /// The UAVs before, links and all.
         uavs: Vec<Uav>,
-        /// Hold before.
-        hold: bool,
+        /// Paused before.
+        paused: bool,
     },
-    /// Hold was switched.
-    Hold(bool),
+    /// Pause was switched (the value before).
+    Pause(bool),
 }
 
 impl Undo {
@@ -114,11 +114,11 @@ impl Fleet {
         Ok((cleared, Undo::Road { road: before, navs }))
     }
 
-    /// [`Fleet::set_hold`], returning its undo record.
-    pub fn set_hold_undoable(&mut self, hold: bool) -> Undo {
-        let before = self.hold;
-        self.hold = hold;
-        Undo::Hold(before)
+    /// [`Fleet::set_paused`], returning its undo record.
+    pub fn set_paused_undoable(&mut self, paused: bool) -> Undo {
+        let before = self.paused;
+        self.paused = paused;
+        Undo::Pause(before)
     }
 
     /// Starts over on `road` with `params` and no UAVs, like [`Fleet::reset`], keeping the old UAVs
@@ -127,8 +127,8 @@ impl Fleet {
         let uavs = std::mem::take(&mut self.uavs);
         let before_params = std::mem::replace(&mut self.config.params, params);
         let before_road = std::mem::replace(&mut self.road, road);
-        let hold = std::mem::replace(&mut self.hold, false);
-        Undo::Fleet { params: before_params, road: before_road, uavs, hold }
+        let paused = std::mem::replace(&mut self.paused, false);
+        Undo::Fleet { params: before_params, road: before_road, uavs, paused }
     }
 
     /// Takes a change back. Records must be undone newest first: each restores exactly the state
@@ -162,13 +162,13 @@ impl Fleet {
                     }
                 }
             }
-            Undo::Fleet { params, road, uavs, hold } => {
+            Undo::Fleet { params, road, uavs, paused } => {
                 self.config.params = params;
                 self.road = road;
                 self.uavs = uavs;
-                self.hold = hold;
+                self.paused = paused;
             }
-            Undo::Hold(hold) => self.hold = hold,
+            Undo::Pause(paused) => self.paused = paused,
         }
     }
 }
@@ -193,14 +193,14 @@ mod tests {
         fleet
     }
 
-    /// What a change may touch: ids in order, policies, goals, hold, road and params.
+    /// What a change may touch: ids in order, policies, goals, pause, road and params.
     fn summary(f: &Fleet) -> String {
         let uavs: Vec<String> = f
             .uavs()
             .iter()
             .map(|u| format!("{}:{}:{:?}:{:?}", u.id, u.policy, u.nav.goal(), u.state.p))
             .collect();
-        format!("{uavs:?} hold={} road={:?} dt={}", f.holding(), f.road().layout(), f.config.params.dt)
+        format!("{uavs:?} paused={} road={:?} dt={}", f.paused(), f.road().layout(), f.config.params.dt)
     }
 
     #[test]
@@ -214,7 +214,7 @@ mod tests {
         undos.push(f.set_goal_undoable("u0", Some(Vec2::new(10.0, 1.5))).unwrap());
         undos.push(f.set_policy_undoable("u1", "pd").unwrap());
         undos.push(f.remove_undoable("u0").unwrap());
-        undos.push(f.set_hold_undoable(true));
+        undos.push(f.set_paused_undoable(true));
         let longer = Road::new(RoadLayout::straight(0.0, 30.0, 4.0, 3)).unwrap();
         let (_, undo) = f.replace_road_undoable(longer).unwrap();
         undos.push(undo);

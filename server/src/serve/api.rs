@@ -321,12 +321,12 @@ async fn load_scenario(
 }
 
 async fn pause(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
-    app.apply(Command::Hold(true)).await?;
+    app.apply(Command::Pause(true)).await?;
     Ok(Json(json!({"paused": true})))
 }
 
 async fn resume(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
-    app.apply(Command::Hold(false)).await?;
+    app.apply(Command::Pause(false)).await?;
     Ok(Json(json!({"paused": false})))
 }
 

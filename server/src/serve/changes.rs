@@ -154,9 +154,9 @@ impl Engine {
                 let writes = vec![Write::Replace(SavedState::of(&self.fleet))];
                 Applied::new(Outcome::ScenarioLoaded { tick: self.ticks }, undo, writes)
             }
-            Command::Hold(hold) => {
-                let undo = self.fleet.set_hold_undoable(hold);
-                Applied::new(Outcome::Done, undo, vec![Write::Paused(hold)])
+            Command::Pause(paused) => {
+                let undo = self.fleet.set_paused_undoable(paused);
+                Applied::new(Outcome::Done, undo, vec![Write::Paused(paused)])
             }
         })
     }

@@ -41,8 +41,8 @@ pub enum Command {
     SetPolicy(String, String),
     /// Replace road, parameters and fleet with a validated scenario.
     LoadScenario(Box<ValidScenario>),
-    /// Hold (true: every UAV brakes to a hover) or resume (false).
-    Hold(bool),
+    /// Pause (true: every UAV brakes to a hover) or resume (false).
+    Pause(bool),
     /// Land one UAV (Some) or all (None). Sent on the urgent channel, never persisted.
     Land(Option<String>),
     /// Emergency stop of every UAV: motors off. Sent on the urgent channel, never persisted.
@@ -73,8 +73,8 @@ impl Command {
             Command::SetGoal(id, None) => format!("goal of `{id}` cleared"),
             Command::SetPolicy(id, policy) => format!("policy of `{id}` set to `{policy}`"),
             Command::LoadScenario(s) => format!("scenario `{}` with {} UAVs", s.name, s.uavs.len()),
-            Command::Hold(true) => "fleet paused".into(),
-            Command::Hold(false) => "fleet resumed".into(),
+            Command::Pause(true) => "fleet paused".into(),
+            Command::Pause(false) => "fleet resumed".into(),
             Command::Land(Some(id)) => format!("land `{id}`"),
             Command::Land(None) => "land all".into(),
             Command::EmergencyStop => "emergency stop".into(),

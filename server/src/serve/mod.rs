@@ -187,7 +187,7 @@ fn initial_fleet(
             tracing::warn!("saved UAV `{}` not resumed: {e}", u.id);
         }
     }
-    fleet.set_hold(saved.paused);
+    fleet.set_paused(saved.paused);
     Ok((fleet, "saved state".to_string()))
 }
 

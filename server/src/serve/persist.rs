@@ -25,7 +25,7 @@ pub struct SavedState {
     /// The layout's regions; absent when it has none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub regions: Option<Vec<Region>>,
-    /// True while the fleet holds.
+    /// True while the fleet is paused.
     pub paused: bool,
     /// The UAVs.
     pub uavs: Vec<SavedUav>,
@@ -72,7 +72,7 @@ impl SavedState {
             params: fleet.config.params,
             segments: fleet.road().layout().segments.clone(),
             regions: fleet.road().layout().regions.clone(),
-            paused: fleet.holding(),
+            paused: fleet.paused(),
             uavs: fleet.uavs().iter().map(SavedUav::of).collect(),
         }
     }

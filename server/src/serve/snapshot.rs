@@ -17,7 +17,7 @@ pub enum UavStatus {
     Flying = 0,
     /// Within ε of its goal.
     Arrived = 1,
-    /// The filter needed slack this tick, or the fleet holds, or the policy failed: braking.
+    /// The filter needed slack this tick, or the fleet is paused, or the policy failed: braking.
     Braking = 2,
     /// The QP failed this tick; the UAV brakes.
     Failed = 3,
@@ -156,7 +156,7 @@ pub struct Snapshot {
     pub tick: u64,
     /// Time since the server started (s).
     pub time: f64,
-    /// True while the fleet holds (`POST /api/fleet/pause`).
+    /// True while the fleet is paused (`POST /api/fleet/pause`).
     pub paused: bool,
     /// Increases whenever the road changes (`GET /api/road` gives the layout).
     pub road_version: u64,
@@ -215,7 +215,7 @@ fn phase_name<S: serde::Serializer>(phase: &LinkPhase, serializer: S) -> Result<
     serializer.serialize_str(phase.name())
 }
 
-fn status(u: &Uav, holding: bool) -> UavStatus {
+fn status(u: &Uav, paused: bool) -> UavStatus {
     let l = &u.last;
     match u.condition {
         Condition::Lost => return UavStatus::Lost,
@@ -235,7 +235,7 @@ fn status(u: &Uav, holding: bool) -> UavStatus {
         UavStatus::Failed
     } else if u.nav.arrived {
         UavStatus::Arrived
-    } else if l.policy_fallback || holding {
+    } else if l.policy_fallback || paused {
         UavStatus::Braking
     } else if u.traffic.waiting.is_some() {
         UavStatus::Waiting
@@ -289,7 +289,7 @@ impl Snapshot {
                     target: xy(&l.target),
                     goal: u.nav.goal().map(|g| xy(&g)),
                     arrived: u.nav.arrived,
-                    status: status(u, fleet.holding()),
+                    status: status(u, fleet.paused()),
                     link: u.link.describe().to_string(),
                     phase: u.phase,
                     lost: u.condition == Condition::Lost,
@@ -307,7 +307,7 @@ impl Snapshot {
         Self {
             tick,
             time,
-            paused: fleet.holding(),
+            paused: fleet.paused(),
             road_version,
             min_collision_margin_m: uavs.iter().filter_map(|u| u.collision_margin_m).min_by(f64::total_cmp),
             min_road_margin_m: uavs.iter().map(|u| u.road_margin_m).min_by(f64::total_cmp),
