@@ -184,7 +184,8 @@ pub async fn check(State(app): State<AppState>, request: Request, next: Next) ->
             );
         }
     }
-    if !change {
+    // A change no route takes gets the router's 404 or 405, not an error about its content.
+    if !change || !super::openapi::takes(request.method(), request.uri().path()) {
         return next.run(request).await;
     }
     if !super::error::is_json(headers) {

@@ -1,8 +1,43 @@
 //! The OpenAPI 3.1 document of the REST API, served at `GET /api/openapi.json` (the file is
 //! `openapi.json` beside this one; a test checks that it lists exactly the router's routes).
 
+use axum::http::Method;
+use std::sync::LazyLock;
+
 /// The document, as served.
 pub const DOCUMENT: &str = include_str!("openapi.json");
+
+/// The document's operations: each path template's segments (`{id}` matches any one segment) with
+/// its methods.
+static OPERATIONS: LazyLock<Vec<(Vec<String>, Vec<Method>)>> = LazyLock::new(|| {
+    // The document is the compiled-in file, which a test parses: it is always JSON with paths.
+    let doc: serde_json::Value = serde_json::from_str(DOCUMENT).expect("openapi.json is JSON");
+    let paths = doc["paths"].as_object().expect("openapi.json has paths");
+    paths
+        .iter()
+        .map(|(path, ops)| {
+            let segments = path.split('/').map(str::to_string).collect();
+            let methods = ops
+                .as_object()
+                .into_iter()
+                .flat_map(|o| o.keys())
+                .filter_map(|m| Method::from_bytes(m.to_ascii_uppercase().as_bytes()).ok())
+                .collect();
+            (segments, methods)
+        })
+        .collect()
+});
+
+/// True when an operation of the document (and so a route: a test keeps them equal) takes `method`
+/// on `path`.
+pub fn takes(method: &Method, path: &str) -> bool {
+    let asked: Vec<&str> = path.split('/').collect();
+    OPERATIONS.iter().any(|(segments, methods)| {
+        methods.contains(method)
+            && segments.len() == asked.len()
+            && segments.iter().zip(&asked).all(|(s, a)| s == a || (s.starts_with('{') && !a.is_empty()))
+    })
+}
 
 #[cfg(test)]
 mod tests {
@@ -25,6 +60,19 @@ mod tests {
             }
         }
         routes
+    }
+
+    #[test]
+    fn an_operation_is_found_by_its_method_and_path() {
+        use axum::http::Method;
+        assert!(super::takes(&Method::POST, "/api/fleet/stop"));
+        assert!(super::takes(&Method::PUT, "/api/uavs/uav-1/goal"));
+        assert!(super::takes(&Method::DELETE, "/api/uavs/x"));
+        assert!(!super::takes(&Method::PUT, "/api/metrics"));
+        assert!(!super::takes(&Method::POST, "/api/uavs//land"));
+        assert!(!super::takes(&Method::POST, "/api/uavs/a/b/land"));
+        assert!(!super::takes(&Method::PATCH, "/api/road"));
+        assert!(!super::takes(&Method::POST, "/nowhere"));
     }
 
     #[test]
