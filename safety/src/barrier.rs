@@ -91,6 +91,17 @@ fn allowance_term(b: f64, zeta: f64, eta_v: f64) -> f64 {
     }
 }
 
+/// The barrier of a UAV `dist` (m) from an obstacle, receding at `rate` (m/s), braking at `delta`
+/// (m/s²), and its row's right-hand side without curvature terms (docs/safety.md §1, §3, §12):
+/// h = √(2δ(dist − D − η_p)), b = h + rate − η_v, c = δ·rate/h + ζb³ + the allowance term.
+fn barrier(dist: f64, rate: f64, delta: f64, clearance: Clearance, zeta: f64) -> (f64, f64) {
+    let h = (2.0 * delta * (dist - clearance.boundary()).max(0.0)).sqrt();
+    let b = h + rate - clearance.eta_v;
+    let c =
+        braking_term(delta, rate, h, h + rate) + zeta * b.powi(3) + allowance_term(b, zeta, clearance.eta_v);
+    (b, c)
+}
+
 /// Collision row of UAV k against neighbour d (docs/safety.md §1, §2; paper eq. 4, 11, 14):
 /// b_kd = √(2δΣ(‖p_kd‖ − D_c)) + p̂_kdᵀv_kd, row
 /// `−p̂ᵀu_k ≤ δ_k/δΣ · (δΣ ṅ/h + ‖v_⊥‖²/n + ζ b_kd³)`, with δΣ = δ_k + δ_d; with model-error
@@ -104,20 +115,14 @@ pub fn collision_row(
     zeta: f64,
     kind: RowKind,
 ) -> Row {
-    let d_c = d_c.into();
     let n_raw = p_kd.norm();
     let n = n_raw.max(MIN_DISTANCE_M);
     let p_hat = if n_raw >= MIN_DISTANCE_M { p_kd / n_raw } else { Vec2::new(1.0, 0.0) };
     let n_dot = p_hat.dot(&v_kd);
     let v_perp2 = (v_kd.norm_squared() - n_dot * n_dot).max(0.0);
     let delta_sum = delta_k + delta_d;
-    let h = (2.0 * delta_sum * (n - d_c.boundary()).max(0.0)).sqrt();
-    let b = h + n_dot - d_c.eta_v;
-    let rhs = braking_term(delta_sum, n_dot, h, h + n_dot)
-        + v_perp2 / n
-        + zeta * b.powi(3)
-        + allowance_term(b, zeta, d_c.eta_v);
-    Row { a: -p_hat, c: delta_k / delta_sum * rhs, b, kind }
+    let (b, rhs) = barrier(n, n_dot, delta_sum, d_c.into(), zeta);
+    Row { a: -p_hat, c: delta_k / delta_sum * (rhs + v_perp2 / n), b, kind }
 }
 
 /// End-point barrier of a finite wall (docs/safety.md §5 R2): the collision barrier with a static
@@ -191,10 +196,7 @@ pub fn line_row(
     zeta: f64,
     kind: RowKind,
 ) -> Row {
-    let d_s = d_s.into();
-    let g = (2.0 * delta * (s - d_s.boundary()).max(0.0)).sqrt();
-    let b = g + s_dot - d_s.eta_v;
-    let c = braking_term(delta, s_dot, g, g + s_dot) + zeta * b.powi(3) + allowance_term(b, zeta, d_s.eta_v);
+    let (b, c) = barrier(s, s_dot, delta, d_s.into(), zeta);
     Row { a: -n_in, c, b, kind }
 }
 
