@@ -28,8 +28,18 @@ proptest! {
         let constraints: Vec<ConstraintRow> = settings.constraint_rows(&rows, delta).collect();
         let reference = QpSolver::new().solve(u_ref, &constraints, delta);
         prop_assume!(reference.status == clarabel::solver::SolverStatus::Solved && !out.failed);
-        // Clarabel meets its 1e-9 tolerances in the objective; on the ball's boundary that leaves the
-        // input itself off by up to ~√1e-9, where the closed form is exact.
-        prop_assert!((out.u - reference.u).norm() <= 1e-4 * delta, "filter {:?} vs Clarabel {:?}", out, reference);
+        // Clarabel stops within its tolerances, the closed form is exact. Without slack the objective
+        // is ½‖u − u_ref‖², 1-strongly convex: a feasible point e above the optimum's objective lies
+        // within √(2e) of it, so Clarabel's own excess over the filter's objective bounds how far
+        // apart the two may be (it once stopped 2.3e-4 m/s² off an unconstrained u_ref).
+        let objective = 0.5 * (out.u - u_ref).norm_squared();
+        let unslacked = out.max_slack == 0.0 && reference.max_slack == 0.0;
+        let excess = if unslacked { (reference.objective - objective).max(0.0) } else { 0.0 };
+        prop_assert!(
+            (out.u - reference.u).norm() <= 1e-4 * delta + (2.0 * excess).sqrt(),
+            "filter {:?} vs Clarabel {:?}", out, reference
+        );
+        // And the filter's input is never worse than Clarabel's.
+        prop_assert!(!unslacked || objective <= reference.objective + 1e-9, "filter {:?} vs Clarabel {:?}", out, reference);
     }
 }
