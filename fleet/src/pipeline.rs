@@ -17,6 +17,7 @@ use links::LinkPhase;
 use policies::{Observation, observation};
 use rayon::prelude::*;
 use roads::{NavMode, Navigator};
+use safety::barrier::Clearance;
 use safety::{ReachDisk, activation_radius};
 use std::time::Instant;
 use uav::{Vec2, braking_input};
@@ -106,8 +107,8 @@ impl TickPipeline {
         self.velocities.extend(fleet.uavs.iter().map(|u| u.state.v));
         self.velocities.extend(fleet.foreign.iter().map(|f| f.state.v));
         let v_max = self.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
-        let (d_c, eta_v) = (params.d_c + 2.0 * params.eta_p, 2.0 * params.eta_v);
-        let reach = activation_radius(d_c, 2.0 * v_max + eta_v, 2.0 * params.delta)
+        let pair = Clearance::pair(params.d_c, &params);
+        let reach = activation_radius(pair.boundary(), 2.0 * v_max + pair.eta_v, 2.0 * params.delta)
             .max(YIELD_RADIUS_IN_DC * params.kept_d_c())
             + fleet.max_stale_reach().max(foreign_reach);
         self.neighbours.update_with_foreign(&self.positions, fleet.uavs.len(), reach);

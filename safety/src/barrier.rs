@@ -2,7 +2,7 @@
 //! numerically safe evaluation of docs/safety.md §4 (clamp `max(h, h_min)`, never √ of a negative
 //! number).
 
-use uav::Vec2;
+use uav::{Params, Vec2};
 
 /// h_min (m/s): lower clamp of h = √(2δΣ(n − D_c)) and g = √(2δ(s − D_s)) in the rows
 /// (docs/safety.md §4.1).
@@ -29,6 +29,16 @@ impl Clearance {
     /// D with no model-error allowance (the double integrator of docs/safety.md §1–§11).
     pub fn exact(d: f64) -> Self {
         Self { d, eta_p: 0.0, eta_v: 0.0 }
+    }
+
+    /// D with one UAV's allowances η_p, η_v of `params`: a wall (D = D_s) or an obstacle.
+    pub fn one(d: f64, params: &Params) -> Self {
+        Self { d, eta_p: params.eta_p, eta_v: params.eta_v }
+    }
+
+    /// D with two UAVs' allowances, which add up (2η_p, 2η_v): a cooperating pair.
+    pub fn pair(d: f64, params: &Params) -> Self {
+        Self { d, eta_p: 2.0 * params.eta_p, eta_v: 2.0 * params.eta_v }
     }
 
     /// The distance h and the rates are measured from: D + η_p.

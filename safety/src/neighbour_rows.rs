@@ -73,7 +73,7 @@ pub fn obstacle_row(me: UavState, disk: &ReachDisk, clearance: f64, params: &Par
     // The boundary approaches k at ρ̇: as if the centre moved towards k at that speed.
     let v_kd = me.v - disk.velocity - p_hat * disk.growth;
     // k's own model error (docs/safety.md §12); the disk holds the other's.
-    let clearance = Clearance { d: clearance + disk.radius, eta_p: params.eta_p, eta_v: params.eta_v };
+    let clearance = Clearance::one(clearance + disk.radius, params);
     let mut row = collision_row(p_kd, v_kd, params.delta, 0.0, clearance, params.zeta, kind);
     row.c -= disk.growth_rate;
     row
@@ -111,7 +111,7 @@ pub fn neighbour_rows(
     // δΣ·dt², beyond D_c.
     let d_c = p.d_c + delta_sum * p.dt * p.dt;
     // Both UAVs' model errors add up (docs/safety.md §12).
-    let pair = Clearance { d: d_c, eta_p: 2.0 * p.eta_p, eta_v: 2.0 * p.eta_v };
+    let pair = Clearance::pair(d_c, p);
     for (d, other) in neighbours {
         match other {
             Neighbour::Cooperating(other) => {

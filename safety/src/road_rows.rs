@@ -68,7 +68,8 @@ pub fn road_rows(
     params: &Params,
     out: &mut Vec<Row>,
 ) {
-    let radius = activation_radius(params.d_s + params.eta_p, v.norm() + params.eta_v, params.delta);
+    let wall = Clearance::one(params.d_s, params);
+    let radius = activation_radius(wall.boundary(), v.norm() + wall.eta_v, params.delta);
     let walls = road.walls();
     let line = |k: usize, n: Vec2, s: f64| wall_row(s, n, v, params, k);
     match rule {
@@ -153,19 +154,14 @@ fn walls_rows(
 
 /// The line row of wall `k` at signed distance `s` along normal `n`, held for one tick (§4.4).
 fn wall_row(s: f64, n: Vec2, v: Vec2, params: &Params, k: usize) -> Row {
-    let (delta, d_s, rate) = (params.delta, wall_clearance(params), n.dot(&v));
+    let (delta, d_s, rate) = (params.delta, Clearance::one(params.d_s, params), n.dot(&v));
     let row = line_row(s, rate, n, delta, d_s, params.zeta, RowKind::Road(k));
     held_for(row, s - d_s.boundary(), rate, 0.0, delta, params.dt, d_s.eta_v)
 }
 
-/// D_s with the model-error allowances η_p, η_v of `params` (docs/safety.md §12).
-pub fn wall_clearance(params: &Params) -> Clearance {
-    Clearance { d: params.d_s, eta_p: params.eta_p, eta_v: params.eta_v }
-}
-
 /// The end-point row of road vertex `c` (wall `k`), held for one tick (§4.4, §10.5).
 fn corner_row(p: Vec2, v: Vec2, c: Vec2, params: &Params, k: usize) -> Row {
-    let (delta, d_s) = (params.delta, wall_clearance(params));
+    let (delta, d_s) = (params.delta, Clearance::one(params.d_s, params));
     let row = vertex_row(p, v, c, delta, d_s, params.zeta, RowKind::Road(k));
     let n = (p - c).norm().max(MIN_DISTANCE_M);
     let rate = (p - c).dot(&v) / n;
