@@ -17,7 +17,8 @@ pub struct FirmwareFleet {
     /// Where each firmware's console is written (`fwN.out`).
     pub run_dir: PathBuf,
     firmware: FirmwareProcesses,
-    /// Whether every UAV has been airborne at once (from then on, truth is reported).
+    /// Whether every UAV has been airborne at once (from then on, truth is reported). A cell: a
+    /// run reads the truth and the setpoints from two closures at once.
     flown: std::cell::Cell<bool>,
 }
 
@@ -57,9 +58,7 @@ impl FirmwareFleet {
                 })
             })
             .collect();
-        if states.iter().all(Option::is_some) {
-            self.flown.set(true);
-        }
+        self.flown.set(self.flown.get() || states.iter().all(Option::is_some));
         self.flown.get().then_some(states)
     }
 
@@ -84,6 +83,13 @@ impl FirmwareFleet {
         (now, (0..self.physics.len()).map(|i| self.physics.stats(i).map_or(0, |s| s.motor_packets)).collect())
     }
 
+    /// Each UAV's motor commands per second since `since` (an earlier [`Self::motor_packets`]).
+    pub fn motor_rates_since(&self, since: &(std::time::Instant, Vec<u64>)) -> Vec<f64> {
+        let (now, after) = self.motor_packets();
+        let seconds = (now - since.0).as_secs_f64().max(1e-9);
+        after.iter().zip(&since.1).map(|(a, b)| (a - b) as f64 / seconds).collect()
+    }
+
     /// Setpoints relayed to each UAV's firmware so far, and when the last one was.
     pub fn setpoints(&self) -> Vec<(u64, Option<std::time::Instant>)> {
         (0..self.physics.len())
@@ -101,10 +107,5 @@ impl FirmwareFleet {
                 console.lines().filter(|l| l.contains("rate is off") || l.contains("rate off")).count()
             })
             .sum()
-    }
-
-    /// The firmware processes (to kill one, as a fault).
-    pub fn firmware(&mut self) -> &mut FirmwareProcesses {
-        &mut self.firmware
     }
 }

@@ -182,10 +182,8 @@ pub fn run_on_firmware(
     let outcome =
         run_scenario_on_truth(&scenario, options, policies, &mut make_link, &mut wait_tick, &mut truth)
             .context("flying the Crazyflie firmware")?;
-    if let Some((since, before)) = first {
-        let (now, after) = firmware.motor_packets();
-        let seconds = (now - since).as_secs_f64().max(1e-9);
-        let rates: Vec<f64> = after.iter().zip(&before).map(|(a, b)| (a - b) as f64 / seconds).collect();
+    if let Some(first) = first {
+        let rates = firmware.motor_rates_since(&first);
         let (lo, hi) = rates.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), r| (lo.min(*r), hi.max(*r)));
         let stats = firmware.physics.loop_stats();
         say!(

@@ -143,7 +143,7 @@ fn fly(args: &StressArgs, cf2: &Path, runtime: &tokio::runtime::Handle, seed: u6
 /// again with `airroads run --link firmware` (without the faults, which the line lists), beside
 /// its trajectory with the true states; removes the trajectory of any other case.
 fn save(args: &StressArgs, result: &CaseResult, scenario: &Scenario) {
-    let Some(dir) = args.save_failing.as_ref().or(args.save_unfinished.as_ref()) else { return };
+    let Some(dir) = save_dir(args) else { return };
     let lab = scenario.params;
     let (flying, arrived) = result.arrivals();
     let trajectory = dir.join(format!("{}.csv", scenario.name));
@@ -163,10 +163,15 @@ fn save(args: &StressArgs, result: &CaseResult, scenario: &Scenario) {
     }
 }
 
+/// Where `--save-failing` (or `--save-unfinished`) keeps the cases worth flying again.
+fn save_dir(args: &StressArgs) -> Option<&std::path::PathBuf> {
+    args.save_failing.as_ref().or(args.save_unfinished.as_ref())
+}
+
 /// With `--save-failing DIR`, the case's trajectory (with the true states) goes to
 /// DIR/NAME.csv; `save` keeps it only for a violating or unfinished case.
 fn trajectory_file(args: &StressArgs, name: &str) -> anyhow::Result<Option<Box<dyn std::io::Write>>> {
-    let Some(dir) = args.save_failing.as_ref().or(args.save_unfinished.as_ref()) else { return Ok(None) };
+    let Some(dir) = save_dir(args) else { return Ok(None) };
     std::fs::create_dir_all(dir).with_context(|| dir.display().to_string())?;
     let path = dir.join(format!("{name}.csv"));
     let file = std::fs::File::create(&path).with_context(|| path.display().to_string())?;
@@ -214,10 +219,8 @@ fn fly_case(
         run_scenario_on_truth(&scenario, options, policies, &mut make_link, &mut wait_tick, &mut truth)
             .context("flying the firmware")?;
     let downed: Vec<usize> = case.faults.iter().filter_map(Fault::downs).collect();
-    let slowest = first_packets.map_or(0.0, |(since, before)| {
-        let (now, after) = firmware.motor_packets();
-        let seconds = (now - since).as_secs_f64().max(1e-9);
-        let rates = after.iter().zip(&before).map(|(a, b)| (a - b) as f64 / seconds).enumerate();
+    let slowest = first_packets.map_or(0.0, |first| {
+        let rates = firmware.motor_rates_since(&first).into_iter().enumerate();
         rates.filter(|(i, _)| !downed.contains(i)).map(|(_, r)| r).fold(f64::INFINITY, f64::min)
     });
     let cuts = (0..scenario.uavs.len())
@@ -280,7 +283,6 @@ fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
     let min = |f: fn(&RunMetrics) -> f64| {
         flown.iter().filter_map(|r| r.metrics.as_ref()).map(f).fold(f64::INFINITY, f64::min)
     };
-    let (flying, arrived) = flown.iter().map(|r| r.arrivals()).fold((0, 0), |(a, b), (c, d)| (a + c, b + d));
     let count = |f: fn(&Fault) -> bool| flown.iter().flat_map(|r| &r.faults).filter(|x| f(x)).count();
     say!(
         "stress --link firmware: {} of {} faulty flights flown (seeds {}..{}), policy {}, eta_p {} m, eta_v {} m/s",
@@ -311,6 +313,7 @@ fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
         cases.iter().map(|r| r.arrivals()).fold((0, 0), |(a, b), (c, d)| (a + c, b + d))
     };
     let ((flying_with, arrived_with), (flying_without, arrived_without)) = (sum(&with), sum(&without));
+    let (flying, arrived) = (flying_with + flying_without, arrived_with + arrived_without);
     say!(
         "  arrivals         {arrived}/{flying} of the Crazyflies no fault downed, in {CASE_T_MAX_S} s: \
          {arrived_without}/{flying_without} in the {} flights where none was downed, \
