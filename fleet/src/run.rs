@@ -168,9 +168,8 @@ fn run_with(
                     l.max_slack,
                     u.nav.arrived
                 )?;
-                match true_states.as_ref().map(|states| states.get(k).copied().flatten()) {
-                    Some(Some(s)) => writeln!(w, ",{},{},{},{}", s.p.x, s.p.y, s.v.x, s.v.y)?,
-                    Some(None) => writeln!(w, ",,,,")?,
+                match true_states.as_ref().and_then(|states| states.get(k).copied().flatten()) {
+                    Some(s) => writeln!(w, ",{},{},{},{}", s.p.x, s.p.y, s.v.x, s.v.y)?,
                     None if truth.is_some() => writeln!(w, ",,,,")?,
                     None => writeln!(w)?,
                 }
