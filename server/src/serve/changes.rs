@@ -6,6 +6,7 @@
 use super::command::{ChangeError, Command, Outcome, Reply, Request};
 use super::durable::{Batch, FromWriter, ToWriter};
 use super::engine::{Engine, PendingBatch, STORAGE_STALL};
+use super::hook::{Arrival, Ownership};
 use super::linking::LinkFactory;
 use super::persist::{SavedState, SavedUav};
 use super::store::Write;
@@ -58,10 +59,8 @@ impl Engine {
             let _ = reply.send(Err(ChangeError::NotDurable(reason)));
             return;
         }
-        // A standby takes only its owner's road (it flies nothing, so any road is safe for it).
-        let follows = matches!(command, Command::FollowRoad(_));
-        if let Some(region) = self.region.as_ref().filter(|r| !r.failover.is_owner() && !follows) {
-            let _ = reply.send(Err(ChangeError::Standby(region.name.clone())));
+        if let Err(e) = self.hook.admits(&command) {
+            let _ = reply.send(Err(e));
             return;
         }
         let (status, detail) = (command.success_status(), command.describe());
@@ -111,7 +110,7 @@ impl Engine {
                 self.fleet.check_new(&id, &policy, &state, goal)?;
                 let link = self.links.make(&id, link.as_deref(), state, dt);
                 let undo = self.fleet.add_undoable(id.clone(), policy, link, state, goal)?;
-                self.log_ownership(|log, at| log.open(&id, at, "added"));
+                self.hook.ownership(Ownership::Opened { id: &id, how: "added" });
                 Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
             }
             Command::Land(Some(id)) => {
@@ -128,7 +127,7 @@ impl Engine {
             }
             Command::RemoveUav(id) => {
                 let undo = self.fleet.remove_undoable(&id)?;
-                self.log_ownership(|log, at| log.close(&id, at, "removed"));
+                self.hook.ownership(Ownership::Closed { id: &id, how: "removed" });
                 Applied::new(Outcome::Done, undo, vec![Write::RemoveUav(id)])
             }
             Command::SetGoal(id, goal) => {
@@ -145,11 +144,10 @@ impl Engine {
                 }
                 let policy = self.default_policy.clone();
                 let undo = load_scenario(&mut self.fleet, &scenario, &policy, &self.links)?;
-                let fleet = &self.fleet;
-                self.log_ownership(|log, at| {
-                    log.close_all(at, "removed");
-                    fleet.uavs().iter().for_each(|u| log.open(&u.id, at, "added"));
-                });
+                self.hook.ownership(Ownership::ClosedAll);
+                for u in self.fleet.uavs() {
+                    self.hook.ownership(Ownership::Opened { id: &u.id, how: "added" });
+                }
                 self.road_changed();
                 let writes = vec![Write::Replace(SavedState::of(&self.fleet))];
                 Applied::new(Outcome::ScenarioLoaded { tick: self.ticks }, undo, writes)
@@ -158,14 +156,37 @@ impl Engine {
                 let undo = self.fleet.set_paused_undoable(paused);
                 Applied::new(Outcome::Done, undo, vec![Write::Paused(paused)])
             }
+            Command::Adopt(arrival) => {
+                self.add_arrival(*arrival)?;
+                // Neither undone nor saved: only a region server adopts, and a region server never
+                // resumes saved state (its region's owner or mirror is the record: `serve_cmd`
+                // refuses `--region` with `--resume`), so a failed write must not take it back.
+                Applied::urgent()
+            }
         })
     }
 
-    /// Records a change of ownership with `--region` (nothing without).
-    fn log_ownership(&self, change: impl FnOnce(&super::region::OwnershipLog, f64)) {
-        if let Some(region) = &self.region {
-            change(&region.ownership, super::region::ownership::wall_now());
+    /// Adds a UAV another server gave this one, where it is (its last owner flew it safely there);
+    /// its link only if this server may open it, its goal only if this road has room for it, its
+    /// policy only if loaded here (else the default).
+    fn add_arrival(&mut self, arrival: Arrival) -> Result<(), ChangeError> {
+        let Arrival { id, state, goal, policy, link, airborne } = arrival;
+        if let Some(Err(reason)) = link.as_deref().map(|l| links::check_link_with(l, &self.link_rules)) {
+            return Err(EditError::Unsafe { field: "link".into(), reason }.into());
         }
+        if self.fleet.uav(&id).is_some() {
+            return Err(EditError::DuplicateId(id).into());
+        }
+        let policy =
+            if self.fleet.policy_names().any(|n| n == policy) { policy } else { self.default_policy.clone() };
+        let goal = goal.filter(|g| self.fleet.check_goal(*g, "goal").is_ok());
+        let link = self.links.make(&id, link.as_deref(), state, self.fleet.config.params.dt);
+        let added = self.fleet.add(id, policy, link, state, goal);
+        if airborne {
+            // A Crazyflie's new link connects first: meanwhile it is avoided as lost.
+            added.mark_airborne();
+        }
+        Ok(())
     }
 
     /// Hands the gap's changes to the writer (after the tick published them). If the writer cannot

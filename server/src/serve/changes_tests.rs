@@ -172,7 +172,9 @@ fn a_standby_refuses_changes_and_changes_nothing() {
     let mut rig = rig(1000);
     let before = ids(&rig);
     // A region's side starts as a standby until its claim makes it the owner.
-    rig.engine.region = Some(crate::serve::region::RegionShared::new("west"));
+    let side = crate::serve::region::RegionShared::new("west");
+    // A new side: its handover protocol is there to take.
+    rig.engine.set_hook(Box::new(crate::serve::region::RegionLoop::new(side, Arc::default()).unwrap()));
     let (mut added, _) = queue(&rig, add("x", 13.0, 16.0));
     rig.engine.apply_commands();
     assert_eq!(added.try_recv().unwrap(), Err(ChangeError::Standby("west".into())));
@@ -181,7 +183,7 @@ fn a_standby_refuses_changes_and_changes_nothing() {
 
 #[test]
 fn a_uav_from_another_server_gets_only_a_link_this_server_may_open() {
-    use crate::serve::region::{OwnershipLog, messages::UavRecord};
+    use crate::serve::region::{OwnershipLog, RegionLoop, messages::UavRecord};
     let mut rig = rig(1000);
     let log = OwnershipLog::default();
     let record = |link: &str| UavRecord {
@@ -193,10 +195,10 @@ fn a_uav_from_another_server_gets_only_a_link_this_server_may_open() {
         airborne: true,
     };
     // A simulator on another host: refused by default, as over REST, and allowed by the rules.
-    assert!(!rig.engine.adopt("far", record("udp://10.0.0.5:19850"), &log, "failover"));
+    assert!(!RegionLoop::adopt(&mut rig.engine, "far", record("udp://10.0.0.5:19850"), "failover", &log));
     assert!(!ids(&rig).contains(&"far".to_string()) && log.intervals().0.is_empty());
     rig.engine.link_rules = Arc::new(links::LinkRules { udp_hosts: vec!["10.0.0.5".parse().unwrap()] });
-    assert!(rig.engine.adopt("far", record("udp://10.0.0.5:19850"), &log, "failover"));
+    assert!(RegionLoop::adopt(&mut rig.engine, "far", record("udp://10.0.0.5:19850"), "failover", &log));
     assert!(ids(&rig).contains(&"far".to_string()));
     assert_eq!(log.intervals().0[0].came, "failover");
 }

@@ -47,6 +47,8 @@ pub enum Command {
     Land(Option<String>),
     /// Emergency stop of every UAV: motors off. Sent on the urgent channel, never persisted.
     EmergencyStop,
+    /// A UAV another server gave this one (a region's handover or takeover; never from a client).
+    Adopt(Box<super::hook::Arrival>),
 }
 
 impl Command {
@@ -78,6 +80,7 @@ impl Command {
             Command::Land(Some(id)) => format!("land `{id}`"),
             Command::Land(None) => "land all".into(),
             Command::EmergencyStop => "emergency stop".into(),
+            Command::Adopt(a) => format!("adopted `{}` at [{}, {}]", a.id, a.state.p.x, a.state.p.y),
         }
     }
 }

@@ -6,8 +6,10 @@
 //! client, a disk or a radio: it only `try_recv`s and `try_send`s; late ticks are counted and
 //! skipped, never bunched.
 
+use super::command::Command;
 use super::command::{ChangeError, Outcome, Reply, Request};
 use super::durable::{FromWriter, StorageStatus, ToWriter};
+use super::hook::{Arrival, LoopEdits, LoopHook, NoHook, Ownership};
 use super::linking::LinkFactory;
 use super::snapshot::Snapshot;
 use super::stats::{LoopMetrics, TickStats};
@@ -58,9 +60,14 @@ impl RoadView {
     }
 }
 
+/// The wall clock now (s since the Unix epoch; 0 on a clock set before 1970).
+pub fn wall_now() -> f64 {
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs_f64()).unwrap_or(0.0)
+}
+
 /// The wall clock now (ms since the Unix epoch).
 pub fn now_ms() -> u64 {
-    (super::region::ownership::wall_now() * 1e3) as u64
+    (wall_now() * 1e3) as u64
 }
 
 /// The next instant at which the wall clock is a whole multiple of `period` (since the Unix epoch).
@@ -147,19 +154,11 @@ pub struct Engine {
     pub(crate) gap: super::changes::Gap,
     /// Answers held until the next snapshot shows what they say.
     pub(crate) after_publish: Vec<(Reply, Result<Outcome, ChangeError>)>,
-    /// The region this loop flies (`--region`): foreign UAVs in, snapshots out.
-    pub(crate) region: Option<super::region::RegionShared>,
-    /// The foreign UAVs of the next tick (buffer reused).
-    pub(crate) foreign: Vec<fleet::ForeignUav>,
-    /// The loop's side of the handover protocol (`--region`).
-    pub(crate) handover: Option<super::region::Handover>,
-    /// This loop flies its region (false while a standby, and until a takeover's UAVs are in).
-    pub(crate) owns_region: bool,
+    /// What a region adds to the loop (a single server: [`NoHook`]).
+    pub(crate) hook: Box<dyn LoopHook>,
     /// Which Crazyflie links this server may open (`--allow-link-host`), for UAVs that come from
     /// another server (a handover or a takeover).
     pub(crate) link_rules: Arc<links::LinkRules>,
-    /// Crazyflies released to another region whose links are closing (`region/detach.rs`).
-    pub(crate) detaching: Vec<super::region::detach::Detaching>,
     /// The tick boundary of the current gap on the wall clock (ms; 0 before the first).
     boundary_ms: u64,
 }
@@ -189,14 +188,25 @@ impl Engine {
             next_seq: 0,
             gap: Default::default(),
             after_publish: Vec::new(),
-            region: None,
-            foreign: Vec::new(),
-            handover: None,
-            owns_region: false,
+            hook: Box::new(NoHook),
             link_rules: Arc::default(),
-            detaching: Vec::new(),
             boundary_ms: 0,
         }
+    }
+
+    /// Plugs in what a region adds to the loop; every UAV flown now is recorded as there from the start.
+    pub fn set_hook(&mut self, hook: Box<dyn LoopHook>) {
+        self.hook = hook;
+        for u in self.fleet.uavs() {
+            self.hook.ownership(Ownership::Opened { id: &u.id, how: "start" });
+        }
+    }
+
+    /// The hook's step between two ticks (it borrows the loop, so it is taken out meanwhile).
+    fn between_ticks(&mut self) {
+        let mut hook = std::mem::replace(&mut self.hook, Box::new(NoHook));
+        hook.between_ticks(self);
+        self.hook = hook;
     }
 
     /// Runs the loop on a new thread until `stop` is set or every command sender is gone.
@@ -234,14 +244,12 @@ impl Engine {
             if !self.apply_commands() {
                 break;
             }
-            self.hand_over();
+            self.between_ticks();
             self.tick(started);
             self.send_gap();
             next += period;
-            if self.region.is_some() {
-                // Regions tick on the wall clock's multiples of dt, so that a change deployed to
-                // every region for one instant is applied at the same tick boundary everywhere.
-                let aligned = next_wall_boundary(period);
+            let aligned = self.hook.next_tick(next, period);
+            if aligned != next {
                 let missed = aligned.saturating_duration_since(next).as_secs_f64() / period.as_secs_f64();
                 self.stats.missed(missed.round() as u64);
                 next = aligned;
@@ -295,16 +303,7 @@ impl Engine {
     }
 
     fn tick(&mut self, started: Instant) {
-        if let Some(region) = &self.region {
-            // A copy under a short lock: the loop never waits on Zenoh.
-            let now = Instant::now();
-            region.foreign.copy_into(now, &mut self.foreign);
-            if let Some(handover) = &mut self.handover {
-                handover.adjust_foreign(&mut self.foreign, now);
-            }
-            self.fleet.set_foreign(&self.foreign);
-            region.foreign_ages.record(&self.foreign);
-        }
+        self.hook.before_tick(&mut self.fleet);
         if !self.fleet.uavs().is_empty() {
             self.fleet.tick();
         }
@@ -314,16 +313,7 @@ impl Engine {
         let duration_us = started.elapsed().as_secs_f64() * 1e6;
         self.stats.record(duration_us, &self.fleet, &snapshot);
         let snapshot = Arc::new(snapshot);
-        if let Some(region) = &self.region {
-            let published = super::region::Published {
-                snapshot: snapshot.clone(),
-                read_at: started,
-                owned: self.owns_region,
-                unheard: self.unheard(Instant::now()),
-                leaving: self.leaving(),
-            };
-            region.published.send_replace(Some(published));
-        }
+        self.hook.after_tick(&snapshot, &self.fleet, started);
         self.channels.snapshots.send_replace(snapshot);
         self.channels.metrics.send_replace(Arc::new(self.stats.metrics()));
         self.channels.clock.ticked();
@@ -344,13 +334,43 @@ impl Engine {
         let _ = self.channels.writer.try_send(ToWriter::Positions(positions));
     }
 
-    pub(crate) fn publish_road(&self) {
+    pub(crate) fn publish_road(&mut self) {
         let since_ms = if self.boundary_ms > 0 { self.boundary_ms } else { now_ms() };
         let view = RoadView::of(self.fleet.road(), self.road_version, since_ms);
         self.channels.road.send_replace(Arc::new(view));
-        if let Some(region) = &self.region {
-            // The other regions' messages are checked against the road flown.
-            region.screen.set_road(self.fleet.road());
+        self.hook.road_changed(self.fleet.road());
+    }
+}
+
+impl LoopEdits for Engine {
+    fn fleet(&self) -> &Fleet {
+        &self.fleet
+    }
+
+    fn max_uavs(&self) -> usize {
+        self.max_uavs
+    }
+
+    fn road_version(&self) -> u64 {
+        self.road_version
+    }
+
+    fn adopt(&mut self, arrival: Arrival) -> bool {
+        let id = arrival.id.clone();
+        match self.apply(Command::Adopt(Box::new(arrival))) {
+            Ok(_) => true,
+            Err(e) => {
+                tracing::warn!("UAV `{id}` not adopted: {e}");
+                false
+            }
         }
+    }
+
+    fn release(&mut self, id: &str) -> Option<fleet::Uav> {
+        self.fleet.remove(id).ok()
+    }
+
+    fn release_all(&mut self) -> Vec<fleet::Uav> {
+        self.fleet.take_all()
     }
 }

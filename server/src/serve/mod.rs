@@ -16,6 +16,7 @@ pub mod error;
 pub mod federate;
 mod federate_merge;
 pub mod guard;
+pub mod hook;
 pub mod linking;
 pub mod listener;
 pub mod mocap;
@@ -153,12 +154,15 @@ pub fn open_store(data_dir: Option<&std::path::Path>) -> Result<Store, store::St
 }
 
 /// Builds the fleet: the saved state of the store if there is one (and `resume`), else `initial`.
+/// A region server never resumes: UAVs come and go by handover without being saved (the region's
+/// owner and its mirror are the record), so a saved fleet may hold UAVs another server flies now.
 fn initial_fleet(
     config: ServeConfig,
     store: &Store,
     factory: &LinkFactory,
 ) -> anyhow::Result<(Fleet, String)> {
-    let saved = if config.resume { store.load()? } else { None };
+    let resume = config.resume && config.region.is_none();
+    let saved = if resume { store.load()? } else { None };
     let mut fleet_config = config.fleet;
     let Some(saved) = saved else {
         fleet_config.params = config.initial.params;
@@ -246,14 +250,11 @@ impl Server {
         let mocap = factory.mocap.clone();
         let stops = factory.stops.clone();
         let mut engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
-        engine.region.clone_from(&region);
         engine.link_rules = link_rules.clone();
         if let Some(region) = &region {
-            engine.handover = region.take_handover();
-            let at = region::ownership::wall_now();
-            for u in engine.fleet.uavs() {
-                region.ownership.open(&u.id, at, "start");
-            }
+            let hook = region::RegionLoop::new(region.clone(), link_rules.clone())
+                .context("the region's loop side was taken already")?;
+            engine.set_hook(Box::new(hook));
         }
         let fleet_loop = engine.spawn(stop.clone())?;
         let stream = Arc::new(StreamCounters::default());

@@ -4,9 +4,8 @@
 //! out only once the link is closed, so the new owner never opens a link the old one still holds.
 //! Meanwhile the UAV is a ghost of this fleet: a reach disk growing from when it left.
 
-use super::Handover;
 use super::handover::record;
-use crate::serve::engine::Engine;
+use super::loop_hook::RegionLoop;
 use std::time::{Duration, Instant};
 
 /// A detach that takes longer than this is logged (the session closes within 0.5 s).
@@ -19,7 +18,7 @@ fn settle(uav: &mut fleet::Uav) {
 }
 
 /// A UAV released to another region whose link is still closing.
-pub(crate) struct Detaching {
+pub(super) struct Detaching {
     uav: fleet::Uav,
     to: String,
     seq: u64,
@@ -27,38 +26,38 @@ pub(crate) struct Detaching {
     warned: bool,
 }
 
-impl Engine {
+impl RegionLoop {
     /// UAV `uav` has left the fleet for region `to` (offer `seq`): released at once if its link is
-    /// closed (a simulated one), else detached and released by [`Engine::release_detached`].
-    pub(crate) fn release(&mut self, handover: &mut Handover, mut uav: fleet::Uav, to: String, seq: u64) {
+    /// closed (a simulated one), else detached and released by [`RegionLoop::release_detached`].
+    pub(super) fn release(&mut self, mut uav: fleet::Uav, to: String, seq: u64) {
         let now = Instant::now();
         settle(&mut uav);
         if uav.link.detached() {
-            handover.released(uav.id.clone(), to, seq, record(&uav), now);
+            self.handover.released(uav.id.clone(), to, seq, record(&uav), now);
             return;
         }
         uav.link.detach();
-        handover.detaching(&uav.id, uav.state, now);
+        self.handover.detaching(&uav.id, uav.state, now);
         self.detaching.push(Detaching { uav, to, seq, since: now, warned: false });
     }
 
     /// The UAVs whose links are closing, as the mirror lists them (a standby that takes over
     /// before their release flies them on; one that saw the release leaves them to the neighbour).
-    pub(crate) fn leaving(&self) -> Vec<super::failover::MirrorUav> {
+    pub(super) fn leaving(&self) -> Vec<super::failover::MirrorUav> {
         let record = |d: &Detaching| super::failover::MirrorUav { id: d.uav.id.clone(), uav: record(&d.uav) };
         self.detaching.iter().map(record).collect()
     }
 
     /// Releases the UAVs whose links have closed since the last gap (while the handover queue has
     /// room for their releases).
-    pub(crate) fn release_detached(&mut self, handover: &mut Handover) {
+    pub(super) fn release_detached(&mut self) {
         if self.detaching.is_empty() {
             return;
         }
         let now = Instant::now();
         let mut waiting = Vec::with_capacity(self.detaching.len());
         for mut d in std::mem::take(&mut self.detaching) {
-            if !d.uav.link.detached() || !handover.can_send() {
+            if !d.uav.link.detached() || !self.handover.can_send() {
                 if !d.warned && now.saturating_duration_since(d.since) > SLOW_DETACH {
                     d.warned = true;
                     tracing::warn!("UAV `{}`: its link has not closed after {SLOW_DETACH:?}", d.uav.id);
@@ -67,7 +66,7 @@ impl Engine {
                 continue;
             }
             settle(&mut d.uav);
-            handover.released(d.uav.id.clone(), d.to, d.seq, record(&d.uav), now);
+            self.handover.released(d.uav.id.clone(), d.to, d.seq, record(&d.uav), now);
         }
         self.detaching = waiting;
     }

@@ -6,7 +6,6 @@
 use serde::Serialize;
 use std::collections::{HashMap, VecDeque};
 use std::sync::{Mutex, MutexGuard, PoisonError};
-use std::time::{SystemTime, UNIX_EPOCH};
 
 /// Closed intervals kept (the oldest are forgotten first; open ones are bounded by the fleet).
 pub const MAX_CLOSED_INTERVALS: usize = 10_000;
@@ -39,10 +38,7 @@ pub struct OwnershipLog {
     log: Mutex<Log>,
 }
 
-/// Now on the wall clock (s since the Unix epoch).
-pub fn wall_now() -> f64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0.0, |d| d.as_secs_f64())
-}
+pub use crate::serve::engine::wall_now;
 
 impl OwnershipLog {
     fn lock(&self) -> MutexGuard<'_, Log> {
