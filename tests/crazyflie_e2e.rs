@@ -248,7 +248,7 @@ async fn shutdown_lands_every_crazyflie_before_the_server_exits() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn motion_capture_poses_reach_their_crazyflie_as_external_positions() {
-    use airroads::serve::mocap::ingest;
+    use engine::mocap::ingest;
     use std::sync::atomic::Ordering::Relaxed;
     let (scenario, sims) = with_sims(shipped("lab3.json"));
     let server = airroads::serve::Server::start(config(&scenario)).unwrap();

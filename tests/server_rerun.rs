@@ -119,7 +119,7 @@ fn temp_rrd() -> std::path::PathBuf {
     std::env::temp_dir().join(format!("airroads-rerun-{}-{nanos}.rrd", std::process::id()))
 }
 
-fn walls_as_strips(road: &airroads::serve::engine::RoadView) -> Vec<Vec<[f32; 2]>> {
+fn walls_as_strips(road: &engine::fleet_loop::RoadView) -> Vec<Vec<[f32; 2]>> {
     road.walls.iter().map(|w| w.iter().map(|p| [p[0] as f32, p[1] as f32]).collect()).collect()
 }
 

@@ -4,9 +4,9 @@
 //! the simulated Crazyflie) and the share of ticks on which a link had a fresh state.
 
 use crate::cli::BenchArgs;
-use airroads::serve::stats::percentiles;
 use cfsim::{SimConfig, SimCrazyflie, SimHandle};
 use crazyflie::{CrazyflieLink, RelayConfig};
+use engine::stats::percentiles;
 use links::{Link, LinkPhase};
 use std::net::SocketAddr;
 use std::process::ExitCode;

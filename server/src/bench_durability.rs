@@ -5,8 +5,9 @@
 
 use crate::cli::BenchArgs;
 use crate::run_cmd::load_scenario;
-use airroads::serve::store::{Store, Write};
-use airroads::serve::{ServeConfig, Server, client, persist};
+use airroads::serve::{ServeConfig, Server, client};
+use engine::persist;
+use engine::store::{Store, Write};
 use std::net::SocketAddr;
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -149,7 +150,7 @@ async fn serve_and_change(
     let commits = state.storage.commits.load(Relaxed) - commits_before;
     let _ = stop.send(());
     http.await??;
-    let stats = airroads::serve::stats::percentiles(&mut latencies);
+    let stats = engine::stats::percentiles(&mut latencies);
     Ok(Row {
         storage,
         clients,

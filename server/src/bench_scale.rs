@@ -7,7 +7,7 @@
 
 use crate::bench_fleet::sim_fleet;
 use crate::cli::BenchArgs;
-use airroads::serve::stats::percentiles;
+use engine::stats::percentiles;
 use fleet::trunk::trunk_scenario;
 use fleet::{MetricsRecorder, StageTimes};
 use std::process::ExitCode;

@@ -4,8 +4,8 @@
 
 use crate::cli::BenchArgs;
 use crate::run_cmd::load_scenario;
-use airroads::serve::stats::percentiles;
 use airroads::serve::{ServeConfig, Server, client};
+use engine::stats::percentiles;
 use futures_util::StreamExt;
 use std::net::SocketAddr;
 use std::process::ExitCode;

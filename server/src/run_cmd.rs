@@ -195,7 +195,7 @@ pub fn run_on_firmware(
             stats.resyncs
         );
     }
-    let latency = airroads::serve::stats::percentiles(&mut latencies_us);
+    let latency = engine::stats::percentiles(&mut latencies_us);
     say!(
         "  setpoints        {} arrived, latency from the tick p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms",
         latencies_us.len(),

@@ -141,7 +141,7 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
     let data_dir = if args.ephemeral {
         None
     } else {
-        Some(args.data_dir.clone().unwrap_or_else(serve::persist::default_dir))
+        Some(args.data_dir.clone().unwrap_or_else(engine::persist::default_dir))
     };
     // A data directory that cannot be written is refused now, not discovered at the first change.
     if let Some(dir) = &data_dir {
@@ -203,7 +203,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
             let socket = tokio::net::UdpSocket::bind(at).await.with_context(|| format!("--mocap {at}"))?;
             let counters = server.state().mocap.clone();
             let senders = args.mocap_allow.clone();
-            tokio::spawn(serve::mocap::ingest(socket, server.mocap.clone(), counters, senders));
+            tokio::spawn(engine::mocap::ingest(socket, server.mocap.clone(), counters, senders));
             Some(at)
         }
         None => None,

@@ -1,14 +1,14 @@
 //! REST handlers (`docs/api.md`, `GET /api/openapi.json`). Reads answer from the latest published
 //! snapshot; changes go to the fleet loop as commands and are answered once it applied them.
 
-use super::command::{Command, Outcome};
 use super::error::{ApiError, ApiJson, NoBody};
-use super::snapshot::{Snapshot, UavSnapshot};
 use super::state::{AppState, json_of};
 use axum::extract::{Path, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use axum::{Json, Router, routing};
+use engine::command::{Command, Outcome};
+use engine::snapshot::{Snapshot, UavSnapshot};
 use fleet::Scenario;
 use roads::{Road, RoadLayout};
 use serde::Deserialize;
@@ -300,7 +300,7 @@ async fn load_scenario(
 ) -> Result<Json<Value>, ApiError> {
     // Refused before any validation work: the loop must be able to tick the fleet in dt.
     if scenario.uavs.len() > app.max_uavs {
-        let full = super::command::ChangeError::FleetFull { wanted: scenario.uavs.len(), max: app.max_uavs };
+        let full = engine::command::ChangeError::FleetFull { wanted: scenario.uavs.len(), max: app.max_uavs };
         return Err(full.into());
     }
     let rules = app.link_rules.clone();

@@ -3,16 +3,16 @@
 //! change itself (so an acknowledged change is always in the log); everything else (refusals of any
 //! kind, land and stop) is queued for the state writer's next commit. `GET /api/audit` reads it.
 
-use super::durable::{AuditQuery, ToWriter};
 use super::error::{ApiError, ErrorInfo};
 use super::guard::is_change;
 use super::state::AppState;
-use super::store::{AuditRecord, now_ms};
 use axum::Json;
 use axum::extract::{Query, Request, State};
 use axum::http::StatusCode;
 use axum::middleware::Next;
 use axum::response::Response;
+use engine::durable::{AuditQuery, ToWriter};
+use engine::store::{AuditRecord, now_ms};
 use serde::Deserialize;
 use serde_json::{Value, json};
 use std::sync::Arc;

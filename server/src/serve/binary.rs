@@ -5,8 +5,8 @@
 //! by [`Encoder`], off the fleet loop, and shared by every client; a client with a viewport copies
 //! the records inside it out of the shared frame ([`filter_bbox`]) without decoding anything else.
 
-use super::snapshot::{Snapshot, UavStatus};
 use axum::body::Bytes;
+use engine::snapshot::{Snapshot, UavStatus};
 use serde_json::json;
 use std::collections::HashMap;
 use std::sync::Arc;

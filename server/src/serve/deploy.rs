@@ -15,14 +15,14 @@
 //! and the answer is 502 `deployment_failed`; a scenario cannot be taken back (its fleet replaced the
 //! old one) and the answer names the regions that loaded it.
 
-use super::command::{Command, Outcome};
-use super::engine::now_ms;
 use super::error::ApiError;
 use super::region::federation::{Answer, ApiQuery, ApiReply, Federation};
 use super::state::AppState;
 use axum::Json;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
+use engine::command::{Command, Outcome};
+use engine::fleet_loop::now_ms;
 use fleet::{Scenario, ValidScenario};
 use roads::{Road, RoadLayout};
 use serde::{Deserialize, Serialize};
@@ -144,7 +144,9 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiErr
     if let Some(s) = &scenario
         && s.uavs.len() > app.max_uavs
     {
-        return Err(super::command::ChangeError::FleetFull { wanted: s.uavs.len(), max: app.max_uavs }.into());
+        return Err(
+            engine::command::ChangeError::FleetFull { wanted: s.uavs.len(), max: app.max_uavs }.into()
+        );
     }
     if !step.commit {
         if kind == Kind::Road {

@@ -1,10 +1,10 @@
 //! The API's errors: `{"error": {"code", "message", "field"?}}` with a 4xx status (5xx only when
 //! the fleet loop is gone), and a JSON body extractor whose rejections use the same shape.
 
-use super::command::ChangeError;
 use axum::extract::{FromRequest, Request};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use engine::command::ChangeError;
 use fleet::EditError;
 use serde::de::DeserializeOwned;
 use serde_json::json;

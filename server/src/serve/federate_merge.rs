@@ -4,11 +4,11 @@
 
 use super::error::ApiError;
 use super::region::federation::Answer;
-use super::snapshot::Snapshot;
 use super::state::AppState;
 use axum::Json;
 use axum::http::{StatusCode, Uri, header};
 use axum::response::{IntoResponse, Response};
+use engine::snapshot::Snapshot;
 use serde_json::{Value, json};
 
 /// The header of a merged `GET /api/uavs` naming the regions that did not answer (comma-separated).

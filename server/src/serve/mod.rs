@@ -6,50 +6,39 @@ mod api;
 pub mod audit;
 pub mod auth;
 pub mod binary;
-mod changes;
 pub mod client;
-pub mod command;
 pub mod deploy;
-pub mod durable;
-pub mod engine;
 pub mod error;
 pub mod federate;
 mod federate_merge;
 pub mod guard;
-pub mod hook;
-pub mod linking;
 pub mod listener;
-pub mod mocap;
 pub mod openapi;
-pub mod persist;
 pub mod region;
 pub mod rerun_fleet;
 mod rerun_log;
 pub mod rerun_sink;
 mod rerun_viewer;
 pub mod road_follow;
-pub mod snapshot;
 pub mod state;
-pub mod stats;
-pub mod store;
 mod web;
 pub mod ws;
 
 use anyhow::Context as _;
 use axum::Router;
+use engine::linking::{LinkFactory, MocapRoutes};
+use engine::persist::SavedState;
+use engine::snapshot::Snapshot;
+use engine::stats::LoopMetrics;
+use engine::store::{Store, Write};
 use engine::{Engine, LoopChannels, LoopClock, RoadView};
 use fleet::{Fleet, FleetConfig, ValidScenario};
-use linking::{LinkFactory, MocapRoutes};
-use persist::SavedState;
 use policies::PolicyRegistry;
-use snapshot::Snapshot;
 use state::{AppState, Frame, StreamCounters};
-use stats::LoopMetrics;
 use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
-use store::{Store, Write};
 use tokio::sync::{mpsc, watch};
 use uav::{UavState, Vec2};
 
@@ -57,8 +46,7 @@ use uav::{UavState, Vec2};
 /// default policy in a dense crowd, with either navigation (BENCHMARKS.md, "Admission").
 pub const DEFAULT_MAX_UAVS: usize = 120;
 
-/// The scenario `airroads serve` flies when it has no saved state and no `--scenario`.
-pub const DEMO_SCENARIO: &str = include_str!("../../../scenarios/demo.json");
+pub use engine::{DEMO_SCENARIO, demo_scenario};
 
 /// Everything the server needs to start.
 pub struct ServeConfig {
@@ -138,15 +126,9 @@ pub struct Server {
     pub mocap: MocapRoutes,
 }
 
-/// The scenario embedded as the default demo (always valid: a test checks it).
-pub fn demo_scenario() -> anyhow::Result<ValidScenario> {
-    let scenario = fleet::Scenario::from_json(DEMO_SCENARIO).context("embedded demo scenario")?;
-    scenario.validate().context("embedded demo scenario")
-}
-
 /// Opens the data directory's database (an in-memory one without a directory); the error names the
 /// directory and why it cannot be written.
-pub fn open_store(data_dir: Option<&std::path::Path>) -> Result<Store, store::StoreError> {
+pub fn open_store(data_dir: Option<&std::path::Path>) -> Result<Store, engine::store::StoreError> {
     match data_dir {
         Some(dir) => Store::open(dir),
         None => Store::in_memory(),
@@ -167,7 +149,7 @@ fn initial_fleet(
     let Some(saved) = saved else {
         fleet_config.params = config.initial.params;
         let mut fleet = Fleet::new(fleet_config, config.initial.road.clone(), config.policies);
-        changes::load_scenario(&mut fleet, &config.initial, &config.default_policy, factory)?;
+        engine::changes::load_scenario(&mut fleet, &config.initial, &config.default_policy, factory)?;
         return Ok((fleet, format!("scenario `{}`", config.initial.name)));
     };
     saved.params.validate()?;
@@ -222,7 +204,7 @@ impl Server {
         );
         // The database holds exactly what flies from the first tick on.
         store.commit([&Write::Replace(SavedState::of(&fleet))]).context("saving the initial state")?;
-        let writer = durable::Writer::spawn(store)?;
+        let writer = engine::durable::Writer::spawn(store)?;
         let (commands, requests) = mpsc::channel(1024);
         let (urgent, urgent_requests) = mpsc::unbounded_channel();
         let first = Snapshot::of(&fleet, 0, 0.0, 0);
@@ -232,7 +214,8 @@ impl Server {
         let first_frame = Frame::new(first.clone(), binary);
         let (snapshots_tx, snapshots) = watch::channel(first);
         let (metrics_tx, metrics) = watch::channel(Arc::new(LoopMetrics::default()));
-        let (road_tx, road) = watch::channel(Arc::new(RoadView::of(fleet.road(), 0, engine::now_ms())));
+        let (road_tx, road) =
+            watch::channel(Arc::new(RoadView::of(fleet.road(), 0, engine::fleet_loop::now_ms())));
         let (frames_tx, frames) = watch::channel(first_frame);
         let clock = Arc::new(LoopClock::default());
         let channels = LoopChannels {
@@ -250,7 +233,7 @@ impl Server {
         let mocap = factory.mocap.clone();
         let stops = factory.stops.clone();
         let mut engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
-        engine.link_rules = link_rules.clone();
+        engine.set_link_rules(link_rules.clone());
         if let Some(region) = &region {
             let hook = region::RegionLoop::new(region.clone(), link_rules.clone())
                 .context("the region's loop side was taken already")?;
@@ -343,7 +326,7 @@ impl Server {
             let _ = tokio::task::spawn_blocking(move || thread.join()).await;
         }
         let (done, flushed) = tokio::sync::oneshot::channel();
-        if self.app.writer.send(durable::ToWriter::Flush(done)).await.is_ok() {
+        if self.app.writer.send(engine::durable::ToWriter::Flush(done)).await.is_ok() {
             let _ = tokio::time::timeout(Duration::from_secs(10), flushed).await;
         }
         // The writer thread ends once the last queue sender (in handler state clones) is gone.
@@ -374,7 +357,7 @@ pub async fn land_crazyflies(state: &AppState) {
     }
     tracing::info!("landing {} Crazyflies before exiting", ids.len());
     for id in ids {
-        if let Err(e) = state.apply_urgent(command::Command::Land(Some(id.clone()))).await {
+        if let Err(e) = state.apply_urgent(engine::command::Command::Land(Some(id.clone()))).await {
             tracing::warn!("{id} not landed: {}", e.message);
         }
     }

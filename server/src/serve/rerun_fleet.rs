@@ -5,7 +5,7 @@
 //! to later positions by instance index.
 
 use super::rerun_log::{color, xy};
-use super::snapshot::Snapshot;
+use engine::snapshot::Snapshot;
 use rerun::{Arrows2D, Clear, Color, Points2D, RecordingStream, RecordingStreamResult};
 
 /// Entity of the fleet's positions (labels: the UAVs' ids).

@@ -3,11 +3,11 @@
 //! Above `batch_above` UAVs the fleet is one batch (`rerun_fleet`) and only the selected UAVs get
 //! their own entities.
 
-use super::engine::RoadView;
 use super::rerun_fleet::FleetLog;
 use super::rerun_sink::{SinkStats, TICK_TIMELINE, TIME_TIMELINE, TRAIL_EVERY_TICKS, TRAIL_POINTS};
-use super::snapshot::{ReservationSnapshot, Snapshot, UavSnapshot, UavStatus};
-use super::stats::LoopMetrics;
+use engine::fleet_loop::RoadView;
+use engine::snapshot::{ReservationSnapshot, Snapshot, UavSnapshot, UavStatus};
+use engine::stats::LoopMetrics;
 use rerun::{
     Arrows2D, Clear, Color, EntityPath, EntityPathPart, LineStrip2D, LineStrips2D, Points2D, Radius,
     RecordingStream, RecordingStreamResult, Scalars, Transform3D,

@@ -16,13 +16,13 @@
 //! the UAVs selected with `PUT /api/rerun/selection` (the dashboard sends its selection) get the
 //! per-UAV entities and series above. What the sink logged and skipped is `rerun` in `/api/metrics`.
 
-use super::engine::RoadView;
 use super::rerun_log::Logger;
 use super::rerun_viewer::Viewer;
-use super::snapshot::Snapshot;
 use super::state::AppState;
-use super::stats::LoopMetrics;
 use anyhow::Context as _;
+use engine::fleet_loop::RoadView;
+use engine::snapshot::Snapshot;
+use engine::stats::LoopMetrics;
 use rerun::external::re_uri::RedapUri;
 use rerun::log::ChunkBatcherConfig;
 use rerun::sink::{FileSink, FileSinkOptions, LogSink};

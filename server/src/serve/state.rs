@@ -2,15 +2,15 @@
 //! snapshot, road and metrics, the state writer's queue, and the counters of bounded resources.
 
 use super::auth::AuthFailures;
-use super::command::{ChangeError, Claim, Command, Outcome, Request};
-use super::durable::{StorageStatus, ToWriter};
-use super::engine::{LoopClock, RoadView};
 use super::error::ApiError;
 use super::guard::{AccessRules, BODY_BUDGET_BYTES};
 use super::listener::ConnectionCounters;
-use super::snapshot::Snapshot;
-use super::stats::LoopMetrics;
 use axum::extract::ws::Utf8Bytes;
+use engine::command::{ChangeError, Claim, Command, Outcome, Request};
+use engine::durable::{StorageStatus, ToWriter};
+use engine::fleet_loop::{LoopClock, RoadView};
+use engine::snapshot::Snapshot;
+use engine::stats::LoopMetrics;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
@@ -93,7 +93,7 @@ pub struct AppState {
     /// The fleet loop's thread (unparked for land and stop).
     pub loop_thread: Option<std::thread::Thread>,
     /// Every Crazyflie's emergency stop, reachable without the fleet loop.
-    pub stops: super::linking::StopRoutes,
+    pub stops: engine::linking::StopRoutes,
     /// The latest snapshot.
     pub snapshots: watch::Receiver<Arc<Snapshot>>,
     /// The latest snapshot as JSON text (serialised once, sent to every client).
@@ -137,7 +137,7 @@ pub struct AppState {
     /// The region this server flies and its neighbours' UAVs (`--region`; None without).
     pub region: Option<super::region::RegionShared>,
     /// Motion-capture counters (all zero without `--mocap`).
-    pub mocap: Arc<super::mocap::MocapCounters>,
+    pub mocap: Arc<engine::mocap::MocapCounters>,
     /// What the Rerun sink has done.
     pub rerun: Arc<super::rerun_sink::RerunCounters>,
     /// The UAVs that keep their own Rerun entities in a batched fleet (`/api/rerun/selection`).

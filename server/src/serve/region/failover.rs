@@ -15,7 +15,7 @@
 //! The loop never waits on any of this: it reads atomic flags between ticks.
 
 use super::messages::{Message, UavRecord};
-use crate::serve::snapshot::Snapshot;
+use engine::snapshot::Snapshot;
 use serde::{Deserialize, Serialize};
 use std::collections::{BTreeSet, HashMap};
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::SeqCst};

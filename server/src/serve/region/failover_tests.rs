@@ -126,7 +126,7 @@ fn a_mirror_round_trips_through_json_and_refuses_unknown_fields() {
 
 #[test]
 fn a_mirror_lists_the_uavs_whose_links_are_closing_after_the_fleet() {
-    let snapshot = crate::serve::snapshot::Snapshot::of(
+    let snapshot = engine::snapshot::Snapshot::of(
         &fleet::Fleet::new(
             fleet::FleetConfig::default(),
             roads::Road::new(roads::RoadLayout::straight(0.0, 20.0, 4.0, 2)).unwrap(), // valid

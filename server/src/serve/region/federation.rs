@@ -5,7 +5,7 @@
 //! (only the region's owner answers; a standby stays silent), and asks them with [`Federation`].
 //! The HTTP side (what is forwarded, how reads are merged) is `serve::federate`.
 
-use crate::serve::engine::RoadView;
+use engine::fleet_loop::RoadView;
 use roads::Road;
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, Mutex, PoisonError};

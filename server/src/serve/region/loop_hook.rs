@@ -7,10 +7,10 @@
 use super::handover::{FleetChange, UavRecord};
 use super::ownership::wall_now;
 use super::{Handover, RegionShared};
-use crate::serve::command::{ChangeError, Command};
-use crate::serve::engine::next_wall_boundary;
-use crate::serve::hook::{Arrival, LoopEdits, LoopHook, Ownership};
-use crate::serve::snapshot::Snapshot;
+use engine::command::{ChangeError, Command};
+use engine::fleet_loop::next_wall_boundary;
+use engine::hook::{Arrival, LoopEdits, LoopHook, Ownership};
+use engine::snapshot::Snapshot;
 use fleet::{Fleet, ForeignUav};
 use roads::Road;
 use std::sync::{Arc, PoisonError};
@@ -172,5 +172,87 @@ impl LoopHook for RegionLoop {
         // Regions tick on the wall clock's multiples of dt, so that a change deployed to every
         // region for one instant is applied at the same tick boundary everywhere.
         next_wall_boundary(period)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::serve::region::messages::UavRecord;
+    use engine::hook::NoHook;
+
+    /// The loop's edits, played by the test: it adopts when told to.
+    struct Edits {
+        fleet: Fleet,
+        accept: bool,
+        adopted: Vec<Arrival>,
+    }
+
+    impl LoopEdits for Edits {
+        fn fleet(&self) -> &Fleet {
+            &self.fleet
+        }
+        fn max_uavs(&self) -> usize {
+            100
+        }
+        fn road_version(&self) -> u64 {
+            0
+        }
+        fn adopt(&mut self, arrival: Arrival) -> bool {
+            self.adopted.push(arrival);
+            self.accept
+        }
+        fn release(&mut self, _: &str) -> Option<fleet::Uav> {
+            None
+        }
+        fn release_all(&mut self) -> Vec<fleet::Uav> {
+            Vec::new()
+        }
+    }
+
+    fn edits(accept: bool) -> Edits {
+        let scenario = engine::demo_scenario().unwrap();
+        let policies = policies::PolicyRegistry::with_pd(scenario.params.delta);
+        let config = fleet::FleetConfig { params: scenario.params, ..Default::default() };
+        Edits { fleet: Fleet::new(config, scenario.road, policies), accept, adopted: Vec::new() }
+    }
+
+    #[test]
+    fn a_standby_refuses_every_change_but_its_owners_road() {
+        // A region's side starts as a standby until its claim makes it the owner.
+        let side = RegionLoop::new(RegionShared::new("west"), Arc::default()).unwrap();
+        let add = Command::AddUav {
+            id: "x".into(),
+            position: Vec2::new(13.0, 16.0),
+            policy: None,
+            goal: None,
+            link: None,
+        };
+        assert_eq!(side.admits(&add), Err(ChangeError::Standby("west".into())));
+        let road = edits(true).fleet.road().clone();
+        assert_eq!(side.admits(&Command::FollowRoad(Box::new(road))), Ok(()));
+        assert_eq!(NoHook.admits(&add), Ok(()), "a single server admits every change");
+    }
+
+    #[test]
+    fn an_adoption_goes_through_the_loops_edit_path_and_opens_ownership_only_when_taken() {
+        let log = super::super::OwnershipLog::default();
+        let record = UavRecord {
+            p: [13.0, 16.0],
+            v: [0.5, 0.0],
+            goal: Some([20.0, 16.0]),
+            policy: "pd".into(),
+            link: Some("udp://10.0.0.5:19850".into()),
+            airborne: true,
+        };
+        let mut refused = edits(false);
+        assert!(!RegionLoop::adopt(&mut refused, "far", record.clone(), "failover", &log));
+        assert!(log.intervals().0.is_empty(), "nothing opened for a refused UAV");
+        let mut taken = edits(true);
+        assert!(RegionLoop::adopt(&mut taken, "far", record, "failover", &log));
+        assert_eq!(log.intervals().0[0].came, "failover");
+        let arrival = &taken.adopted[0];
+        assert_eq!((arrival.id.as_str(), arrival.state.v.x, arrival.airborne), ("far", 0.5, true));
+        assert_eq!(arrival.link.as_deref(), Some("udp://10.0.0.5:19850"));
     }
 }

@@ -1,7 +1,7 @@
 //! The handover protocol's messages (`handover`), JSON on the key `PREFIX/region/<to>/handover/<from>`
 //! (docs/regions.md, Handover): `offer`, `accept`, `refuse`, `release`.
 
-use crate::serve::snapshot::UavSnapshot;
+use engine::snapshot::UavSnapshot;
 use serde::{Deserialize, Serialize};
 use uav::{UavState, Vec2};
 

@@ -33,7 +33,7 @@ pub use loop_hook::RegionLoop;
 pub use ownership::OwnershipLog;
 pub use table::ForeignTable;
 
-use super::snapshot::Snapshot;
+use engine::snapshot::Snapshot;
 use roads::Road;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use std::sync::mpsc::SyncSender;

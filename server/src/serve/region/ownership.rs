@@ -38,7 +38,7 @@ pub struct OwnershipLog {
     log: Mutex<Log>,
 }
 
-pub use crate::serve::engine::wall_now;
+pub use engine::fleet_loop::wall_now;
 
 impl OwnershipLog {
     fn lock(&self) -> MutexGuard<'_, Log> {

@@ -4,7 +4,7 @@
 
 use super::loop_hook::RegionLoop;
 use super::ownership::wall_now;
-use crate::serve::hook::LoopEdits;
+use engine::hook::LoopEdits;
 use std::collections::HashSet;
 use std::time::Instant;
 

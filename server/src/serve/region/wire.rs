@@ -11,7 +11,7 @@
 //! a region name that are not valid, and positions or velocities that are not finite are errors.
 
 use super::super::binary::{UAV_ARRIVED, UAV_LOST, status_code};
-use super::super::snapshot::Snapshot;
+use engine::snapshot::Snapshot;
 use thiserror::Error;
 use uav::UavState;
 

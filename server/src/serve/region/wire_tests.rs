@@ -1,5 +1,5 @@
 use super::*;
-use crate::serve::snapshot::{UavSnapshot, UavStatus};
+use engine::snapshot::{UavSnapshot, UavStatus};
 use proptest::prelude::*;
 
 fn uav(id: &str, p: [f64; 2], v: [f64; 2]) -> UavSnapshot {

@@ -194,6 +194,11 @@ impl Engine {
         }
     }
 
+    /// Which Crazyflie links this server may open for UAVs that come from another server.
+    pub fn set_link_rules(&mut self, rules: Arc<links::LinkRules>) {
+        self.link_rules = rules;
+    }
+
     /// Plugs in what a region adds to the loop; every UAV flown now is recorded as there from the start.
     pub fn set_hook(&mut self, hook: Box<dyn LoopHook>) {
         self.hook = hook;

@@ -67,39 +67,31 @@ pub trait LoopEdits {
     fn release_all(&mut self) -> Vec<fleet::Uav>;
 }
 
-/// The loop's hook: regions plug in here; every method of a single server's ([`NoHook`]) does
-/// nothing.
+/// The loop's hook: regions plug in here; each method's default does nothing (admits every
+/// change, keeps the loop's own tick instants), which is a single server's [`NoHook`].
 pub trait LoopHook: Send {
     /// Between two ticks, after the queued changes: UAVs leave and arrive.
-    fn between_ticks(&mut self, edits: &mut dyn LoopEdits);
+    fn between_ticks(&mut self, _edits: &mut dyn LoopEdits) {}
     /// Just before a tick: the other servers' UAVs the fleet avoids.
-    fn before_tick(&mut self, fleet: &mut Fleet);
+    fn before_tick(&mut self, _fleet: &mut Fleet) {}
     /// After a tick, with its snapshot (before the readers get it); `read_at`: when the tick began.
-    fn after_tick(&mut self, snapshot: &Arc<Snapshot>, fleet: &Fleet, read_at: Instant);
+    fn after_tick(&mut self, _snapshot: &Arc<Snapshot>, _fleet: &Fleet, _read_at: Instant) {}
     /// The loop flies `road` from now on.
-    fn road_changed(&mut self, road: &Road);
+    fn road_changed(&mut self, _road: &Road) {}
     /// Whether `command` may be applied now (a standby refuses every change but its owner's road).
-    fn admits(&self, command: &Command) -> Result<(), ChangeError>;
+    fn admits(&self, _command: &Command) -> Result<(), ChangeError> {
+        Ok(())
+    }
     /// Records a change of ownership.
-    fn ownership(&self, change: Ownership<'_>);
+    fn ownership(&self, _change: Ownership<'_>) {}
     /// The tick instant that follows `next` (a region aligns it to the wall clock).
-    fn next_tick(&self, next: Instant, period: Duration) -> Instant;
+    fn next_tick(&self, next: Instant, _period: Duration) -> Instant {
+        next
+    }
 }
 
 /// A single server: no other server's UAVs, nobody to hand over to, every change admitted.
 #[derive(Debug, Default, Clone, Copy)]
 pub struct NoHook;
 
-impl LoopHook for NoHook {
-    fn between_ticks(&mut self, _: &mut dyn LoopEdits) {}
-    fn before_tick(&mut self, _: &mut Fleet) {}
-    fn after_tick(&mut self, _: &Arc<Snapshot>, _: &Fleet, _: Instant) {}
-    fn road_changed(&mut self, _: &Road) {}
-    fn admits(&self, _: &Command) -> Result<(), ChangeError> {
-        Ok(())
-    }
-    fn ownership(&self, _: Ownership<'_>) {}
-    fn next_tick(&self, next: Instant, _: Duration) -> Instant {
-        next
-    }
-}
+impl LoopHook for NoHook {}

@@ -2,11 +2,11 @@
 //! withdrawn and refused changes, and a batch the disk refused taken back with every later one.
 
 use super::*;
-use crate::serve::command::{Claim, Command, Outcome, Request};
-use crate::serve::durable::StorageStatus;
-use crate::serve::engine::{LoopChannels, LoopClock, MAX_COMMANDS_PER_TICK, RoadView};
-use crate::serve::snapshot::Snapshot;
-use crate::serve::stats::LoopMetrics;
+use crate::command::{Claim, Command, Outcome, Request};
+use crate::durable::StorageStatus;
+use crate::fleet_loop::{LoopChannels, LoopClock, MAX_COMMANDS_PER_TICK, RoadView};
+use crate::snapshot::Snapshot;
+use crate::stats::LoopMetrics;
 use links::LinkPhase;
 use std::sync::Arc;
 use tokio::sync::{mpsc, oneshot, watch};
@@ -24,7 +24,7 @@ struct Rig {
 
 fn rig(max_uavs: usize) -> Rig {
     let runtime = tokio::runtime::Builder::new_current_thread().build().unwrap();
-    let scenario = super::super::demo_scenario().unwrap();
+    let scenario = crate::demo_scenario().unwrap();
     let policies = policies::PolicyRegistry::with_pd(scenario.params.delta);
     let config = fleet::FleetConfig { params: scenario.params, ..Default::default() };
     let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
@@ -167,38 +167,47 @@ fn withdrawn_degraded_and_oversized_changes_change_nothing() {
     assert!(full.writer.try_recv().is_err(), "nothing to write");
 }
 
+/// A hook that refuses every change, as a region's standby does.
+struct Refusing;
+
+impl crate::hook::LoopHook for Refusing {
+    fn admits(&self, _: &Command) -> Result<(), ChangeError> {
+        Err(ChangeError::Standby("west".into()))
+    }
+}
+
 #[test]
-fn a_standby_refuses_changes_and_changes_nothing() {
+fn a_change_the_hook_refuses_is_answered_with_its_reason_and_changes_nothing() {
     let mut rig = rig(1000);
     let before = ids(&rig);
-    // A region's side starts as a standby until its claim makes it the owner.
-    let side = crate::serve::region::RegionShared::new("west");
-    // A new side: its handover protocol is there to take.
-    rig.engine.set_hook(Box::new(crate::serve::region::RegionLoop::new(side, Arc::default()).unwrap()));
+    rig.engine.set_hook(Box::new(Refusing));
     let (mut added, _) = queue(&rig, add("x", 13.0, 16.0));
     rig.engine.apply_commands();
     assert_eq!(added.try_recv().unwrap(), Err(ChangeError::Standby("west".into())));
     assert_eq!(ids(&rig), before);
+    rig.engine.send_gap();
+    assert!(rig.writer.try_recv().is_err(), "nothing to write");
 }
 
 #[test]
 fn a_uav_from_another_server_gets_only_a_link_this_server_may_open() {
-    use crate::serve::region::{OwnershipLog, RegionLoop, messages::UavRecord};
+    use crate::hook::{Arrival, LoopEdits};
     let mut rig = rig(1000);
-    let log = OwnershipLog::default();
-    let record = |link: &str| UavRecord {
-        p: [13.0, 16.0],
-        v: [0.0, 0.0],
+    let arrival = |link: &str| Arrival {
+        id: "far".into(),
+        state: uav::UavState::at_rest(Vec2::new(13.0, 16.0)),
         goal: None,
         policy: "pd".into(),
         link: Some(link.into()),
         airborne: true,
     };
     // A simulator on another host: refused by default, as over REST, and allowed by the rules.
-    assert!(!RegionLoop::adopt(&mut rig.engine, "far", record("udp://10.0.0.5:19850"), "failover", &log));
-    assert!(!ids(&rig).contains(&"far".to_string()) && log.intervals().0.is_empty());
-    rig.engine.link_rules = Arc::new(links::LinkRules { udp_hosts: vec!["10.0.0.5".parse().unwrap()] });
-    assert!(RegionLoop::adopt(&mut rig.engine, "far", record("udp://10.0.0.5:19850"), "failover", &log));
+    assert!(!LoopEdits::adopt(&mut rig.engine, arrival("udp://10.0.0.5:19850")));
+    assert!(!ids(&rig).contains(&"far".to_string()));
+    rig.engine.set_link_rules(Arc::new(links::LinkRules { udp_hosts: vec!["10.0.0.5".parse().unwrap()] }));
+    assert!(LoopEdits::adopt(&mut rig.engine, arrival("udp://10.0.0.5:19850")));
     assert!(ids(&rig).contains(&"far".to_string()));
-    assert_eq!(log.intervals().0[0].came, "failover");
+    // Adopted, it is neither undone nor written (a region server never resumes saved state).
+    rig.engine.send_gap();
+    assert!(rig.writer.try_recv().is_err(), "an adoption is not saved");
 }

@@ -5,7 +5,7 @@
 
 use super::command::{ChangeError, Command, Outcome, Reply, Request};
 use super::durable::{Batch, FromWriter, ToWriter};
-use super::engine::{Engine, PendingBatch, STORAGE_STALL};
+use super::fleet_loop::{Engine, PendingBatch, STORAGE_STALL};
 use super::hook::{Arrival, Ownership};
 use super::linking::LinkFactory;
 use super::persist::{SavedState, SavedUav};
