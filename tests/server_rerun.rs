@@ -4,12 +4,12 @@
 mod support;
 
 use airroads::serve::Server;
-use airroads::serve::rerun_sink::{self, RerunMode};
 use airroads::serve::state::AppState;
 use rerun::components::{LineStrip2D, Position2D};
 use rerun::external::re_log_encoding::DecoderApp;
 use rerun::log::{Chunk, LogMsg};
 use rerun::{Clear, ComponentIdentifier, EntityPath, LineStrips2D, Points2D, Scalars, TimelineName};
+use rerun_sink::RerunMode;
 use std::collections::HashMap;
 use std::time::Duration;
 
@@ -143,7 +143,7 @@ async fn start_batching_above(mode: &str, batch_above: usize) -> Running {
     let server = Server::start(support::config(&support::small())).unwrap();
     let state = server.state().clone();
     let mode: RerunMode = mode.parse().unwrap();
-    let sink = rerun_sink::start(&mode, &state, batch_above).unwrap().expect("a sink");
+    let sink = rerun_sink::start(&mode, state.rerun_inputs(), batch_above).unwrap().expect("a sink");
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let serving = tokio::spawn(airroads::serve::serve(listener, server, async move {
         let _ = stopped.await;

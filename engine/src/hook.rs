@@ -1,6 +1,6 @@
 //! What a region server adds to the fleet loop ([`LoopHook`]): a hook is called at fixed points of
 //! every gap and tick, and a single server has none ([`NoHook`], whose calls do nothing). The loop
-//! knows nothing else of regions; the regions' side (`serve::region::RegionLoop`) knows the loop
+//! knows nothing else of regions; the regions' side (`regions::RegionLoop`) knows the loop
 //! only through this trait and [`LoopEdits`].
 
 use super::command::{ChangeError, Command};

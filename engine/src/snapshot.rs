@@ -6,6 +6,16 @@ use rayon::prelude::*;
 use serde::Serialize;
 use uav::{UavState, Vec2};
 
+/// Record flag of the binary stream and the regions' wire: within ε of its goal.
+pub const UAV_ARRIVED: u8 = 1;
+/// Record flag of the binary stream and the regions' wire: its link is lost.
+pub const UAV_LOST: u8 = 2;
+
+/// The status byte of a record ([`UavStatus`]'s number; docs/streams.md's table).
+pub fn status_code(status: UavStatus) -> u8 {
+    status as u8
+}
+
 /// What one UAV is doing, as the dashboard colours it. The numbers are the binary stream's status
 /// byte (a public format: docs/streams.md, `web/binary.js` and `scripts/airroads_stream.py` are
 /// checked against them); a new status takes the next number, none is ever renumbered.

@@ -5,10 +5,10 @@
 //! age of the foreign states its fleet used (p50/p99/max), the handovers, and its tick p50/p99.
 
 use crate::cli::BenchArgs;
-use airroads::serve::region::{self, RegionShared, ZenohOptions};
 use airroads::serve::{ServeConfig, Server};
 use anyhow::Context as _;
 use fleet::trunk::trunk_scenario;
+use regions::{self, RegionShared, ZenohOptions};
 use std::process::ExitCode;
 use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, Instant};
@@ -22,7 +22,7 @@ pub fn main(args: &BenchArgs) -> ExitCode {
 struct Running {
     server: Server,
     shared: RegionShared,
-    _link: region::RegionLink,
+    _link: regions::RegionLink,
 }
 
 fn free_endpoint(protocol: &str) -> anyhow::Result<String> {
@@ -59,13 +59,13 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let names: Vec<String> = (0..count).map(|k| format!("r{k}")).collect();
     let certs = std::env::temp_dir().join(format!("airroads-bench-regions-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&certs);
-    let request = region::certs::Request {
+    let request = regions::certs::Request {
         regions: names.clone(),
         roles: vec!["primary".into()],
         hosts: vec![],
         days: 1,
     };
-    region::certs::issue(&certs, &request)?;
+    regions::certs::issue(&certs, &request)?;
     let mut running = Vec::new();
     for k in 0..count {
         let name = format!("r{k}");
@@ -79,20 +79,20 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
             config_file: None,
             prefix: "bench".into(),
             transport: if args.zenoh_insecure {
-                region::secure::Transport::InsecureLoopback
+                regions::secure::Transport::InsecureLoopback
             } else {
-                let (cert, key) = region::certs::server_files(&certs, &name, "primary");
-                region::secure::Transport::Tls(region::secure::TlsFiles {
-                    ca: certs.join(region::certs::CA_CERT),
+                let (cert, key) = regions::certs::server_files(&certs, &name, "primary");
+                regions::secure::Transport::Tls(regions::secure::TlsFiles {
+                    ca: certs.join(regions::certs::CA_CERT),
                     cert,
                     key,
                 })
             },
             regions: names.clone(),
         };
-        let session = region::open(&options).await?;
-        let keys = region::tokens::RegionKeys::new(&options, &name);
-        let claim = region::tokens::claim(&session, &keys, &shared.failover, false).await?;
+        let session = regions::open(&options).await?;
+        let keys = regions::tokens::RegionKeys::new(&options, &name);
+        let claim = regions::tokens::claim(&session, &keys, &shared.failover, false).await?;
         let uavs = initial.uavs.len();
         let policies = policies::PolicyRegistry::standard(scenario.params.delta)?;
         policies.check(&args.policy).map_err(|e| anyhow::anyhow!("--policy {}: {e}", args.policy))?;
@@ -102,8 +102,8 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         config.max_uavs = n;
         config.region = Some(shared.clone());
         let server = Server::start(config)?;
-        let neighbours = region::neighbours_of(&scenario.road, &name).map_err(anyhow::Error::msg)?;
-        let link = region::start(session, &options, &shared, &neighbours, claim).await?;
+        let neighbours = regions::neighbours_of(&scenario.road, &name).map_err(anyhow::Error::msg)?;
+        let link = regions::start(session, &options, &shared, &neighbours, claim).await?;
         say!("  {name}: {uavs} UAVs, neighbours {}", neighbours.join(", "));
         running.push(Running { server, shared, _link: link });
     }

@@ -1,8 +1,8 @@
 //! `airroads certs`: the region network's certificate authority and one certificate per region and
-//! role (`airroads::serve::region::certs`).
+//! role (`regions::certs`).
 
 use crate::cli::CertsArgs;
-use airroads::serve::region::certs;
+use regions::certs;
 use std::path::Path;
 use std::process::ExitCode;
 

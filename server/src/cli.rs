@@ -114,10 +114,10 @@ pub struct ServeArgs {
     /// Log to Rerun (0.36.x viewer): `off`, `connect` (the local viewer), `connect=ADDR` (host:port or
     /// rerun+http://host:port/proxy), `save=FILE.rrd`, or `serve` (a gRPC server on 127.0.0.1:9876).
     #[arg(long, default_value = "off", value_name = "MODE")]
-    pub rerun: airroads::serve::rerun_sink::RerunMode,
+    pub rerun: rerun_sink::RerunMode,
     /// Above this many UAVs, log the fleet to Rerun as one batch per tick (`world/fleet`) and give
     /// only the UAVs selected with PUT /api/rerun/selection their own entities.
-    #[arg(long, value_name = "N", default_value_t = airroads::serve::rerun_sink::BATCH_ABOVE_UAVS)]
+    #[arg(long, value_name = "N", default_value_t = rerun_sink::BATCH_ABOVE_UAVS)]
     pub rerun_batch_above: usize,
     /// Fly the first N UAVs of the scenario as simulated Crazyflies (cfsim, in this process) through
     /// the real CRTP path over UDP, on ports from --cfsim-port up. Starts from the scenario, like

@@ -2,7 +2,6 @@
 
 use crate::cli::ServeArgs;
 use crate::run_cmd::{EXIT_INVALID, load_scenario_with};
-use airroads::serve::rerun_sink;
 use airroads::serve::{self, ServeConfig, Server};
 use anyhow::Context as _;
 use std::process::ExitCode;
@@ -174,12 +173,12 @@ fn keep_region(
     initial: &mut fleet::ValidScenario,
     name: &str,
     prefix: &str,
-) -> Result<serve::region::RegionShared, String> {
-    serve::region::neighbours_of(&initial.road, name).map_err(|e| format!("--region {e}"))?;
-    serve::region::check_prefix(prefix).map_err(|e| format!("--zenoh-prefix {e}"))?;
+) -> Result<regions::RegionShared, String> {
+    regions::neighbours_of(&initial.road, name).map_err(|e| format!("--region {e}"))?;
+    regions::check_prefix(prefix).map_err(|e| format!("--zenoh-prefix {e}"))?;
     let road = &initial.road;
     initial.uavs.retain(|u| road.region_of(road.locate(&u.start, None)).is_some_and(|r| r.name == name));
-    Ok(serve::region::RegionShared::new(name))
+    Ok(regions::RegionShared::new(name))
 }
 
 async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
@@ -227,7 +226,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
         if server.state().token.is_some() { "need the bearer token" } else { "open (no token)" }
     );
     // Rerun is optional: a failure to start it is reported and the server runs without it.
-    let sink = match rerun_sink::start(rerun, server.state(), args.rerun_batch_above) {
+    let sink = match rerun_sink::start(rerun, server.state().rerun_inputs(), args.rerun_batch_above) {
         Ok(sink) => {
             say!("  rerun      {rerun}");
             sink
@@ -258,8 +257,8 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
 }
 
 /// How this server joins the region network: QUIC with its certificate, or `--zenoh-insecure`.
-fn transport(args: &ServeArgs) -> Result<serve::region::secure::Transport, String> {
-    use serve::region::secure::{TlsFiles, Transport};
+fn transport(args: &ServeArgs) -> Result<regions::secure::Transport, String> {
+    use regions::secure::{TlsFiles, Transport};
     let transport = match (&args.zenoh_ca, &args.zenoh_cert, &args.zenoh_key) {
         (Some(ca), Some(cert), Some(key)) => {
             Transport::Tls(TlsFiles { ca: ca.clone(), cert: cert.clone(), key: key.clone() })
@@ -272,13 +271,13 @@ fn transport(args: &ServeArgs) -> Result<serve::region::secure::Transport, Strin
         }
     };
     let endpoints = args.zenoh_listen.iter().chain(&args.zenoh_connect);
-    serve::region::secure::check_endpoints(&transport, endpoints)?;
+    regions::secure::check_endpoints(&transport, endpoints)?;
     Ok(transport)
 }
 
-fn zenoh_options(args: &ServeArgs, road: &roads::RoadLayout) -> anyhow::Result<serve::region::ZenohOptions> {
+fn zenoh_options(args: &ServeArgs, road: &roads::RoadLayout) -> anyhow::Result<regions::ZenohOptions> {
     let transport = transport(args).map_err(anyhow::Error::msg)?;
-    Ok(serve::region::ZenohOptions {
+    Ok(regions::ZenohOptions {
         listen: args.zenoh_listen.clone(),
         connect: args.zenoh_connect.clone(),
         config_file: args.zenoh_config.clone(),
@@ -291,20 +290,20 @@ fn zenoh_options(args: &ServeArgs, road: &roads::RoadLayout) -> anyhow::Result<s
 /// Opens the region's Zenoh session (`--region`, `--standby-for`) and settles who owns the region.
 async fn claim_region(
     args: &ServeArgs,
-    shared: &serve::region::RegionShared,
+    shared: &regions::RegionShared,
     road: &roads::RoadLayout,
-) -> anyhow::Result<(zenoh::Session, serve::region::tokens::Claim)> {
+) -> anyhow::Result<(zenoh::Session, regions::tokens::Claim)> {
     let options = zenoh_options(args, road)?;
-    if options.transport == serve::region::secure::Transport::InsecureLoopback {
+    if options.transport == regions::secure::Transport::InsecureLoopback {
         tracing::warn!(
             "--zenoh-insecure: the region network is plain TCP without authentication; any process on \
              this host can publish states, hand over UAVs and command this region"
         );
     }
-    let session = serve::region::open(&options).await?;
-    let keys = serve::region::tokens::RegionKeys::new(&options, &shared.name);
+    let session = regions::open(&options).await?;
+    let keys = regions::tokens::RegionKeys::new(&options, &shared.name);
     let standby = args.standby_for.is_some();
-    let claim = serve::region::tokens::claim(&session, &keys, &shared.failover, standby).await?;
+    let claim = regions::tokens::claim(&session, &keys, &shared.failover, standby).await?;
     Ok((session, claim))
 }
 
@@ -312,21 +311,20 @@ async fn claim_region(
 async fn start_region(
     args: &ServeArgs,
     session: zenoh::Session,
-    claim: serve::region::tokens::Claim,
-    shared: &serve::region::RegionShared,
+    claim: regions::tokens::Claim,
+    shared: &regions::RegionShared,
     app: &serve::state::AppState,
-) -> anyhow::Result<(serve::region::RegionLink, zenoh::query::Queryable<()>)> {
+) -> anyhow::Result<(regions::RegionLink, zenoh::query::Queryable<()>)> {
     let road = app.road.borrow().layout.clone();
     let options = zenoh_options(args, &road)?;
     let road = roads::Road::new(road).context("the served road")?;
-    let neighbours = serve::region::neighbours_of(&road, &shared.name).map_err(anyhow::Error::msg)?;
-    let link = serve::region::start(session.clone(), &options, shared, &neighbours, claim).await?;
-    let federation =
-        serve::region::federation::Federation::new(session.clone(), &options.prefix, &shared.name);
+    let neighbours = regions::neighbours_of(&road, &shared.name).map_err(anyhow::Error::msg)?;
+    let link = regions::start(session.clone(), &options, shared, &neighbours, claim).await?;
+    let federation = regions::federation::Federation::new(session.clone(), &options.prefix, &shared.name);
     let queryable = serve::federate::answer_queries(&federation, &session, app.clone()).await?;
     let _ = shared.federation.set(federation);
     tokio::spawn(serve::road_follow::follow(app.clone()));
-    let key = serve::region::state_key(&options.prefix, &shared.name);
+    let key = regions::state_key(&options.prefix, &shared.name);
     let role = if shared.failover.is_owner() { "owner" } else { "standby" };
     say!(
         "  region     {} as {role} ({} UAVs), states on {key}",

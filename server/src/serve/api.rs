@@ -384,7 +384,7 @@ async fn put_rerun_selection(
     State(app): State<AppState>,
     ApiJson(body): ApiJson<SelectionBody>,
 ) -> Result<Json<Value>, ApiError> {
-    use super::rerun_sink::MAX_SELECTED;
+    use rerun_sink::MAX_SELECTED;
     if body.ids.len() > MAX_SELECTED {
         return Err(ApiError::invalid("ids", format!("at most {MAX_SELECTED} UAVs, got {}", body.ids.len())));
     }

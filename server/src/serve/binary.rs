@@ -6,7 +6,7 @@
 //! the records inside it out of the shared frame ([`filter_bbox`]) without decoding anything else.
 
 use axum::body::Bytes;
-use engine::snapshot::{Snapshot, UavStatus};
+use engine::snapshot::Snapshot;
 use serde_json::json;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -29,15 +29,7 @@ pub const ROSTER_HEADER_BYTES: usize = 8;
 pub const FLAG_PAUSED: u16 = 1;
 /// Tick-frame flag: only the UAVs inside the client's viewport are in the frame.
 pub const FLAG_FILTERED: u16 = 2;
-/// Record flag: within ε of its goal.
-pub const UAV_ARRIVED: u8 = 1;
-/// Record flag: its link is lost.
-pub const UAV_LOST: u8 = 2;
-
-/// The status byte of a record ([`UavStatus`]'s number; docs/streams.md's table).
-pub fn status_code(status: UavStatus) -> u8 {
-    status as u8
-}
+pub use engine::snapshot::{UAV_ARRIVED, UAV_LOST, status_code};
 
 /// One snapshot in the binary format.
 #[derive(Debug, Clone, Default)]
@@ -196,6 +188,7 @@ pub fn filter_bbox(body: &[u8], bbox: Bbox) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use engine::snapshot::UavStatus;
 
     /// The quoted names of the list that follows `start` in `text`, up to its closing bracket.
     fn quoted_list(text: &str, start: &str) -> Vec<String> {

@@ -16,7 +16,6 @@
 //! old one) and the answer names the regions that loaded it.
 
 use super::error::ApiError;
-use super::region::federation::{Answer, ApiQuery, ApiReply, Federation};
 use super::state::AppState;
 use axum::Json;
 use axum::http::StatusCode;
@@ -24,8 +23,9 @@ use axum::response::{IntoResponse, Response};
 use engine::command::{Command, Outcome};
 use engine::fleet_loop::now_ms;
 use fleet::{Scenario, ValidScenario};
+use regions::federation::{Answer, ApiQuery, ApiReply, Federation, Kind, Step};
 use roads::{Road, RoadLayout};
-use serde::{Deserialize, Serialize};
+
 use serde_json::{Value, json};
 use std::time::Duration;
 
@@ -33,31 +33,6 @@ use std::time::Duration;
 pub const SWITCH_DELAY: Duration = Duration::from_millis(500);
 /// How long a region may take to answer a commit (the delay, one tick, the disk).
 pub const COMMIT_TIMEOUT: Duration = Duration::from_secs(5);
-
-/// What is deployed.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Kind {
-    /// A road layout (`PUT /api/road`'s body).
-    Road,
-    /// A scenario (`POST /api/scenario`'s body).
-    Scenario,
-}
-
-/// One step of a deployment, carried in [`ApiQuery::deploy`].
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Step {
-    /// `prepare` (check only) or `commit` (switch at `at_ms`).
-    pub commit: bool,
-    /// What is deployed.
-    pub kind: Kind,
-    /// The request's body as sent by the operator.
-    pub body: String,
-    /// The instant to switch at (ms since the Unix epoch; a commit only).
-    #[serde(default)]
-    pub at_ms: u64,
-}
 
 /// The region names of a layout, in order.
 fn names(layout: &RoadLayout) -> Vec<String> {
@@ -91,7 +66,7 @@ fn check_same_regions(old: &Road, new: &Road) -> Result<(), ApiError> {
         return Err(ApiError::invalid("regions", message));
     }
     for name in &before {
-        let (a, b) = (super::region::neighbours_of(old, name), super::region::neighbours_of(new, name));
+        let (a, b) = (regions::neighbours_of(old, name), regions::neighbours_of(new, name));
         if a != b {
             let message = format!(
                 "the neighbours of region `{name}` would change ({} → {}): restart its servers for that",
@@ -237,15 +212,9 @@ pub async fn coordinate(
     let old_layout = app.road.borrow().layout.clone();
     let regions = names(&old_layout);
     let prepare = Step { commit: false, kind, body: body.clone(), at_ms: 0 };
-    for (region, answer) in everywhere(
-        app,
-        federation,
-        &regions,
-        &prepare,
-        super::region::federation::ASK_TIMEOUT,
-        &authorization,
-    )
-    .await
+    for (region, answer) in
+        everywhere(app, federation, &regions, &prepare, regions::federation::ASK_TIMEOUT, &authorization)
+            .await
     {
         let ok = matches!(&answer, Answer::Replied(r) if (200..300).contains(&r.status));
         if !ok {
@@ -338,14 +307,5 @@ mod tests {
         let reordered =
             check_same_regions(&old, &road(&[("b", 0, 1), ("a", 2, 3), ("c", 4, 5)])).unwrap_err();
         assert!(reordered.message.contains("neighbours of region `a`"), "{}", reordered.message);
-    }
-
-    #[test]
-    fn steps_round_trip_as_json_and_unknown_fields_are_refused() {
-        let step = Step { commit: true, kind: Kind::Scenario, body: "{}".into(), at_ms: 17 };
-        let text = serde_json::to_string(&step).unwrap();
-        assert!(text.contains(r#""kind":"scenario""#), "{text}");
-        assert_eq!(serde_json::from_str::<Step>(&text).unwrap(), step);
-        assert!(serde_json::from_str::<Step>(&text.replacen('{', r#"{"x":1,"#, 1)).is_err());
     }
 }

@@ -14,13 +14,13 @@
 
 use super::api;
 use super::error::{ApiError, MAX_BODY_BYTES};
-use super::region::federation::{Answer, ApiQuery, ApiReply, Federation, MAX_CARRIED_BYTES};
 use super::state::AppState;
 use axum::body::{Body, Bytes};
 use axum::extract::{Request, State};
 use axum::http::{Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
+use regions::federation::{Answer, ApiQuery, ApiReply, Federation, MAX_CARRIED_BYTES};
 use serde_json::{Value, json};
 use std::sync::Arc;
 use std::time::Duration;
@@ -49,7 +49,7 @@ enum Route {
     /// `POST /api/fleet/...`: here, then everywhere.
     Fleet,
     /// `PUT /api/road` or `POST /api/scenario`: every region at once, or none (`deploy`).
-    Deploy(super::deploy::Kind),
+    Deploy(regions::federation::Kind),
     /// Here only.
     Local,
 }
@@ -63,8 +63,8 @@ fn route(method: &Method, path: &str) -> Route {
         ("GET", "/api/state") => Route::State,
         ("GET", "/api/uavs") => Route::List,
         ("POST", "/api/uavs") => Route::Add,
-        ("PUT", "/api/road") => Route::Deploy(super::deploy::Kind::Road),
-        ("POST", "/api/scenario") => Route::Deploy(super::deploy::Kind::Scenario),
+        ("PUT", "/api/road") => Route::Deploy(regions::federation::Kind::Road),
+        ("POST", "/api/scenario") => Route::Deploy(regions::federation::Kind::Scenario),
         ("POST", "/api/fleet/pause" | "/api/fleet/resume" | "/api/fleet/land" | "/api/fleet/stop") => {
             Route::Fleet
         }
@@ -371,7 +371,7 @@ mod tests {
         assert_eq!(route(&Method::GET, "/api/state"), Route::State);
         assert_eq!(route(&Method::POST, "/api/fleet/stop"), Route::Fleet);
         assert_eq!(route(&Method::GET, "/api/metrics"), Route::Local);
-        assert_eq!(route(&Method::PUT, "/api/road"), Route::Deploy(super::super::deploy::Kind::Road));
+        assert_eq!(route(&Method::PUT, "/api/road"), Route::Deploy(regions::federation::Kind::Road));
         assert_eq!(route(&Method::GET, "/api/road"), Route::Local);
     }
 

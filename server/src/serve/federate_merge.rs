@@ -3,12 +3,12 @@
 //! every region. A region that did not answer is named, never silently left out.
 
 use super::error::ApiError;
-use super::region::federation::Answer;
 use super::state::AppState;
 use axum::Json;
 use axum::http::{StatusCode, Uri, header};
 use axum::response::{IntoResponse, Response};
 use engine::snapshot::Snapshot;
+use regions::federation::Answer;
 use serde_json::{Value, json};
 
 /// The header of a merged `GET /api/uavs` naming the regions that did not answer (comma-separated).

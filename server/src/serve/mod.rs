@@ -14,11 +14,6 @@ mod federate_merge;
 pub mod guard;
 pub mod listener;
 pub mod openapi;
-pub mod region;
-pub mod rerun_fleet;
-mod rerun_log;
-pub mod rerun_sink;
-mod rerun_viewer;
 pub mod road_follow;
 pub mod state;
 mod web;
@@ -80,7 +75,7 @@ pub struct ServeConfig {
     pub link_rules: links::LinkRules,
     /// The region this server flies (`--region`) and what its loop shares with Zenoh; None: the
     /// whole road, no Zenoh.
-    pub region: Option<region::RegionShared>,
+    pub region: Option<regions::RegionShared>,
 }
 
 impl ServeConfig {
@@ -235,7 +230,7 @@ impl Server {
         let mut engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
         engine.set_link_rules(link_rules.clone());
         if let Some(region) = &region {
-            let hook = region::RegionLoop::new(region.clone(), link_rules.clone())
+            let hook = regions::RegionLoop::new(region.clone(), link_rules.clone())
                 .context("the region's loop side was taken already")?;
             engine.set_hook(Box::new(hook));
         }

@@ -3,9 +3,9 @@
 //! the region's queryable) and takes it (`Command::FollowRoad`, the one change a standby accepts).
 //! So a takeover flies on with the road the owner last flew, whatever was changed since the start.
 
-use super::region::federation::{Answer, ApiQuery};
 use super::state::AppState;
 use engine::command::Command;
+use regions::federation::{Answer, ApiQuery};
 use std::time::Duration;
 
 /// How often a standby compares its owner's road version with the one it took.

@@ -135,11 +135,11 @@ pub struct AppState {
     /// Validations of large inputs (roads, scenarios) run one at a time, off the async workers.
     pub validation: Arc<Semaphore>,
     /// The region this server flies and its neighbours' UAVs (`--region`; None without).
-    pub region: Option<super::region::RegionShared>,
+    pub region: Option<regions::RegionShared>,
     /// Motion-capture counters (all zero without `--mocap`).
     pub mocap: Arc<engine::mocap::MocapCounters>,
     /// What the Rerun sink has done.
-    pub rerun: Arc<super::rerun_sink::RerunCounters>,
+    pub rerun: Arc<rerun_sink::RerunCounters>,
     /// The UAVs that keep their own Rerun entities in a batched fleet (`/api/rerun/selection`).
     pub rerun_selection: Arc<watch::Sender<Arc<[String]>>>,
 }
@@ -150,6 +150,17 @@ pub fn body_budget() -> Arc<Semaphore> {
 }
 
 impl AppState {
+    /// What a Rerun sink reads from this server (`rerun_sink::start`).
+    pub fn rerun_inputs(&self) -> rerun_sink::Inputs {
+        rerun_sink::Inputs {
+            snapshots: self.snapshots.clone(),
+            road: self.road.clone(),
+            metrics: self.metrics.clone(),
+            selection: self.rerun_selection.subscribe(),
+            counters: self.rerun.clone(),
+        }
+    }
+
     /// Sends a land or stop `command` ahead of every queued change, wakes the loop, and waits for
     /// its outcome (land and stop are never persisted, so they never wait on the disk).
     pub async fn apply_urgent(&self, command: Command) -> Result<Outcome, ApiError> {

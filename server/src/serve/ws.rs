@@ -117,7 +117,7 @@ async fn send_binary(
     b: BinaryFrame,
     bbox: Option<Bbox>,
     seen: &mut Seen,
-    elsewhere: Option<&super::region::elsewhere::Elsewhere>,
+    elsewhere: Option<&regions::elsewhere::Elsewhere>,
 ) -> Result<(), bool> {
     if b.roster_version != seen.0 {
         send(socket, Message::Binary(b.roster)).await?;

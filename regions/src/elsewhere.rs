@@ -4,7 +4,7 @@
 //! fleet. Nothing here is decoded or used by the fleet loop, and a message is copied out of Zenoh's
 //! buffers only when a stream client is sent it (once, whatever the number of clients).
 
-use axum::body::Bytes;
+use bytes::Bytes;
 use std::collections::HashMap;
 use std::sync::{Mutex, MutexGuard, OnceLock, PoisonError};
 use std::time::{Duration, Instant};

@@ -6,6 +6,9 @@
 //! Nothing here can make the fleet loop wait: the loop replaces a `watch` value with each snapshot
 //! (the publishing task sends the newest one it has, skipping any it was too slow for) and copies
 //! the foreign UAVs out of a [`ForeignTable`] that the subscriber's callback fills.
+//!
+//! The crate plugs into the fleet loop only through the engine's hook ([`RegionLoop`]); the HTTP
+//! side of the regions (forwarding, merged reads, deployments) is `airroads::serve::federate`.
 
 pub mod ages;
 pub mod certs;

@@ -2,7 +2,7 @@
 //! viewer goes away, and nothing is logged while it is not connected, so the gRPC client's queue
 //! never fills and the sink thread never blocks on it.
 
-use super::rerun_sink::builder;
+use super::builder;
 use anyhow::Context as _;
 use rerun::RecordingStream;
 use rerun::external::re_uri::RedapUri;

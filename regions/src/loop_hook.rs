@@ -178,7 +178,7 @@ impl LoopHook for RegionLoop {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::serve::region::messages::UavRecord;
+    use crate::messages::UavRecord;
     use engine::hook::NoHook;
 
     /// The loop's edits, played by the test: it adopts when told to.

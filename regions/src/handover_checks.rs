@@ -3,7 +3,7 @@
 //! and is counted by name (`peer_refused`).
 
 use super::{Handover, MAX_RESERVATIONS_PER_SENDER, UavRecord};
-use crate::serve::region::screen::PeerRefusals;
+use crate::screen::PeerRefusals;
 use fleet::Fleet;
 use links::LinkRules;
 

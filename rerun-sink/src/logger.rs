@@ -3,8 +3,8 @@
 //! Above `batch_above` UAVs the fleet is one batch (`rerun_fleet`) and only the selected UAVs get
 //! their own entities.
 
-use super::rerun_fleet::FleetLog;
-use super::rerun_sink::{SinkStats, TICK_TIMELINE, TIME_TIMELINE, TRAIL_EVERY_TICKS, TRAIL_POINTS};
+use super::fleet_log::FleetLog;
+use super::{SinkStats, TICK_TIMELINE, TIME_TIMELINE, TRAIL_EVERY_TICKS, TRAIL_POINTS};
 use engine::fleet_loop::RoadView;
 use engine::snapshot::{ReservationSnapshot, Snapshot, UavSnapshot, UavStatus};
 use engine::stats::LoopMetrics;

@@ -163,7 +163,7 @@ impl ForeignTable {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::serve::region::wire::{self, WireUav};
+    use crate::wire::{self, WireUav};
     use std::time::Duration;
 
     fn states(region: &str, ids: &[&str]) -> RegionStates {

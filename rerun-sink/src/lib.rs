@@ -16,13 +16,15 @@
 //! the UAVs selected with `PUT /api/rerun/selection` (the dashboard sends its selection) get the
 //! per-UAV entities and series above. What the sink logged and skipped is `rerun` in `/api/metrics`.
 
-use super::rerun_log::Logger;
-use super::rerun_viewer::Viewer;
-use super::state::AppState;
+mod fleet_log;
+mod logger;
+mod viewer;
+
 use anyhow::Context as _;
 use engine::fleet_loop::RoadView;
 use engine::snapshot::Snapshot;
 use engine::stats::LoopMetrics;
+use logger::Logger;
 use rerun::external::re_uri::RedapUri;
 use rerun::log::ChunkBatcherConfig;
 use rerun::sink::{FileSink, FileSinkOptions, LogSink};
@@ -33,6 +35,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
 use std::time::Duration;
 use tokio::sync::{oneshot, watch};
+use viewer::Viewer;
 
 /// The Rerun application id of the recordings.
 pub const APPLICATION_ID: &str = "airroads";
@@ -196,7 +199,7 @@ impl RerunSink {
 /// than `batch_above` UAVs. Errors (a file that cannot be created, a port in use) are returned; a
 /// missing viewer for `connect` is not an error: the sink warns, keeps retrying and skips
 /// snapshots until one listens.
-pub fn start(mode: &RerunMode, state: &AppState, batch_above: usize) -> anyhow::Result<Option<RerunSink>> {
+pub fn start(mode: &RerunMode, inputs: Inputs, batch_above: usize) -> anyhow::Result<Option<RerunSink>> {
     let output = match mode {
         RerunMode::Off => return Ok(None),
         RerunMode::Connect(url) => {
@@ -227,16 +230,10 @@ pub fn start(mode: &RerunMode, state: &AppState, batch_above: usize) -> anyhow::
             Output::Stream(builder().serve_grpc_opts("127.0.0.1", port, options)?)
         }
     };
-    let channels = Channels {
-        snapshots: state.snapshots.clone(),
-        road: state.road.clone(),
-        metrics: state.metrics.clone(),
-        selection: state.rerun_selection.subscribe(),
-        counters: state.rerun.clone(),
-    };
+    let channels = inputs;
     let (stop, stopped) = oneshot::channel();
     let (done_tx, done) = std::sync::mpsc::channel();
-    state.rerun.active.store(true, Relaxed);
+    channels.counters.active.store(true, Relaxed);
     std::thread::Builder::new().name("rerun-sink".into()).spawn(move || {
         let counters = channels.counters.clone();
         let stats = run(output, channels, Logger::new(batch_above), stopped);
@@ -248,27 +245,33 @@ pub fn start(mode: &RerunMode, state: &AppState, batch_above: usize) -> anyhow::
 }
 
 /// The recording's builder: application id and name.
-pub(super) fn builder() -> RecordingStreamBuilder {
+pub(crate) fn builder() -> RecordingStreamBuilder {
     RecordingStreamBuilder::new(APPLICATION_ID).recording_name("airroads serve")
 }
 
 /// What the sink thread reads, and where it reports.
-struct Channels {
-    snapshots: watch::Receiver<Arc<Snapshot>>,
-    road: watch::Receiver<Arc<RoadView>>,
-    metrics: watch::Receiver<Arc<LoopMetrics>>,
-    selection: watch::Receiver<Arc<[String]>>,
-    counters: Arc<RerunCounters>,
+/// What the sink reads (the engine's channels and the selection) and where it counts.
+pub struct Inputs {
+    /// The snapshot after each tick.
+    pub snapshots: watch::Receiver<Arc<Snapshot>>,
+    /// The road, after each change.
+    pub road: watch::Receiver<Arc<RoadView>>,
+    /// The loop's statistics.
+    pub metrics: watch::Receiver<Arc<LoopMetrics>>,
+    /// The UAVs that keep their own entities in a batched fleet (`PUT /api/rerun/selection`).
+    pub selection: watch::Receiver<Arc<[String]>>,
+    /// What the sink did, for `GET /api/metrics`.
+    pub counters: Arc<RerunCounters>,
 }
 
 /// The sink thread: logs every snapshot it gets to until `stopped` fires or the fleet loop ends.
 fn run(
     mut output: Output,
-    channels: Channels,
+    channels: Inputs,
     mut logger: Logger,
     mut stopped: oneshot::Receiver<()>,
 ) -> SinkStats {
-    let Channels { mut snapshots, road, metrics, mut selection, counters } = channels;
+    let Inputs { mut snapshots, road, metrics, mut selection, counters } = channels;
     let mut selected: HashSet<String> = selection.borrow_and_update().iter().cloned().collect();
     let runtime = match tokio::runtime::Builder::new_current_thread().build() {
         Ok(r) => r,

@@ -1,5 +1,5 @@
 //! The payload a region publishes every tick (docs/regions.md): little-endian, a header
-//! then one record per UAV. A record is the binary stream's 40-byte record (`super::super::binary`)
+//! then one record per UAV. A record is the binary stream's 40-byte record (`airroads::serve::binary`)
 //! with its roster index replaced by the UAV's id (a region's receivers have no roster): `u16` id
 //! length, the id (UTF-8), then `f32` p, v, u and target (x, y each), `u8` status (the stream's
 //! codes), `u8` flags (1 arrived, 2 lost, 4 ghost), `u16` unheard: how long before the message's
@@ -10,8 +10,8 @@
 //! Decoding never panics: truncated, oversized or garbage input, an unknown version or kind, ids or
 //! a region name that are not valid, and positions or velocities that are not finite are errors.
 
-use super::super::binary::{UAV_ARRIVED, UAV_LOST, status_code};
 use engine::snapshot::Snapshot;
+use engine::snapshot::{UAV_ARRIVED, UAV_LOST, status_code};
 use thiserror::Error;
 use uav::UavState;
 

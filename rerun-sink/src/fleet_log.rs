@@ -4,7 +4,7 @@
 //! labels, logged again only when the roster (the ids in snapshot order) changes: Rerun joins them
 //! to later positions by instance index.
 
-use super::rerun_log::{color, xy};
+use super::logger::{color, xy};
 use engine::snapshot::Snapshot;
 use rerun::{Arrows2D, Clear, Color, Points2D, RecordingStream, RecordingStreamResult};
 

@@ -48,13 +48,38 @@ pub struct ApiQuery {
     pub uav: Option<String>,
     /// A step of a deployment-wide road or scenario (`serve::deploy`) instead of a request.
     #[serde(default)]
-    pub deploy: Option<crate::serve::deploy::Step>,
+    pub deploy: Option<Step>,
     /// The operator's `Authorization` header, checked by the region that applies the request.
     #[serde(default)]
     pub authorization: Option<String>,
     /// The operator's address, for the applying region's audit log.
     #[serde(default)]
     pub client: Option<String>,
+}
+
+/// What is deployed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Kind {
+    /// A road layout (`PUT /api/road`'s body).
+    Road,
+    /// A scenario (`POST /api/scenario`'s body).
+    Scenario,
+}
+
+/// One step of a deployment, carried in [`ApiQuery::deploy`] (the HTTP side's `serve::deploy` runs them).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Step {
+    /// `prepare` (check only) or `commit` (switch at `at_ms`).
+    pub commit: bool,
+    /// What is deployed.
+    pub kind: Kind,
+    /// The request's body as sent by the operator.
+    pub body: String,
+    /// The instant to switch at (ms since the Unix epoch; a commit only).
+    #[serde(default)]
+    pub at_ms: u64,
 }
 
 /// A region's answer: the HTTP status and body its API gave.
@@ -233,5 +258,14 @@ mod tests {
         assert_eq!(asker_of("airroads", "west", "airroads/region/west/api/east"), Some("east"));
         assert_eq!(asker_of("airroads", "west", "airroads/region/west/api/"), None);
         assert_eq!(asker_of("airroads", "west", "airroads/region/east/api/west"), None);
+    }
+
+    #[test]
+    fn steps_round_trip_as_json_and_unknown_fields_are_refused() {
+        let step = Step { commit: true, kind: Kind::Scenario, body: "{}".into(), at_ms: 17 };
+        let text = serde_json::to_string(&step).unwrap();
+        assert!(text.contains(r#""kind":"scenario""#), "{text}");
+        assert_eq!(serde_json::from_str::<Step>(&text).unwrap(), step);
+        assert!(serde_json::from_str::<Step>(&text.replacen('{', r#"{"x":1,"#, 1)).is_err());
     }
 }
