@@ -251,7 +251,7 @@ async fn motion_capture_poses_reach_their_crazyflie_as_external_positions() {
     use engine::mocap::ingest;
     use std::sync::atomic::Ordering::Relaxed;
     let (scenario, sims) = with_sims(shipped("lab3.json"));
-    let server = airroads::serve::Server::start(config(&scenario)).unwrap();
+    let server = airroads_server::serve::Server::start(config(&scenario)).unwrap();
     let socket = tokio::net::UdpSocket::bind("127.0.0.1:0").await.unwrap();
     let mocap_addr = socket.local_addr().unwrap();
     // The server's own counters, as `/api/metrics` shows them (`serve --mocap` passes the same).

@@ -3,8 +3,8 @@
 
 mod support;
 
-use airroads::serve::Server;
-use airroads::serve::state::AppState;
+use airroads_server::serve::Server;
+use airroads_server::serve::state::AppState;
 use rerun::components::{LineStrip2D, Position2D};
 use rerun::external::re_log_encoding::DecoderApp;
 use rerun::log::{Chunk, LogMsg};
@@ -145,7 +145,7 @@ async fn start_batching_above(mode: &str, batch_above: usize) -> Running {
     let mode: RerunMode = mode.parse().unwrap();
     let sink = rerun_sink::start(&mode, state.rerun_inputs(), batch_above).unwrap().expect("a sink");
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let serving = tokio::spawn(airroads::serve::serve(listener, server, async move {
+    let serving = tokio::spawn(airroads_server::serve::serve(listener, server, async move {
         let _ = stopped.await;
     }));
     Running { addr, state, sink, stop, serving }

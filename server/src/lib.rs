@@ -1,6 +1,6 @@
-//! The airroads server library: `airroads serve` (fleet loop, REST API, WebSocket stream,
-//! persistence). The binary adds the command line and the headless subcommands.
+//! The airroads server as a library: [`serve::Server::start`] wires the fleet loop (the `engine`
+//! crate), the regions (`regions`) and the HTTP side (REST API, streams, guards, audit; this
+//! crate), and [`serve::serve`] runs it on a bound listener. The `airroads` command (`cli/`) adds the
+//! command line; tests start it in-process.
 
-pub mod cfsim_fleet;
-pub mod firmware_fleet;
 pub mod serve;

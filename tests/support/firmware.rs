@@ -83,7 +83,7 @@ impl Rig {
         }
         let road = scenario(&json).road;
         let policies = policies::PolicyRegistry::standard(5.0).map_err(|e| e.to_string())?;
-        let config = airroads::serve::ServeConfig::new(
+        let config = airroads_server::serve::ServeConfig::new(
             fleet::FleetConfig::default(),
             policies,
             "rl".into(),

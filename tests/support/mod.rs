@@ -7,7 +7,7 @@ pub mod crazyflies;
 pub mod firmware;
 pub mod procs;
 
-use airroads::serve::{ServeConfig, Server};
+use airroads_server::serve::{ServeConfig, Server};
 use serde_json::Value;
 use std::net::SocketAddr;
 use std::path::PathBuf;
@@ -64,7 +64,7 @@ pub struct Running {
     /// Its address.
     pub addr: SocketAddr,
     /// Its shared handler state (to look inside, or to stage a failure).
-    pub state: airroads::serve::state::AppState,
+    pub state: airroads_server::serve::state::AppState,
     stop: Option<oneshot::Sender<()>>,
     task: Option<tokio::task::JoinHandle<anyhow::Result<()>>>,
 }
@@ -82,7 +82,7 @@ pub async fn start(config: ServeConfig) -> Running {
     let server = Server::start(config).unwrap();
     let state = server.state().clone();
     let (stop, stopped) = oneshot::channel::<()>();
-    let task = tokio::spawn(airroads::serve::serve(listener, server, async move {
+    let task = tokio::spawn(airroads_server::serve::serve(listener, server, async move {
         let _ = stopped.await;
     }));
     Running { addr, state, stop: Some(stop), task: Some(task) }
@@ -145,7 +145,7 @@ pub async fn raw(
     body: Option<&str>,
     headers: &[(&str, &str)],
 ) -> (u16, String) {
-    airroads::serve::client::request(addr, method, path, body, headers).await.unwrap()
+    airroads_server::serve::client::request(addr, method, path, body, headers).await.unwrap()
 }
 
 /// A response read off the wire: status, headers (names lower-cased) and body.

@@ -5,8 +5,10 @@
 //! metrics a headless run records. Prints tick p50/p99 and the mean time of each stage per tick and
 //! per UAV, then how the per-UAV cost of the largest fleet compares with the smallest's.
 
+use flights::say;
+
+use crate::BenchArgs;
 use crate::bench_fleet::sim_fleet;
-use crate::cli::BenchArgs;
 use engine::stats::percentiles;
 use fleet::trunk::trunk_scenario;
 use fleet::{MetricsRecorder, StageTimes};

@@ -6,7 +6,9 @@
 //! an idle machine; the consoles' loop-rate warnings), the physics rate, arrivals and the true
 //! margins.
 
-use crate::cli::BenchArgs;
+use flights::say;
+
+use crate::BenchArgs;
 use std::path::Path;
 use std::process::ExitCode;
 
@@ -67,8 +69,8 @@ fn measure(cf2: &Path, n: usize, policy: &str) -> anyhow::Result<()> {
         paths: false,
     };
     say!("== {n} Crazyflie firmware processes, {} ({policy})", scenario.name);
-    let outcome = crate::run_cmd::run_on_firmware(&scenario, options, policies, cf2)?;
-    crate::run_cmd::print_summary(&outcome.metrics, outcome.policy_fallbacks, &outcome.stalls);
+    let outcome = flights::run_on_firmware(&scenario, options, policies, cf2)?;
+    flights::print_summary(&outcome.metrics, outcome.policy_fallbacks, &outcome.stalls);
     Ok(())
 }
 

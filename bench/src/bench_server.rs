@@ -2,10 +2,12 @@
 //! one run: no clients; N WebSocket clients of which a tenth never read (stalled); the same plus
 //! REST clients. Prints tick duration percentiles per phase and REST latency percentiles.
 
-use crate::cli::BenchArgs;
-use crate::run_cmd::load_scenario;
-use airroads::serve::{ServeConfig, Server, client};
+use flights::say;
+
+use crate::BenchArgs;
+use airroads_server::serve::{ServeConfig, Server, client};
 use engine::stats::percentiles;
+use flights::load_scenario;
 use futures_util::StreamExt;
 use std::net::SocketAddr;
 use std::process::ExitCode;
@@ -18,7 +20,7 @@ const REST_WORKERS: usize = 8;
 
 /// Runs the benchmark.
 pub fn main(args: &BenchArgs) -> ExitCode {
-    crate::bench::block_on(bench(args))
+    crate::block_on(bench(args))
 }
 
 /// What one phase measured.
@@ -37,7 +39,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let initial = match (&args.scenario, args.crowd) {
         (Some(path), _) => load_scenario(path).map_err(anyhow::Error::msg)?,
         (None, Some(n)) => fleet::stress::crowd_scenario(usize::try_from(n)?).validate()?,
-        (None, None) => airroads::serve::demo_scenario()?,
+        (None, None) => airroads_server::serve::demo_scenario()?,
     };
     let policies = policies::PolicyRegistry::standard(initial.params.delta)?;
     let uavs = initial.uavs.len();
@@ -50,7 +52,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let server = Server::start(config)?;
     let state = server.state().clone();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let http = tokio::spawn(airroads::serve::serve(listener, server, async move {
+    let http = tokio::spawn(airroads_server::serve::serve(listener, server, async move {
         let _ = stopped.await;
     }));
     let seconds = Duration::from_secs_f64(args.seconds.max(1.0));

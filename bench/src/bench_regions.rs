@@ -4,8 +4,10 @@
 //! a warm-up it measures for `--seconds`: per region the Zenoh bytes per second it publishes, the
 //! age of the foreign states its fleet used (p50/p99/max), the handovers, and its tick p50/p99.
 
-use crate::cli::BenchArgs;
-use airroads::serve::{ServeConfig, Server};
+use flights::say;
+
+use crate::BenchArgs;
+use airroads_server::serve::{ServeConfig, Server};
 use anyhow::Context as _;
 use fleet::trunk::trunk_scenario;
 use regions::{self, RegionShared, ZenohOptions};
@@ -15,7 +17,7 @@ use std::time::{Duration, Instant};
 
 /// Runs the benchmark.
 pub fn main(args: &BenchArgs) -> ExitCode {
-    crate::bench::block_on(bench(args))
+    crate::block_on(bench(args))
 }
 
 /// One region's server and what it shares with Zenoh.

@@ -5,6 +5,8 @@
 //! uncertified or has a KKT residual above 1e-9, or differs from a Clarabel answer by more than 1e-6
 //! with a higher objective (see [`Versus`] for how a difference is attributed).
 
+use flights::say;
+
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use safety::{ConstraintRow, ExactSolver, QpSolver, kkt_residual};

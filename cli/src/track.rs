@@ -5,6 +5,8 @@
 //! step k it observes [p − p_r(k), v − v_r(k), v]; the action is saturated to ‖u‖ ≤ δ = 5 and the exact
 //! step taken; errors are p(k) − p_r(k) for k = 1..1000.
 
+use flights::say;
+
 use crate::cli::TrackArgs;
 use policies::{Observation, PdPolicy, Policy, observation};
 use std::process::ExitCode;

@@ -3,11 +3,13 @@
 //! directory (fsync) and in memory (`--ephemeral`, the same code without the disk); plus the store
 //! alone: one fsynced transaction per change against one per batch of 64 (group commit).
 
-use crate::cli::BenchArgs;
-use crate::run_cmd::load_scenario;
-use airroads::serve::{ServeConfig, Server, client};
+use flights::say;
+
+use crate::BenchArgs;
+use airroads_server::serve::{ServeConfig, Server, client};
 use engine::persist;
 use engine::store::{Store, Write};
+use flights::load_scenario;
 use std::net::SocketAddr;
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -16,7 +18,7 @@ use std::time::{Duration, Instant};
 
 /// Runs the subcommand.
 pub fn main(args: &BenchArgs) -> ExitCode {
-    crate::bench::block_on(bench(args))
+    crate::block_on(bench(args))
 }
 
 struct Row {
@@ -111,7 +113,7 @@ async fn serve_and_change(
 ) -> anyhow::Result<Row> {
     let initial = match &args.scenario {
         Some(path) => load_scenario(path).map_err(anyhow::Error::msg)?,
-        None => airroads::serve::demo_scenario()?,
+        None => airroads_server::serve::demo_scenario()?,
     };
     let policies = policies::PolicyRegistry::standard(initial.params.delta)?;
     let mut config = ServeConfig::new(fleet::FleetConfig::default(), policies, "pd".into(), initial);
@@ -127,7 +129,7 @@ async fn serve_and_change(
     let ids: Vec<String> = state.snapshots.borrow().uavs.iter().map(|u| u.id.clone()).collect();
     let goals: Vec<Option<[f64; 2]>> = state.snapshots.borrow().uavs.iter().map(|u| u.goal).collect();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
-    let http = tokio::spawn(airroads::serve::serve(listener, server, async move {
+    let http = tokio::spawn(airroads_server::serve::serve(listener, server, async move {
         let _ = stopped.await;
     }));
     tokio::time::sleep(Duration::from_millis(500)).await;

@@ -3,7 +3,9 @@
 //! blocks start 30 m apart, so the measured ticks are the approach (every UAV flying, few filter
 //! solves): the navigation and traffic rules work for every UAV every tick regardless.
 
-use crate::cli::BenchArgs;
+use flights::say;
+
+use crate::BenchArgs;
 use fleet::stress::crowd_scenario;
 use fleet::{Fleet, FleetConfig, Scenario, StageTimes};
 use links::SimLink;

@@ -1,5 +1,7 @@
 //! `airroads stress`: random valid scenarios, run in parallel, violations reported with their seeds.
 
+use flights::say;
+
 use crate::cli::StressArgs;
 use fleet::{RunMetrics, RunOptions, run_scenario};
 use std::process::ExitCode;

@@ -9,16 +9,18 @@
 //! if the true distance between two airborne Crazyflies falls below D_c or one comes closer than
 //! D_s to a wall; the faulted Crazyflie is a lost UAV to the others.
 
+use flights::say;
+
 mod faults;
 
 use crate::cli::StressArgs;
-use crate::run_cmd::{crazyflie_links, real_time_ticks};
 use crate::stress_cmd::each_seed;
-use airroads::firmware_fleet::FirmwareFleet;
 use anyhow::Context as _;
 use cfsim::sitl::SitlFaults;
 use faults::{Fault, inject};
 use fleet::{RunMetrics, RunOptions, Scenario, ScenarioUav, run_scenario_on_truth};
+use flights::firmware_fleet::FirmwareFleet;
+use flights::{crazyflie_links, real_time_ticks};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use std::path::Path;

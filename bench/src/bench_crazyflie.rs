@@ -3,7 +3,9 @@
 //! size it prints the setpoint latency (from `Link::send` in the tick to the datagram's arrival at
 //! the simulated Crazyflie) and the share of ticks on which a link had a fresh state.
 
-use crate::cli::BenchArgs;
+use flights::say;
+
+use crate::BenchArgs;
 use cfsim::{SimConfig, SimCrazyflie, SimHandle};
 use crazyflie::{CrazyflieLink, RelayConfig};
 use engine::stats::percentiles;
@@ -15,7 +17,7 @@ use uav::Vec2;
 
 /// Runs the benchmark.
 pub fn main(args: &BenchArgs) -> ExitCode {
-    let Some(runtime) = crate::bench::runtime() else { return ExitCode::FAILURE };
+    let Some(runtime) = crate::runtime() else { return ExitCode::FAILURE };
     say!("Crazyflie relay over CRTP/UDP (loopback), 20 Hz, {:.0} s per fleet size", args.seconds);
     say!(
         "{:>6} {:>10} {:>10} {:>10} {:>10} {:>12} {:>10}",

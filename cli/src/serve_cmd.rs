@@ -1,8 +1,11 @@
 //! `airroads serve`: checks the flags, starts the server and runs it until Ctrl-C or SIGTERM.
 
+use flights::say;
+
 use crate::cli::ServeArgs;
-use crate::run_cmd::{EXIT_INVALID, load_scenario_with};
-use airroads::serve::{self, ServeConfig, Server};
+use crate::run_cmd::EXIT_INVALID;
+use flights::load_scenario_with;
+use airroads_server::serve::{self, ServeConfig, Server};
 use anyhow::Context as _;
 use std::process::ExitCode;
 
@@ -195,7 +198,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     if config.region.as_ref().is_some_and(|r| !r.failover.is_owner()) {
         config.initial.uavs.clear();
     }
-    let sims = airroads::cfsim_fleet::spawn(&mut config.initial, args.cfsim, args.cfsim_port)?;
+    let sims = flights::cfsim_fleet::spawn(&mut config.initial, args.cfsim, args.cfsim_port)?;
     let server = Server::start(config)?;
     let mocap = match args.mocap {
         Some(at) => {

@@ -1,8 +1,8 @@
 //! The faults of `airroads stress --link firmware`: which, drawn at random per case, and how they
 //! are applied to the physics and the firmware processes during a flight.
 
-use airroads::firmware_fleet::FirmwareFleet;
 use cfsim::sitl::SitlFaults;
+use flights::firmware_fleet::FirmwareFleet;
 use rand::Rng;
 use rand::rngs::StdRng;
 use std::time::Duration;

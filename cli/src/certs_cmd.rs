@@ -1,6 +1,8 @@
 //! `airroads certs`: the region network's certificate authority and one certificate per region and
 //! role (`regions::certs`).
 
+use flights::say;
+
 use crate::cli::CertsArgs;
 use regions::certs;
 use std::path::Path;

@@ -1,7 +1,21 @@
-//! `airroads bench filter`: µs per filtered UAV for 2, 6 and 12 rows, through the whole filter (as
-//! flown with `--solver`), and per QP through the exact solver and through Clarabel alone.
+//! The benchmarks of `airroads bench` (BENCHMARKS.md holds their figures), one module each; this
+//! file dispatches them and is `airroads bench filter` itself: µs per filtered UAV for 2, 6 and 12
+//! rows, through the whole filter (as flown with `--solver`), and per QP through the exact solver
+//! and through Clarabel alone.
 
-use crate::cli::{BenchArgs, BenchTarget};
+use flights::say;
+
+mod args;
+mod bench_crazyflie;
+mod bench_durability;
+mod bench_firmware;
+mod bench_fleet;
+mod bench_regions;
+mod bench_scale;
+mod bench_server;
+mod bench_solver;
+
+pub use args::{BenchArgs, BenchTarget};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use safety::{ExactSolver, FilterSettings, QpSolver, Row, RowKind, SafetyFilter, Solver};
