@@ -259,7 +259,15 @@ async fn motion_capture_poses_reach_their_crazyflie_as_external_positions() {
     tokio::spawn(ingest(socket, server.mocap.clone(), counters.clone(), Vec::new()));
     // The Crazyflie links register once created; wait until cf2 is connected.
     let deadline = Instant::now() + Duration::from_secs_f64(PATIENCE);
-    while server.state().snapshots.borrow().uavs.iter().any(|u| u.phase == links::LinkPhase::Connecting) {
+    while server
+        .state()
+        .engine
+        .snapshots
+        .borrow()
+        .uavs
+        .iter()
+        .any(|u| u.phase == links::LinkPhase::Connecting)
+    {
         assert!(Instant::now() < deadline, "the Crazyflies did not connect");
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
@@ -362,7 +370,10 @@ async fn the_emergency_stop_reaches_the_crazyflies_while_the_loop_is_stalled() {
     let (status, body) = server.call("PUT", "/api/uavs/cf1/policy", Some(r#"{"policy": "stall"}"#)).await;
     assert_eq!(status, 200, "{body}");
     tokio::time::sleep(Duration::from_millis(300)).await;
-    assert!(server.state.clock.tick_age() > Duration::from_millis(250), "the loop is inside a slow tick");
+    assert!(
+        server.state.engine.clock.tick_age() > Duration::from_millis(250),
+        "the loop is inside a slow tick"
+    );
     let sent = Instant::now();
     let addr = server.addr;
     // The answer may wait for the stalled loop (503 after 2 s); the Crazyflies must not.

@@ -165,7 +165,7 @@ impl Running {
 async fn save_mode_records_road_uavs_and_series_readable_by_rerun() {
     let rrd = temp_rrd();
     let server = start(&format!("save={}", rrd.display())).await;
-    let first_road = walls_as_strips(&server.state.road.borrow());
+    let first_road = walls_as_strips(&server.state.engine.road.borrow());
 
     // Fly, then change the road (walls logged again) and remove `b` (its entities cleared), fly on.
     tokio::time::sleep(Duration::from_millis(600)).await;
@@ -174,12 +174,12 @@ async fn save_mode_records_road_uavs_and_series_readable_by_rerun() {
     assert_eq!(status, 200, "{body}");
     let (status, body) = support::raw(server.addr, "DELETE", "/api/uavs/b", None, &[]).await;
     assert_eq!(status, 204, "{body}");
-    let second_road = walls_as_strips(&server.state.road.borrow());
+    let second_road = walls_as_strips(&server.state.engine.road.borrow());
     assert_ne!(first_road, second_road);
     tokio::time::sleep(Duration::from_millis(600)).await;
     let state = server.state.clone();
     let stats = server.stop().await;
-    let last = state.snapshots.borrow().clone();
+    let last = state.engine.snapshots.borrow().clone();
     assert_eq!(stats.errors, 0);
     assert!(stats.logged >= 10, "{stats:?}");
 
@@ -247,11 +247,11 @@ async fn connect_without_a_viewer_keeps_the_server_running() {
     // A port nothing listens on: the sink logs nothing and skips; the loop and the API carry on.
     let closed = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap();
     let server = start(&format!("connect={closed}")).await;
-    let tick = server.state.snapshots.borrow().tick;
+    let tick = server.state.engine.snapshots.borrow().tick;
     tokio::time::sleep(Duration::from_millis(1500)).await;
     let (status, _) = support::raw(server.addr, "GET", "/healthz", None, &[]).await;
     assert_eq!(status, 200);
-    let ticked = server.state.snapshots.borrow().tick - tick;
+    let ticked = server.state.engine.snapshots.borrow().tick - tick;
     assert!(ticked >= 20, "{ticked} ticks in 1.5 s");
     let stopping = std::time::Instant::now();
     let stats = server.stop().await;
@@ -273,7 +273,7 @@ async fn single_file_reservations_are_logged_with_who_is_in_and_who_waits() {
     let state = server.state.clone();
     let stats = server.stop().await;
     assert_eq!(stats.errors, 0);
-    let last = state.snapshots.borrow().clone();
+    let last = state.engine.snapshots.borrow().clone();
     assert_eq!(last.reservations.len(), 1, "one single-file section");
 
     let rec = read_rrd(&rrd);
@@ -324,7 +324,7 @@ async fn a_fleet_above_the_threshold_is_one_batch_and_only_selected_uavs_have_th
     let state = server.state.clone();
     let stats = server.stop().await;
     assert_eq!(stats.errors, 0);
-    let last = state.snapshots.borrow().clone();
+    let last = state.engine.snapshots.borrow().clone();
 
     let rec = read_rrd(&rrd);
     std::fs::remove_file(&rrd).unwrap();

@@ -379,7 +379,7 @@ async fn while_changes_cannot_be_saved_health_says_so_and_they_are_refused() {
     }
     tokio::time::sleep(std::time::Duration::from_millis(300)).await;
     // The state writer's verdict after a failed commit (as a full disk gives it).
-    server.state.storage.degrade("database or disk is full".into());
+    server.state.engine.storage.degrade("database or disk is full".into());
     let health = server.get("/healthz").await;
     assert_eq!(health["status"], "degraded", "{health}");
     assert!(health["problems"][0].as_str().unwrap().contains("disk is full"), "{health}");

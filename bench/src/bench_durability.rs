@@ -126,14 +126,14 @@ async fn serve_and_change(
     let addr = listener.local_addr()?;
     let server = Server::start(config)?;
     let state = server.state().clone();
-    let ids: Vec<String> = state.snapshots.borrow().uavs.iter().map(|u| u.id.clone()).collect();
-    let goals: Vec<Option<[f64; 2]>> = state.snapshots.borrow().uavs.iter().map(|u| u.goal).collect();
+    let ids: Vec<String> = state.engine.snapshots.borrow().uavs.iter().map(|u| u.id.clone()).collect();
+    let goals: Vec<Option<[f64; 2]>> = state.engine.snapshots.borrow().uavs.iter().map(|u| u.goal).collect();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let http = tokio::spawn(airroads_server::serve::serve(listener, server, async move {
         let _ = stopped.await;
     }));
     tokio::time::sleep(Duration::from_millis(500)).await;
-    let commits_before = state.storage.commits.load(Relaxed);
+    let commits_before = state.engine.storage.commits.load(Relaxed);
     let running = Arc::new(AtomicBool::new(true));
     let mut workers = Vec::new();
     for w in 0..clients {
@@ -149,7 +149,7 @@ async fn serve_and_change(
         latencies.extend(w.await?);
     }
     let elapsed = started.elapsed().as_secs_f64();
-    let commits = state.storage.commits.load(Relaxed) - commits_before;
+    let commits = state.engine.storage.commits.load(Relaxed) - commits_before;
     let _ = stop.send(());
     http.await??;
     let stats = engine::stats::percentiles(&mut latencies);

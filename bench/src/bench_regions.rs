@@ -112,7 +112,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     tokio::time::sleep(Duration::from_secs(3)).await;
     let bytes_at_start: Vec<u64> = running.iter().map(|r| r.shared.published_bytes.load(Relaxed)).collect();
     let missed_at_start: Vec<u64> =
-        running.iter().map(|r| r.server.state().metrics.borrow().missed_ticks).collect();
+        running.iter().map(|r| r.server.state().engine.metrics.borrow().missed_ticks).collect();
     let started = Instant::now();
     tokio::time::sleep(Duration::from_secs_f64(seconds)).await;
     let elapsed = started.elapsed().as_secs_f64();
@@ -135,8 +135,8 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     for (k, r) in running.iter().enumerate() {
         let now = Instant::now();
         let report = r.shared.report(now);
-        let metrics = r.server.state().metrics.borrow().clone();
-        let uavs = r.server.state().snapshots.borrow().uavs.len();
+        let metrics = r.server.state().engine.metrics.borrow().clone();
+        let uavs = r.server.state().engine.snapshots.borrow().uavs.len();
         let rate = (r.shared.published_bytes.load(Relaxed) - bytes_at_start[k]) as f64 / elapsed / 1e6;
         total += rate;
         let ages = &report["foreign_age_ms"];

@@ -59,7 +59,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
 
     // Tick durations, collected by the bench from the metrics the loop publishes each tick.
     let durations = Arc::new(Mutex::new(Vec::<f64>::new()));
-    let mut metrics = state.metrics.clone();
+    let mut metrics = state.engine.metrics.clone();
     let sink = durations.clone();
     tokio::spawn(async move {
         let mut last = 0;
@@ -110,7 +110,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     phases.push(take(ws_name.clone(), Default::default()));
 
     let running = Arc::new(AtomicBool::new(true));
-    let ids: Vec<String> = state.snapshots.borrow().uavs.iter().map(|u| u.id.clone()).collect();
+    let ids: Vec<String> = state.engine.snapshots.borrow().uavs.iter().map(|u| u.id.clone()).collect();
     let mut workers = Vec::new();
     for w in 0..REST_WORKERS {
         workers.push(tokio::spawn(rest_worker(addr, ids.clone(), w, running.clone())));

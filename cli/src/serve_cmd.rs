@@ -4,9 +4,9 @@ use flights::say;
 
 use crate::cli::ServeArgs;
 use crate::run_cmd::EXIT_INVALID;
-use flights::load_scenario_with;
 use airroads_server::serve::{self, ServeConfig, Server};
 use anyhow::Context as _;
+use flights::load_scenario_with;
 use std::process::ExitCode;
 
 /// Runs the subcommand: exit 0 after a clean shutdown, 1 on a runtime failure, 2 for invalid flags.
@@ -212,7 +212,11 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     };
     say!("airroads serving on http://{local}");
     say!("  API        http://{local}/api (OpenAPI: /api/openapi.json), stream ws://{local}/ws");
-    say!("  fleet      {} UAVs from {}", server.state().snapshots.borrow().uavs.len(), server.resumed_from);
+    say!(
+        "  fleet      {} UAVs from {}",
+        server.state().engine.snapshots.borrow().uavs.len(),
+        server.resumed_from
+    );
     match &data_dir {
         Some(dir) => say!("  data dir   {}", dir.display()),
         None => say!("  data dir   none (--ephemeral)"),
@@ -318,7 +322,7 @@ async fn start_region(
     shared: &regions::RegionShared,
     app: &serve::state::AppState,
 ) -> anyhow::Result<(regions::RegionLink, zenoh::query::Queryable<()>)> {
-    let road = app.road.borrow().layout.clone();
+    let road = app.engine.road.borrow().layout.clone();
     let options = zenoh_options(args, &road)?;
     let road = roads::Road::new(road).context("the served road")?;
     let neighbours = regions::neighbours_of(&road, &shared.name).map_err(anyhow::Error::msg)?;
@@ -332,7 +336,7 @@ async fn start_region(
     say!(
         "  region     {} as {role} ({} UAVs), states on {key}",
         shared.name,
-        app.snapshots.borrow().uavs.len()
+        app.engine.snapshots.borrow().uavs.len()
     );
     say!("  neighbours {}", if neighbours.is_empty() { "none".to_string() } else { neighbours.join(", ") });
     if args.region.is_some() && !shared.failover.is_owner() {

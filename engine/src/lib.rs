@@ -1,13 +1,15 @@
 //! The engine of `airroads serve`: the fleet loop on its own thread ([`fleet_loop`]), the changes it
 //! applies between ticks with their undo records ([`changes`], [`command`]), their durability
 //! ([`durable`], [`store`], [`persist`]), the snapshots and statistics it publishes ([`snapshot`],
-//! [`stats`]), and the links it opens ([`linking`], [`mocap`]). It knows no HTTP, no Zenoh and no
+//! [`stats`]), and the links it opens ([`linking`], [`mocap`]); [`start`] runs it and
+//! [`EngineHandle`] is all a client of the loop holds. It knows no HTTP, no Zenoh and no
 //! Rerun: readers watch its channels, and regions plug in through one hook ([`hook`]).
 
 pub mod changes;
 pub mod command;
 pub mod durable;
 pub mod fleet_loop;
+pub mod handle;
 pub mod hook;
 pub mod linking;
 pub mod mocap;
@@ -17,6 +19,7 @@ pub mod stats;
 pub mod store;
 
 pub use fleet_loop::{Engine, LoopChannels, LoopClock, RoadView};
+pub use handle::{ApplyError, EngineConfig, EngineHandle, RunningEngine, start};
 
 /// The scenario `airroads serve` flies when it has no saved state and no `--scenario`.
 pub const DEMO_SCENARIO: &str = include_str!("../../scenarios/demo.json");

@@ -46,17 +46,17 @@ pub const STALLED_AFTER: std::time::Duration = std::time::Duration::from_secs(1)
 /// `ok`; `degraded` (200: flying, but changes are refused because they cannot be saved);
 /// `stalled` (503: no tick for [`STALLED_AFTER`]); `loop_stopped` (503).
 async fn healthz(State(app): State<AppState>) -> Response {
-    let tick = app.snapshots.borrow().tick;
-    let age = app.clock.tick_age();
+    let tick = app.engine.snapshots.borrow().tick;
+    let age = app.engine.clock.tick_age();
     let tick_age_ms = age.as_secs_f64() * 1e3;
     let mut problems = Vec::new();
-    let status = if app.commands.is_closed() {
+    let status = if app.engine.stopped() {
         problems.push("the fleet loop has stopped".to_string());
         "loop_stopped"
     } else if age > STALLED_AFTER {
         problems.push(format!("no tick for {:.1} s", age.as_secs_f64()));
         "stalled"
-    } else if let Some(reason) = app.storage.refusal() {
+    } else if let Some(reason) = app.engine.storage.refusal() {
         problems.push(format!("changes cannot be saved: {reason}"));
         "degraded"
     } else {
@@ -73,11 +73,11 @@ async fn openapi() -> Response {
 }
 
 async fn get_road(State(app): State<AppState>) -> Json<RoadLayout> {
-    Json(app.road.borrow().layout.clone())
+    Json(app.engine.road.borrow().layout.clone())
 }
 
 async fn get_road_geometry(State(app): State<AppState>) -> Response {
-    Json(app.road.borrow().clone()).into_response()
+    Json(app.engine.road.borrow().clone()).into_response()
 }
 
 async fn put_road(
@@ -87,7 +87,7 @@ async fn put_road(
     let road = app.validate(move || road_of(layout)).await?;
     match app.apply(Command::SetRoad(Box::new(road))).await {
         Ok(Outcome::RoadReplaced { cleared_goals }) => {
-            let version = app.road.borrow().version;
+            let version = app.engine.road.borrow().version;
             Ok(Json(json!({"version": version, "cleared_goals": cleared_goals})).into_response())
         }
         Ok(_) => Ok(StatusCode::OK.into_response()),
@@ -171,7 +171,7 @@ async fn list_uavs(
     query: Result<axum::extract::Query<ListQuery>, axum::extract::rejection::QueryRejection>,
 ) -> Result<Json<Vec<UavSnapshot>>, ApiError> {
     let axum::extract::Query(q) = query.map_err(|e| ApiError::invalid("limit", e.body_text()))?;
-    let snapshot = app.snapshots.borrow().clone();
+    let snapshot = app.engine.snapshots.borrow().clone();
     let Some(page) = q.page()? else { return Ok(Json(snapshot.uavs.clone())) };
     let start = match &q.after {
         None => 0,
@@ -182,7 +182,7 @@ async fn list_uavs(
 }
 
 async fn get_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<Json<UavSnapshot>, ApiError> {
-    let snapshot = app.snapshots.borrow().clone();
+    let snapshot = app.engine.snapshots.borrow().clone();
     let found = position_of(&app, &snapshot, &id).and_then(|k| snapshot.uavs.get(k));
     found.cloned().map(Json).ok_or_else(|| ApiError::unknown_uav(&id))
 }
@@ -315,7 +315,7 @@ async fn load_scenario(
     let (name, count) = (valid.name.clone(), valid.uavs.len());
     let tick = match app.apply(Command::LoadScenario(Box::new(valid))).await? {
         Outcome::ScenarioLoaded { tick } => tick,
-        _ => app.snapshots.borrow().tick,
+        _ => app.engine.snapshots.borrow().tick,
     };
     Ok(Json(json!({"name": name, "uavs": count, "loaded_after_tick": tick})))
 }
@@ -346,7 +346,7 @@ async fn land_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<
 
 async fn stop_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
     // Straight to every Crazyflie's radio session first: that works even while the loop is stalled.
-    let direct = app.stops.stop_all();
+    let direct = app.engine.stops.stop_all();
     match app.apply_urgent(Command::EmergencyStop).await {
         Ok(_) => Ok(Json(json!({"stopped": "all"}))),
         Err(mut e) => {
@@ -360,7 +360,7 @@ async fn stop_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<
 
 async fn get_state(State(app): State<AppState>) -> Response {
     let frame = app.frames.borrow().clone();
-    let snapshot = app.snapshots.borrow().clone();
+    let snapshot = app.engine.snapshots.borrow().clone();
     // The serialiser may still be on the previous tick: an answered change must show at once.
     let text = if frame.tick() == snapshot.tick { frame.json() } else { json_of(&snapshot) };
     ([(header::CONTENT_TYPE, "application/json")], axum::body::Bytes::from(text)).into_response()
@@ -396,7 +396,7 @@ async fn put_rerun_selection(
     }
     // One pass over the fleet, whatever its size.
     let mut unseen: std::collections::HashSet<&str> = ids.iter().map(String::as_str).collect();
-    for u in &app.snapshots.borrow().uavs {
+    for u in &app.engine.snapshots.borrow().uavs {
         unseen.remove(u.id.as_str());
     }
     if let Some(id) = ids.iter().find(|id| unseen.contains(id.as_str())) {
@@ -425,7 +425,7 @@ async fn get_ownership(State(app): State<AppState>) -> Result<Json<Value>, ApiEr
 
 async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
     use std::sync::atomic::Ordering::Relaxed;
-    let metrics = app.metrics.borrow().clone();
+    let metrics = app.engine.metrics.borrow().clone();
     let mut doc = serde_json::to_value(&*metrics).unwrap_or_else(|_| json!({}));
     let s = &app.stream;
     doc["stream"] = json!({
@@ -438,14 +438,14 @@ async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
     });
     doc["connections"] = app.connections.report();
     doc["auth"] = app.auth_failures.report();
-    doc["storage"] = serde_json::to_value(app.storage.report()).unwrap_or(Value::Null);
+    doc["storage"] = serde_json::to_value(app.engine.storage.report()).unwrap_or(Value::Null);
     doc["mocap"] = app.mocap.report();
     doc["rerun"] = app.rerun.report();
     if let Some(region) = &app.region {
         doc["region"] = region.report(std::time::Instant::now());
     }
     // The first links with an error, by UAV (the count of all is `links.with_error`).
-    let snapshot = app.snapshots.borrow().clone();
+    let snapshot = app.engine.snapshots.borrow().clone();
     let errors: Vec<Value> = snapshot
         .uavs
         .iter()
@@ -453,7 +453,7 @@ async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
         .take(LISTED_LINK_ERRORS)
         .collect();
     doc["links"]["errors"] = json!(errors);
-    doc["tick_age_ms"] = json!(app.clock.tick_age().as_secs_f64() * 1e3);
+    doc["tick_age_ms"] = json!(app.engine.clock.tick_age().as_secs_f64() * 1e3);
     doc["max_uavs"] = json!(app.max_uavs);
     Json(doc)
 }

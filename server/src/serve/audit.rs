@@ -80,8 +80,8 @@ pub async fn record(State(app): State<AppState>, request: Request, next: Next) -
         if record.detail.is_empty() {
             record.detail = detail;
         }
-        if app.writer.try_send(ToWriter::Audit(record)).is_err() {
-            app.storage.audit_dropped.fetch_add(1, Relaxed);
+        if app.engine.writer.try_send(ToWriter::Audit(record)).is_err() {
+            app.engine.storage.audit_dropped.fetch_add(1, Relaxed);
         }
     }
     response
@@ -114,7 +114,8 @@ pub async fn list(
     }
     let (reply, answer) = tokio::sync::oneshot::channel();
     let query = AuditQuery { after: q.after, before: q.before, limit, reply };
-    app.writer
+    app.engine
+        .writer
         .try_send(ToWriter::Query(query))
         .map_err(|_| ApiError::busy("the audit log is busy; try again"))?;
     let unavailable = |why: &str| {

@@ -100,7 +100,7 @@ pub async fn answer(app: &AppState, own: &str, step: Step) -> Response {
 }
 
 async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiError> {
-    let current = app.road.borrow().layout.clone();
+    let current = app.engine.road.borrow().layout.clone();
     let (kind, body) = (step.kind, step.body.clone());
     let own_name = own.to_string();
     let rules = app.link_rules.clone();
@@ -130,28 +130,28 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiErr
         return Ok(json!({"ready": true}));
     }
     // Queued half a tick before the boundary: the loop takes it in the gap at the boundary.
-    let half_tick = (app.metrics.borrow().dt * 500.0) as u64;
+    let half_tick = (app.engine.metrics.borrow().dt * 500.0) as u64;
     let wait =
         step.at_ms.saturating_sub(half_tick).saturating_sub(now_ms()).min(COMMIT_TIMEOUT.as_millis() as u64);
     tokio::time::sleep(Duration::from_millis(wait)).await;
     let mut done = match scenario {
         None => match app.apply(Command::SetRoad(Box::new(road))).await? {
             Outcome::RoadReplaced { cleared_goals } => {
-                json!({"version": app.road.borrow().version, "cleared_goals": cleared_goals})
+                json!({"version": app.engine.road.borrow().version, "cleared_goals": cleared_goals})
             }
-            _ => json!({"version": app.road.borrow().version}),
+            _ => json!({"version": app.engine.road.borrow().version}),
         },
         Some(valid) => {
             let (name, count) = (valid.name.clone(), valid.uavs.len());
             let tick = match app.apply(Command::LoadScenario(Box::new(valid))).await? {
                 Outcome::ScenarioLoaded { tick } => tick,
-                _ => app.snapshots.borrow().tick,
+                _ => app.engine.snapshots.borrow().tick,
             };
             json!({"name": name, "uavs": count, "loaded_after_tick": tick})
         }
     };
     // When the loop put the new road in place (the gap at the boundary, on this server's clock).
-    done["switched_at_ms"] = json!(app.road.borrow().since_ms);
+    done["switched_at_ms"] = json!(app.engine.road.borrow().since_ms);
     Ok(done)
 }
 
@@ -209,7 +209,7 @@ pub async fn coordinate(
     body: String,
     authorization: Option<String>,
 ) -> Response {
-    let old_layout = app.road.borrow().layout.clone();
+    let old_layout = app.engine.road.borrow().layout.clone();
     let regions = names(&old_layout);
     let prepare = Step { commit: false, kind, body: body.clone(), at_ms: 0 };
     for (region, answer) in
@@ -222,7 +222,7 @@ pub async fn coordinate(
         }
     }
     // The first tick boundary (a multiple of dt on the wall clock) after the delay.
-    let dt_ms = ((app.metrics.borrow().dt * 1e3).round() as u64).max(1);
+    let dt_ms = ((app.engine.metrics.borrow().dt * 1e3).round() as u64).max(1);
     let at_ms = (now_ms() + SWITCH_DELAY.as_millis() as u64).div_ceil(dt_ms) * dt_ms;
     let commit = Step { commit: true, kind, body, at_ms };
     let answers = everywhere(app, federation, &regions, &commit, COMMIT_TIMEOUT, &authorization).await;

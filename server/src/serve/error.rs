@@ -4,6 +4,7 @@
 use axum::extract::{FromRequest, Request};
 use axum::http::{HeaderMap, StatusCode, header};
 use axum::response::{IntoResponse, Response};
+use engine::ApplyError;
 use engine::command::ChangeError;
 use fleet::EditError;
 use serde::de::DeserializeOwned;
@@ -54,6 +55,19 @@ impl ApiError {
     /// 503 when the fleet loop does not answer.
     pub fn loop_unavailable() -> Self {
         Self::new(StatusCode::SERVICE_UNAVAILABLE, "loop_unavailable", "the fleet loop is not running")
+    }
+}
+
+impl From<ApplyError> for ApiError {
+    fn from(e: ApplyError) -> Self {
+        match e {
+            ApplyError::Unavailable => Self::loop_unavailable(),
+            ApplyError::Busy => Self::busy(e.to_string()),
+            ApplyError::Refused(e) => e.into(),
+            ApplyError::StorageTimeout => {
+                Self::new(StatusCode::SERVICE_UNAVAILABLE, "storage_timeout", e.to_string())
+            }
+        }
     }
 }
 

@@ -190,7 +190,7 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
             let merged = if route == Route::State {
                 super::federate_merge::state(&app, &federation.own, &all, answers)
             } else {
-                let snapshot = app.snapshots.borrow().clone();
+                let snapshot = app.engine.snapshots.borrow().clone();
                 super::federate_merge::list(&uri, snapshot, &federation.own, &all, answers)
             };
             merged.unwrap_or_else(IntoResponse::into_response)
@@ -204,13 +204,13 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
 
 /// The road's regions, in its order.
 fn region_names(app: &AppState) -> Vec<String> {
-    let road = app.road.borrow();
+    let road = app.engine.road.borrow();
     road.layout.regions.iter().flatten().map(|r| r.name.clone()).collect()
 }
 
 /// This region flies UAV `id` now (by the latest snapshot).
 fn flown_here(app: &AppState, id: &str) -> bool {
-    let snapshot = app.snapshots.borrow().clone();
+    let snapshot = app.engine.snapshots.borrow().clone();
     api::position_of(app, &snapshot, id).is_some()
 }
 
@@ -219,7 +219,7 @@ fn region_of_position(app: &AppState, federation: &Federation, body: &[u8]) -> O
     let doc: Value = serde_json::from_slice(body).ok()?;
     let p = doc.get("position")?.as_array()?;
     let (x, y) = (p.first()?.as_f64()?, p.get(1)?.as_f64()?);
-    let view = app.road.borrow().clone();
+    let view = app.engine.road.borrow().clone();
     let road = federation.road(&view)?;
     let segment = road.locate(&uav::Vec2::new(x, y), None);
     road.region_of(segment).map(|r| r.name.clone())
@@ -282,7 +282,7 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
     let region = app.region.as_ref()?;
     let asker = region.federation.get()?.asker(query.key_expr().as_str())?;
     let known =
-        app.road.borrow().layout.regions.as_ref().is_some_and(|rs| rs.iter().any(|r| r.name == asker));
+        app.engine.road.borrow().layout.regions.as_ref().is_some_and(|rs| rs.iter().any(|r| r.name == asker));
     if !known {
         return None;
     }

@@ -64,7 +64,7 @@ pub fn state(
     regions: &[String],
     answers: Vec<(String, Answer)>,
 ) -> Result<Response, ApiError> {
-    let snapshot: std::sync::Arc<Snapshot> = app.snapshots.borrow().clone();
+    let snapshot: std::sync::Arc<Snapshot> = app.engine.snapshots.borrow().clone();
     let mut doc = serde_json::to_value(&*snapshot)
         .map_err(|e| ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal", e.to_string()))?;
     // A standby asked its own region's owner: its own empty fleet is not the region's.

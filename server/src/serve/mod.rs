@@ -21,21 +21,19 @@ pub mod ws;
 
 use anyhow::Context as _;
 use axum::Router;
-use engine::linking::{LinkFactory, MocapRoutes};
-use engine::persist::SavedState;
+use engine::linking::MocapRoutes;
 use engine::snapshot::Snapshot;
-use engine::stats::LoopMetrics;
-use engine::store::{Store, Write};
-use engine::{Engine, LoopChannels, LoopClock, RoadView};
-use fleet::{Fleet, FleetConfig, ValidScenario};
+use engine::{EngineConfig, RunningEngine};
+use fleet::{FleetConfig, ValidScenario};
 use policies::PolicyRegistry;
 use state::{AppState, Frame, StreamCounters};
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::Ordering;
 use std::time::Duration;
-use tokio::sync::{mpsc, watch};
-use uav::{UavState, Vec2};
+use tokio::sync::watch;
+
+pub use engine::handle::open_store;
 
 /// Most UAVs by default: what the fleet loop ticks within dt on the development machine with the
 /// default policy in a dense crowd, with either navigation (BENCHMARKS.md, "Admission").
@@ -106,12 +104,10 @@ impl ServeConfig {
     }
 }
 
-/// A running server: the fleet loop thread and the shared handler state.
+/// A running server: the engine's threads and the shared handler state.
 pub struct Server {
     app: AppState,
-    stop: Arc<AtomicBool>,
-    fleet_loop: Option<std::thread::JoinHandle<()>>,
-    writer: Option<std::thread::JoinHandle<()>>,
+    engine: RunningEngine,
     allow_hosts: Vec<String>,
     allow_origins: Vec<String>,
     limits: listener::Limits,
@@ -121,59 +117,9 @@ pub struct Server {
     pub mocap: MocapRoutes,
 }
 
-/// Opens the data directory's database (an in-memory one without a directory); the error names the
-/// directory and why it cannot be written.
-pub fn open_store(data_dir: Option<&std::path::Path>) -> Result<Store, engine::store::StoreError> {
-    match data_dir {
-        Some(dir) => Store::open(dir),
-        None => Store::in_memory(),
-    }
-}
-
-/// Builds the fleet: the saved state of the store if there is one (and `resume`), else `initial`.
-/// A region server never resumes: UAVs come and go by handover without being saved (the region's
-/// owner and its mirror are the record), so a saved fleet may hold UAVs another server flies now.
-fn initial_fleet(
-    config: ServeConfig,
-    store: &Store,
-    factory: &LinkFactory,
-) -> anyhow::Result<(Fleet, String)> {
-    let resume = config.resume && config.region.is_none();
-    let saved = if resume { store.load()? } else { None };
-    let mut fleet_config = config.fleet;
-    let Some(saved) = saved else {
-        fleet_config.params = config.initial.params;
-        let mut fleet = Fleet::new(fleet_config, config.initial.road.clone(), config.policies);
-        engine::changes::load_scenario(&mut fleet, &config.initial, &config.default_policy, factory)?;
-        return Ok((fleet, format!("scenario `{}`", config.initial.name)));
-    };
-    saved.params.validate()?;
-    fleet_config.params = saved.params;
-    let mut fleet = Fleet::new(fleet_config, saved.road()?, config.policies);
-    for u in &saved.uavs {
-        let policy =
-            if fleet.policy_names().any(|n| n == u.policy) { &u.policy } else { &config.default_policy };
-        let state = UavState::at_rest(Vec2::new(u.position[0], u.position[1]));
-        let goal = u.goal.map(|g| Vec2::new(g[0], g[1]));
-        if let Some(Err(e)) = u.link.as_deref().map(|l| links::check_link_with(l, &config.link_rules)) {
-            tracing::warn!("saved UAV `{}` not resumed: link: {e}", u.id);
-            continue;
-        }
-        if let Err(e) = fleet.check_new(&u.id, policy, &state, goal) {
-            tracing::warn!("saved UAV `{}` not resumed: {e}", u.id);
-            continue;
-        }
-        let link = factory.make(&u.id, u.link.as_deref(), state, saved.params.dt);
-        if let Err(e) = fleet.try_add(u.id.clone(), policy.clone(), link, state, goal) {
-            tracing::warn!("saved UAV `{}` not resumed: {e}", u.id);
-        }
-    }
-    fleet.set_paused(saved.paused);
-    Ok((fleet, "saved state".to_string()))
-}
-
 impl Server {
-    /// Starts the fleet loop, the snapshot serialiser and the state writer (inside a tokio runtime).
+    /// Starts the engine (the fleet loop and the state writer), the snapshot serialiser and the
+    /// HTTP side's state (inside a tokio runtime).
     pub fn start(config: ServeConfig) -> anyhow::Result<Self> {
         let token = config.token.clone().map(Arc::from);
         let default_policy: Arc<str> = Arc::from(config.default_policy.as_str());
@@ -188,67 +134,35 @@ impl Server {
         let (allow_hosts, allow_origins) = (config.allow_hosts.clone(), config.allow_origins.clone());
         let link_rules = Arc::new(config.link_rules.clone());
         let region = config.region.clone();
-        let mut store = open_store(config.data_dir.as_deref())
-            .with_context(|| format!("data directory {}", display_dir(config.data_dir.as_deref())))?;
-        let factory = LinkFactory::new(tokio::runtime::Handle::current(), config.relay);
-        let (fleet, resumed_from) = initial_fleet(config, &store, &factory)?;
-        anyhow::ensure!(
-            fleet.uavs().len() <= max_uavs,
-            "the fleet has {} UAVs, more than the maximum of {max_uavs} (--max-uavs)",
-            fleet.uavs().len()
-        );
-        // The database holds exactly what flies from the first tick on.
-        store.commit([&Write::Replace(SavedState::of(&fleet))]).context("saving the initial state")?;
-        let writer = engine::durable::Writer::spawn(store)?;
-        let (commands, requests) = mpsc::channel(1024);
-        let (urgent, urgent_requests) = mpsc::unbounded_channel();
-        let first = Snapshot::of(&fleet, 0, 0.0, 0);
-        let mut encoder = binary::Encoder::default();
-        let binary = encoder.encode(&first);
-        let first = Arc::new(first);
-        let first_frame = Frame::new(first.clone(), binary);
-        let (snapshots_tx, snapshots) = watch::channel(first);
-        let (metrics_tx, metrics) = watch::channel(Arc::new(LoopMetrics::default()));
-        let (road_tx, road) =
-            watch::channel(Arc::new(RoadView::of(fleet.road(), 0, engine::fleet_loop::now_ms())));
-        let (frames_tx, frames) = watch::channel(first_frame);
-        let clock = Arc::new(LoopClock::default());
-        let channels = LoopChannels {
-            requests,
-            urgent: urgent_requests,
-            snapshots: snapshots_tx,
-            metrics: metrics_tx,
-            road: road_tx,
-            writer: writer.queue.clone(),
-            written: writer.answers,
-            storage: writer.status.clone(),
-            clock: clock.clone(),
+        let hook = match &region {
+            Some(region) => Some(Box::new(
+                regions::RegionLoop::new(region.clone(), link_rules.clone())
+                    .context("the region's loop side was taken already")?,
+            ) as Box<dyn engine::hook::LoopHook>),
+            None => None,
         };
-        let stop = Arc::new(AtomicBool::new(false));
-        let mocap = factory.mocap.clone();
-        let stops = factory.stops.clone();
-        let mut engine = Engine::new(fleet, default_policy.to_string(), factory, channels, max_uavs);
-        engine.set_link_rules(link_rules.clone());
-        if let Some(region) = &region {
-            let hook = regions::RegionLoop::new(region.clone(), link_rules.clone())
-                .context("the region's loop side was taken already")?;
-            engine.set_hook(Box::new(hook));
-        }
-        let fleet_loop = engine.spawn(stop.clone())?;
+        let running = engine::start(EngineConfig {
+            fleet: config.fleet,
+            policies: config.policies,
+            default_policy: config.default_policy,
+            data_dir: config.data_dir,
+            initial: config.initial,
+            relay: config.relay,
+            resume: config.resume,
+            max_uavs,
+            link_rules: link_rules.clone(),
+            hook,
+        })?;
+        let snapshots = running.handle.snapshots.clone();
+        let mut encoder = binary::Encoder::default();
+        let first = snapshots.borrow().clone();
+        let binary = encoder.encode(&first);
+        let (frames_tx, frames) = watch::channel(Frame::new(first, binary));
         let stream = Arc::new(StreamCounters::default());
-        tokio::spawn(serialise(snapshots.clone(), frames_tx, encoder, stream.clone()));
+        tokio::spawn(serialise(snapshots, frames_tx, encoder, stream.clone()));
         let app = AppState {
-            commands,
-            urgent,
-            loop_thread: Some(fleet_loop.thread().clone()),
-            stops,
-            snapshots,
+            engine: running.handle.clone(),
             frames,
-            road,
-            metrics,
-            clock,
-            writer: writer.queue,
-            storage: writer.status,
             token,
             auth_failures: Arc::default(),
             forwarding: Arc::new(tokio::sync::Semaphore::new(federate::MAX_FORWARDED)),
@@ -268,15 +182,13 @@ impl Server {
             region,
         };
         Ok(Self {
+            resumed_from: running.resumed_from.clone(),
+            mocap: running.mocap.clone(),
             app,
-            stop,
-            fleet_loop: Some(fleet_loop),
-            writer: Some(writer.thread),
+            engine: running,
             allow_hosts,
             allow_origins,
             limits,
-            resumed_from,
-            mocap,
         })
     }
 
@@ -313,24 +225,9 @@ impl Server {
 
     /// Stops the fleet loop after its current tick and waits until the state writer committed
     /// everything queued (the last positions included).
-    pub async fn shutdown(mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        if let Some(thread) = self.fleet_loop.take() {
-            thread.thread().unpark();
-            // Joining a thread blocks: do it on the blocking pool.
-            let _ = tokio::task::spawn_blocking(move || thread.join()).await;
-        }
-        let (done, flushed) = tokio::sync::oneshot::channel();
-        if self.app.writer.send(engine::durable::ToWriter::Flush(done)).await.is_ok() {
-            let _ = tokio::time::timeout(Duration::from_secs(10), flushed).await;
-        }
-        // The writer thread ends once the last queue sender (in handler state clones) is gone.
-        drop(self.writer.take());
+    pub async fn shutdown(self) {
+        self.engine.shutdown().await;
     }
-}
-
-fn display_dir(dir: Option<&std::path::Path>) -> String {
-    dir.map_or_else(|| "(in memory)".into(), |d| d.display().to_string())
 }
 
 /// How long shutdown waits for the Crazyflies to land.
@@ -346,7 +243,7 @@ pub async fn land_crazyflies(state: &AppState) {
             .map(|u| u.id.clone())
             .collect()
     };
-    let ids = airborne(&state.snapshots.borrow());
+    let ids = airborne(&state.engine.snapshots.borrow());
     if ids.is_empty() {
         return;
     }
@@ -356,7 +253,7 @@ pub async fn land_crazyflies(state: &AppState) {
             tracing::warn!("{id} not landed: {}", e.message);
         }
     }
-    let mut snapshots = state.snapshots.clone();
+    let mut snapshots = state.engine.snapshots.clone();
     let landed = async {
         while !airborne(&snapshots.borrow_and_update()).is_empty() {
             if snapshots.changed().await.is_err() {
@@ -407,16 +304,13 @@ pub async fn serve(
     let app = server.router();
     // Crazyflies land before the loop stops (it keeps flying the others meanwhile); then stopping
     // the loop ends every WebSocket stream, and the accept loop stops and drains.
-    let stop = server.stop.clone();
+    let stopper = server.engine.stopper();
     let state = server.app.clone();
     let (closing, closed) = watch::channel(false);
     tokio::spawn(async move {
         shutdown.await;
         land_crazyflies(&state).await;
-        stop.store(true, Ordering::Relaxed);
-        if let Some(thread) = &state.loop_thread {
-            thread.unpark();
-        }
+        stopper.stop();
         closing.send_replace(true);
     });
     listener::run(listener, app, server.limits, server.app.connections.clone(), closed, DRAIN).await;

@@ -6,22 +6,13 @@ use super::error::ApiError;
 use super::guard::{AccessRules, BODY_BUDGET_BYTES};
 use super::listener::ConnectionCounters;
 use axum::extract::ws::Utf8Bytes;
-use engine::command::{ChangeError, Claim, Command, Outcome, Request};
-use engine::durable::{StorageStatus, ToWriter};
-use engine::fleet_loop::{LoopClock, RoadView};
+use engine::EngineHandle;
+use engine::command::{Command, Outcome};
 use engine::snapshot::Snapshot;
-use engine::stats::LoopMetrics;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
 use std::sync::{Arc, OnceLock};
 use std::time::Duration;
-use tokio::sync::{Semaphore, mpsc, oneshot, watch};
-
-/// How long a change may wait for the fleet loop to take it; then it is withdrawn (503, nothing
-/// changed).
-pub const COMMAND_TIMEOUT: Duration = Duration::from_secs(2);
-
-/// How long a change the loop took may wait for the disk before the client is told it is unknown.
-pub const DURABLE_TIMEOUT: Duration = Duration::from_secs(30);
+use tokio::sync::{Semaphore, watch};
 
 /// A snapshot serialised once for every reader: in the binary format always, as JSON once a reader
 /// asks for it (at 10,000 UAVs the JSON is 5.6 MB and costs the serialiser far more than the binary
@@ -86,28 +77,10 @@ pub struct StreamCounters {
 /// Shared handler state (cheap to clone).
 #[derive(Clone)]
 pub struct AppState {
-    /// Commands into the fleet loop.
-    pub commands: mpsc::Sender<Request>,
-    /// Land and stop requests, which the loop applies as soon as they arrive.
-    pub urgent: mpsc::UnboundedSender<Request>,
-    /// The fleet loop's thread (unparked for land and stop).
-    pub loop_thread: Option<std::thread::Thread>,
-    /// Every Crazyflie's emergency stop, reachable without the fleet loop.
-    pub stops: engine::linking::StopRoutes,
-    /// The latest snapshot.
-    pub snapshots: watch::Receiver<Arc<Snapshot>>,
-    /// The latest snapshot as JSON text (serialised once, sent to every client).
+    /// The fleet loop: changes in; snapshots, road and metrics out; the state writer's queue.
+    pub engine: EngineHandle,
+    /// The latest snapshot serialised (binary always, JSON once asked), sent to every client.
     pub frames: watch::Receiver<Frame>,
-    /// The current road.
-    pub road: watch::Receiver<Arc<RoadView>>,
-    /// The latest loop statistics.
-    pub metrics: watch::Receiver<Arc<LoopMetrics>>,
-    /// When the loop last finished a tick.
-    pub clock: Arc<LoopClock>,
-    /// The state writer's queue (audit entries and queries from the HTTP side).
-    pub writer: mpsc::Sender<ToWriter>,
-    /// The storage's health.
-    pub storage: Arc<StorageStatus>,
     /// The bearer token mutating requests need, if one is configured.
     pub token: Option<Arc<str>>,
     /// Failed authentication attempts per client.
@@ -153,9 +126,9 @@ impl AppState {
     /// What a Rerun sink reads from this server (`rerun_sink::start`).
     pub fn rerun_inputs(&self) -> rerun_sink::Inputs {
         rerun_sink::Inputs {
-            snapshots: self.snapshots.clone(),
-            road: self.road.clone(),
-            metrics: self.metrics.clone(),
+            snapshots: self.engine.snapshots.clone(),
+            road: self.engine.road.clone(),
+            metrics: self.engine.metrics.clone(),
             selection: self.rerun_selection.subscribe(),
             counters: self.rerun.clone(),
         }
@@ -164,53 +137,20 @@ impl AppState {
     /// Sends a land or stop `command` ahead of every queued change, wakes the loop, and waits for
     /// its outcome (land and stop are never persisted, so they never wait on the disk).
     pub async fn apply_urgent(&self, command: Command) -> Result<Outcome, ApiError> {
-        let (reply, answer) = oneshot::channel();
-        self.urgent.send(Request::new(command, reply)).map_err(|_| ApiError::loop_unavailable())?;
-        if let Some(thread) = &self.loop_thread {
-            thread.unpark();
-        }
-        match tokio::time::timeout(COMMAND_TIMEOUT, answer).await {
-            Ok(Ok(outcome)) => outcome.map_err(ApiError::from),
-            _ => Err(ApiError::loop_unavailable()),
-        }
+        Ok(self.engine.apply_urgent(command).await?)
     }
 
-    /// Sends `command` to the fleet loop and waits (off the loop) until it is applied and on disk.
-    /// A change the loop did not take within [`COMMAND_TIMEOUT`] is withdrawn (503, nothing changed);
-    /// one it took is answered with its real outcome, never with an error for an applied change.
+    /// Sends `command` to the fleet loop with the request's audit entry and waits (off the loop)
+    /// until it is applied and on disk ([`EngineHandle::apply`]); an applied change marks the
+    /// request's audit entry as committed with it.
     pub async fn apply(&self, command: Command) -> Result<Outcome, ApiError> {
         let context = super::audit::current();
-        let (reply, mut answer) = oneshot::channel();
-        let claim = Arc::new(Claim::default());
         let audit = context.as_ref().map(|c| c.record.clone());
-        let request = Request { command, reply, audit, claim: claim.clone() };
-        match tokio::time::timeout(COMMAND_TIMEOUT, self.commands.send(request)).await {
-            Ok(Ok(())) => {}
-            Ok(Err(_)) => return Err(ApiError::loop_unavailable()),
-            Err(_) => return Err(ApiError::busy("too many changes queued; nothing changed; try again")),
-        }
-        let outcome = match tokio::time::timeout(COMMAND_TIMEOUT, &mut answer).await {
-            Ok(answer) => answer,
-            Err(_) if claim.withdraw() => return Err(ChangeError::Withdrawn.into()),
-            // Taken: the outcome comes once it is on disk (or taken back).
-            Err(_) => match tokio::time::timeout(DURABLE_TIMEOUT, answer).await {
-                Ok(answer) => answer,
-                Err(_) => {
-                    return Err(ApiError::new(
-                        axum::http::StatusCode::SERVICE_UNAVAILABLE,
-                        "storage_timeout",
-                        "the change was applied but the disk has not confirmed it; check GET /healthz",
-                    ));
-                }
-            },
-        };
-        let outcome = outcome.map_err(|_| ApiError::loop_unavailable())?;
-        if outcome.is_ok()
-            && let Some(context) = context
-        {
+        let outcome = self.engine.apply(command, audit).await?;
+        if let Some(context) = context {
             context.committed.store(true, Relaxed);
         }
-        outcome.map_err(ApiError::from)
+        Ok(outcome)
     }
 
     /// Runs `work` (a validation of a large input) on the blocking pool, one at a time: waits at
