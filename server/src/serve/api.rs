@@ -1,12 +1,12 @@
-//! REST handlers (`docs/api.md`, `GET /api/openapi.json`). Reads answer from the latest published
+//! REST handlers (`docs/api.md`, `GET /api/openapi.json`; their routes are `routes::ROUTES`). Reads answer from the latest published
 //! snapshot; changes go to the fleet loop as commands and are answered once it applied them.
 
 use super::error::{ApiError, ApiJson, NoBody};
 use super::state::{AppState, json_of};
+use axum::Json;
 use axum::extract::{Path, State};
 use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
-use axum::{Json, Router, routing};
 use engine::command::{Command, Outcome};
 use engine::snapshot::{Snapshot, UavSnapshot};
 use fleet::Scenario;
@@ -15,37 +15,12 @@ use serde::Deserialize;
 use serde_json::{Value, json};
 use uav::Vec2;
 
-/// The `/api` routes and `/healthz`.
-pub fn router() -> Router<AppState> {
-    Router::new()
-        .route("/healthz", routing::get(healthz))
-        .route("/api/openapi.json", routing::get(openapi))
-        .route("/api/road", routing::get(get_road).put(put_road))
-        .route("/api/road/geometry", routing::get(get_road_geometry))
-        .route("/api/uavs", routing::get(list_uavs).post(add_uav))
-        .route("/api/uavs/{id}", routing::get(get_uav).delete(remove_uav))
-        .route("/api/uavs/{id}/goal", routing::put(set_goal).delete(clear_goal))
-        .route("/api/uavs/{id}/policy", routing::put(set_policy))
-        .route("/api/uavs/{id}/land", routing::post(land_uav))
-        .route("/api/policies", routing::get(list_policies))
-        .route("/api/scenario", routing::post(load_scenario))
-        .route("/api/fleet/pause", routing::post(pause))
-        .route("/api/fleet/resume", routing::post(resume))
-        .route("/api/fleet/land", routing::post(land_fleet))
-        .route("/api/fleet/stop", routing::post(stop_fleet))
-        .route("/api/state", routing::get(get_state))
-        .route("/api/metrics", routing::get(get_metrics))
-        .route("/api/audit", routing::get(super::audit::list))
-        .route("/api/region/ownership", routing::get(get_ownership))
-        .route("/api/rerun/selection", routing::get(get_rerun_selection).put(put_rerun_selection))
-}
-
 /// A loop that has not finished a tick for this long is reported stalled.
 pub const STALLED_AFTER: std::time::Duration = std::time::Duration::from_secs(1);
 
 /// `ok`; `degraded` (200: flying, but changes are refused because they cannot be saved);
 /// `stalled` (503: no tick for [`STALLED_AFTER`]); `loop_stopped` (503).
-async fn healthz(State(app): State<AppState>) -> Response {
+pub(super) async fn healthz(State(app): State<AppState>) -> Response {
     let tick = app.engine.snapshots.borrow().tick;
     let age = app.engine.clock.tick_age();
     let tick_age_ms = age.as_secs_f64() * 1e3;
@@ -68,19 +43,19 @@ async fn healthz(State(app): State<AppState>) -> Response {
     (code, Json(body)).into_response()
 }
 
-async fn openapi() -> Response {
+pub(super) async fn openapi() -> Response {
     ([(header::CONTENT_TYPE, "application/json")], super::openapi::DOCUMENT).into_response()
 }
 
-async fn get_road(State(app): State<AppState>) -> Json<RoadLayout> {
+pub(super) async fn get_road(State(app): State<AppState>) -> Json<RoadLayout> {
     Json(app.engine.road.borrow().layout.clone())
 }
 
-async fn get_road_geometry(State(app): State<AppState>) -> Response {
+pub(super) async fn get_road_geometry(State(app): State<AppState>) -> Response {
     Json(app.engine.road.borrow().clone()).into_response()
 }
 
-async fn put_road(
+pub(super) async fn put_road(
     State(app): State<AppState>,
     ApiJson(layout): ApiJson<RoadLayout>,
 ) -> Result<Response, ApiError> {
@@ -166,7 +141,7 @@ pub(crate) fn no_uav_after(id: &str) -> ApiError {
 /// `GET /api/uavs[?bbox=x0,y0,x1,y1][&limit=N][&after=ID]`: the UAVs in fleet order, those inside
 /// `bbox` only, starting after the UAV `after`, at most `limit` (1–1000, default 1000 when any
 /// parameter is given). The next page starts after the last id of this one.
-async fn list_uavs(
+pub(super) async fn list_uavs(
     State(app): State<AppState>,
     query: Result<axum::extract::Query<ListQuery>, axum::extract::rejection::QueryRejection>,
 ) -> Result<Json<Vec<UavSnapshot>>, ApiError> {
@@ -181,7 +156,10 @@ async fn list_uavs(
     Ok(Json(shown.take(page.limit).cloned().collect()))
 }
 
-async fn get_uav(State(app): State<AppState>, Path(id): Path<String>) -> Result<Json<UavSnapshot>, ApiError> {
+pub(super) async fn get_uav(
+    State(app): State<AppState>,
+    Path(id): Path<String>,
+) -> Result<Json<UavSnapshot>, ApiError> {
     let snapshot = app.engine.snapshots.borrow().clone();
     let found = position_of(&app, &snapshot, &id).and_then(|k| snapshot.uavs.get(k));
     found.cloned().map(Json).ok_or_else(|| ApiError::unknown_uav(&id))
@@ -204,7 +182,7 @@ pub(crate) fn position_of(app: &AppState, snapshot: &Snapshot, id: &str) -> Opti
 /// `POST /api/uavs` body.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct NewUav {
+pub(super) struct NewUav {
     id: String,
     position: [f64; 2],
     #[serde(default)]
@@ -225,7 +203,10 @@ fn point(field: &str, x: [f64; 2]) -> Result<Vec2, ApiError> {
     }
 }
 
-async fn add_uav(State(app): State<AppState>, ApiJson(new): ApiJson<NewUav>) -> Result<Response, ApiError> {
+pub(super) async fn add_uav(
+    State(app): State<AppState>,
+    ApiJson(new): ApiJson<NewUav>,
+) -> Result<Response, ApiError> {
     uav::check_uav_id(&new.id).map_err(|reason| ApiError::invalid("id", reason))?;
     let position = point("position", new.position)?;
     let goal = new.goal.map(|g| point("goal", g)).transpose()?;
@@ -239,7 +220,7 @@ async fn add_uav(State(app): State<AppState>, ApiJson(new): ApiJson<NewUav>) -> 
     Ok((StatusCode::CREATED, [(header::LOCATION, format!("/api/uavs/{id}"))], Json(body)).into_response())
 }
 
-async fn remove_uav(
+pub(super) async fn remove_uav(
     State(app): State<AppState>,
     Path(id): Path<String>,
     NoBody: NoBody,
@@ -251,11 +232,11 @@ async fn remove_uav(
 /// `PUT /api/uavs/{id}/goal` body.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct GoalBody {
+pub(super) struct GoalBody {
     goal: [f64; 2],
 }
 
-async fn set_goal(
+pub(super) async fn set_goal(
     State(app): State<AppState>,
     Path(id): Path<String>,
     ApiJson(body): ApiJson<GoalBody>,
@@ -265,7 +246,7 @@ async fn set_goal(
     Ok(Json(json!({"id": id, "goal": body.goal})))
 }
 
-async fn clear_goal(
+pub(super) async fn clear_goal(
     State(app): State<AppState>,
     Path(id): Path<String>,
     NoBody: NoBody,
@@ -277,11 +258,11 @@ async fn clear_goal(
 /// `PUT /api/uavs/{id}/policy` body.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct PolicyBody {
+pub(super) struct PolicyBody {
     policy: String,
 }
 
-async fn set_policy(
+pub(super) async fn set_policy(
     State(app): State<AppState>,
     Path(id): Path<String>,
     ApiJson(body): ApiJson<PolicyBody>,
@@ -290,11 +271,11 @@ async fn set_policy(
     Ok(Json(json!({"id": id, "policy": body.policy})))
 }
 
-async fn list_policies(State(app): State<AppState>) -> Json<Value> {
+pub(super) async fn list_policies(State(app): State<AppState>) -> Json<Value> {
     Json(json!({"policies": &*app.policies, "default": &*app.default_policy}))
 }
 
-async fn load_scenario(
+pub(super) async fn load_scenario(
     State(app): State<AppState>,
     ApiJson(scenario): ApiJson<Scenario>,
 ) -> Result<Json<Value>, ApiError> {
@@ -320,17 +301,17 @@ async fn load_scenario(
     Ok(Json(json!({"name": name, "uavs": count, "loaded_after_tick": tick})))
 }
 
-async fn pause(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
+pub(super) async fn pause(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
     app.apply(Command::Pause(true)).await?;
     Ok(Json(json!({"paused": true})))
 }
 
-async fn resume(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
+pub(super) async fn resume(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
     app.apply(Command::Pause(false)).await?;
     Ok(Json(json!({"paused": false})))
 }
 
-async fn land_uav(
+pub(super) async fn land_uav(
     State(app): State<AppState>,
     Path(id): Path<String>,
     NoBody: NoBody,
@@ -339,12 +320,12 @@ async fn land_uav(
     Ok(Json(json!({"landing": [id]})))
 }
 
-async fn land_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
+pub(super) async fn land_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
     app.apply_urgent(Command::Land(None)).await?;
     Ok(Json(json!({"landing": "all"})))
 }
 
-async fn stop_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
+pub(super) async fn stop_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
     // Straight to every Crazyflie's radio session first: that works even while the loop is stalled.
     let direct = app.engine.stops.stop_all();
     match app.apply_urgent(Command::EmergencyStop).await {
@@ -358,7 +339,7 @@ async fn stop_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<
     }
 }
 
-async fn get_state(State(app): State<AppState>) -> Response {
+pub(super) async fn get_state(State(app): State<AppState>) -> Response {
     let frame = app.frames.borrow().clone();
     let snapshot = app.engine.snapshots.borrow().clone();
     // The serialiser may still be on the previous tick: an answered change must show at once.
@@ -369,18 +350,18 @@ async fn get_state(State(app): State<AppState>) -> Response {
 /// `PUT /api/rerun/selection` body.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct SelectionBody {
+pub(super) struct SelectionBody {
     ids: Vec<String>,
 }
 
-async fn get_rerun_selection(State(app): State<AppState>) -> Json<Value> {
+pub(super) async fn get_rerun_selection(State(app): State<AppState>) -> Json<Value> {
     let ids = app.rerun_selection.borrow().clone();
     Json(json!({"ids": &*ids}))
 }
 
 /// Which UAVs keep their own Rerun entities when the fleet is logged as one batch. View state, like
 /// the dashboard's selection: applied at once, not saved (a restart starts with none).
-async fn put_rerun_selection(
+pub(super) async fn put_rerun_selection(
     State(app): State<AppState>,
     ApiJson(body): ApiJson<SelectionBody>,
 ) -> Result<Json<Value>, ApiError> {
@@ -411,7 +392,7 @@ async fn put_rerun_selection(
 pub const LISTED_LINK_ERRORS: usize = 16;
 
 /// `GET /api/region/ownership`: this region's ownership intervals (404 without `--region`).
-async fn get_ownership(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+pub(super) async fn get_ownership(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
     let Some(region) = &app.region else {
         return Err(ApiError::new(
             StatusCode::NOT_FOUND,
@@ -423,7 +404,7 @@ async fn get_ownership(State(app): State<AppState>) -> Result<Json<Value>, ApiEr
     Ok(Json(json!({"region": region.name, "intervals": intervals, "forgotten": forgotten})))
 }
 
-async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
+pub(super) async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
     use std::sync::atomic::Ordering::Relaxed;
     let metrics = app.engine.metrics.borrow().clone();
     let mut doc = serde_json::to_value(&*metrics).unwrap_or_else(|_| json!({}));

@@ -19,9 +19,10 @@
 
 use super::error::ApiError;
 use super::guard::is_change;
+use super::routes::Access;
 use super::state::AppState;
 use axum::extract::{Request, State};
-use axum::http::{HeaderValue, StatusCode, header};
+use axum::http::{HeaderValue, Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use serde_json::{Value, json};
@@ -290,11 +291,10 @@ impl AuthFailures {
     }
 }
 
-/// The routes an operator must always reach with the right token.
-pub fn safety_route(path: &str) -> bool {
-    path == "/api/fleet/stop"
-        || path == "/api/fleet/land"
-        || (path.starts_with("/api/uavs/") && path.ends_with("/land"))
+/// The routes an operator must always reach with the right token (land and stop: the route
+/// table's [`Access::Urgent`]).
+pub fn safety_route(method: &Method, path: &str) -> bool {
+    super::routes::find(method, path).is_some_and(|(route, _)| route.access == Access::Urgent)
 }
 
 fn too_many() -> Response {
@@ -314,13 +314,14 @@ pub async fn require_token(State(app): State<AppState>, request: Request, next: 
     let Some(token) = &app.token else {
         return next.run(request).await;
     };
-    let path = request.uri().path();
-    if !is_change(request.method()) && path != "/api/audit" {
+    let (method, path) = (request.method(), request.uri().path());
+    let private = super::routes::find(method, path).is_some_and(|(r, _)| r.access == Access::PrivateRead);
+    if !is_change(method) && !private {
         return next.run(request).await;
     }
     let ip = super::listener::remote(&request).map_or(IpAddr::V4(Ipv4Addr::UNSPECIFIED), |a| a.ip());
     let failures = &app.auth_failures;
-    let limited = match failures.admit(ip, safety_route(path), Instant::now()) {
+    let limited = match failures.admit(ip, safety_route(method, path), Instant::now()) {
         Admission::Check { limited } => limited,
         Admission::Refuse { global } => {
             failures.rate_limited.fetch_add(1, Relaxed);
@@ -421,8 +422,15 @@ mod tests {
         assert!(!failures.exhausted(ip("10.0.1.1")));
         assert_eq!(failures.admit(ip("10.0.0.77"), false, now), Admission::Refuse { global: false });
         assert_eq!(failures.admit(ip("10.0.1.1"), false, now), Admission::Check { limited: false });
-        assert!(safety_route("/api/fleet/stop") && safety_route("/api/uavs/cf1/land"));
-        assert!(!safety_route("/api/uavs/cf1/goal"));
+        assert!(safety_route(&Method::POST, "/api/fleet/stop"));
+        assert!(
+            safety_route(&Method::POST, "/api/fleet/land")
+                && safety_route(&Method::POST, "/api/uavs/cf1/land")
+        );
+        assert!(
+            !safety_route(&Method::PUT, "/api/uavs/cf1/goal")
+                && !safety_route(&Method::GET, "/api/fleet/stop")
+        );
     }
 
     #[test]

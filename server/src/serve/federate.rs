@@ -14,6 +14,7 @@
 
 use super::api;
 use super::error::{ApiError, MAX_BODY_BYTES};
+use super::routes::Reach;
 use super::state::AppState;
 use axum::body::{Body, Bytes};
 use axum::extract::{Request, State};
@@ -54,21 +55,17 @@ enum Route {
     Local,
 }
 
+/// Where `method path` is answered (the route table's [`Reach`], with the UAV's id).
 fn route(method: &Method, path: &str) -> Route {
-    let rest = path.strip_prefix("/api/uavs/");
-    if let Some(id) = rest.map(|r| r.split('/').next().unwrap_or_default()).filter(|id| !id.is_empty()) {
-        return Route::Uav(id.to_string());
-    }
-    match (method.as_str(), path) {
-        ("GET", "/api/state") => Route::State,
-        ("GET", "/api/uavs") => Route::List,
-        ("POST", "/api/uavs") => Route::Add,
-        ("PUT", "/api/road") => Route::Deploy(regions::federation::Kind::Road),
-        ("POST", "/api/scenario") => Route::Deploy(regions::federation::Kind::Scenario),
-        ("POST", "/api/fleet/pause" | "/api/fleet/resume" | "/api/fleet/land" | "/api/fleet/stop") => {
-            Route::Fleet
-        }
-        _ => Route::Local,
+    let Some((route, id)) = super::routes::find(method, path) else { return Route::Local };
+    match (route.reach, id) {
+        (Reach::Uav, Some(id)) => Route::Uav(id.to_string()),
+        (Reach::State, _) => Route::State,
+        (Reach::List, _) => Route::List,
+        (Reach::Add, _) => Route::Add,
+        (Reach::Fleet, _) => Route::Fleet,
+        (Reach::Deploy(kind), _) => Route::Deploy(kind),
+        (Reach::Here | Reach::Uav, _) => Route::Local,
     }
 }
 
@@ -330,7 +327,7 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
     // The operator's authority is checked here, by the API's own token check and rate limit, and
     // the change audited here, where it is applied (in its own transaction), naming the region and
     // the operator's address.
-    let router = api::router()
+    let router = super::routes::router()
         .layer(axum::middleware::from_fn_with_state(app.clone(), super::auth::require_token))
         .layer(axum::middleware::from_fn_with_state(app.clone(), super::audit::record))
         .with_state(app.clone());

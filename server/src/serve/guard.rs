@@ -144,7 +144,7 @@ pub async fn check(State(app): State<AppState>, request: Request, next: Next) ->
             .into_response();
     }
     if request.extensions().get::<super::listener::Reserved>().is_some()
-        && !super::auth::safety_route(request.uri().path())
+        && !super::auth::safety_route(request.method(), request.uri().path())
     {
         return ApiError::busy(
             "every connection is taken; this one serves only the emergency stop and land routes",
@@ -185,7 +185,7 @@ pub async fn check(State(app): State<AppState>, request: Request, next: Next) ->
         }
     }
     // A change no route takes gets the router's 404 or 405, not an error about its content.
-    if !change || !super::openapi::takes(request.method(), request.uri().path()) {
+    if !change || super::routes::find(request.method(), request.uri().path()).is_none() {
         return next.run(request).await;
     }
     if !super::error::is_json(headers) {

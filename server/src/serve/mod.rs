@@ -15,6 +15,7 @@ pub mod guard;
 pub mod listener;
 pub mod openapi;
 pub mod road_follow;
+pub mod routes;
 pub mod state;
 mod web;
 pub mod ws;
@@ -202,7 +203,7 @@ impl Server {
     /// [`Server::listening_on`] set the address.
     pub fn router(&self) -> Router {
         let app = self.app.clone();
-        api::router()
+        routes::router()
             .merge(web::router())
             .route("/ws", axum::routing::get(ws::handler))
             .fallback(not_found)
