@@ -6,19 +6,9 @@
 //! makes the disk larger: the fleet gets more careful, never less safe.
 
 use crate::fleet::Fleet;
-use safety::{ReachDisk, flown_reach_disk};
-use uav::UavState;
-
-/// A UAV flown by another region, as that region's last message gave it.
-#[derive(Debug, Clone, PartialEq)]
-pub struct ForeignUav {
-    /// Its id.
-    pub id: String,
-    /// Its state in the last message.
-    pub state: UavState,
-    /// How old that state is now (s): measured on this side's clock.
-    pub age_s: f64,
-}
+pub use crate::member::ForeignUav;
+#[cfg(test)]
+use safety::ReachDisk;
 
 impl Fleet {
     /// Replaces the foreign UAVs for the next ticks (call before each [`Fleet::tick`] with the ages
@@ -48,10 +38,9 @@ impl Fleet {
     }
 
     /// Where foreign UAV f can be now.
-    pub(crate) fn foreign_disk(&self, f: usize) -> ReachDisk {
-        let foreign = &self.foreign[f];
-        let (delta, horizon) = (self.config.params.delta, self.config.lost_reach_horizon);
-        flown_reach_disk(foreign.state, foreign.age_s, delta, horizon)
+    #[cfg(test)]
+    fn foreign_disk(&self, f: usize) -> ReachDisk {
+        self.foreign[f].disk(&self.config)
     }
 }
 
@@ -60,6 +49,7 @@ mod tests {
     use super::*;
     use crate::FleetConfig;
     use roads::{Road, RoadLayout};
+    use uav::UavState;
     use uav::Vec2;
 
     fn fleet() -> Fleet {

@@ -1,19 +1,27 @@
 //! The fleet's traffic rules (`traffic` navigation, docs/traffic.md), run once per tick
 //! before the targets are chosen, in O(UAVs + zones + neighbour pairs):
 //! - **single-file sections**: the parts of the road where two opposite lanes do not fit are
-//!   conflict zones ([`crate::zones`]); a UAV whose route crosses one holds before it until the
+//!   conflict zones ([`crate::traffic::zones`]); a UAV whose route crosses one holds before it until the
 //!   zone admits its direction;
 //! - **deadlock resolution**: a UAV stalled for [`DEADLOCK_AFTER_S`] next to a stalled neighbour
 //!   with priority (stalled longer, then the smaller id) backs off for [`BACK_OFF_S`] to the far
 //!   right of its lane, or, in a single-file part, back to the nearest place where two fit.
 
-use crate::fleet::Uav;
-use crate::progress::Progress;
+pub mod following;
+pub mod passing;
+pub mod sections;
+pub mod speed;
+pub(crate) mod yielding;
+pub mod zones;
+
+pub use crate::member::{UavTraffic, WaitReason};
+
+use crate::member::Uav;
 use crate::ragged::Ragged;
-use crate::sections::{HOLD_M, Section, next_section, sections};
-use crate::speed::SpeedProfile;
-use crate::yielding::{Flying, make_way};
-use crate::zones::{Request, Reservations};
+use crate::traffic::sections::{HOLD_M, Section, next_section, sections};
+use crate::traffic::speed::SpeedProfile;
+use crate::traffic::yielding::{Flying, make_way};
+use crate::traffic::zones::{Request, Reservations};
 use roads::{Navigator, Restriction, RoutePosition};
 use uav::Vec2;
 
@@ -29,25 +37,6 @@ pub const FOLLOW_GAP_IN_DC: f64 = 2.0;
 /// Neighbours closer than this many D_c count as blocking each other in the deadlock rule.
 const BLOCKING_IN_DC: f64 = 3.0;
 
-/// Why the traffic rules keep a UAV from its way this tick (the snapshot's `wait_reason`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum WaitReason {
-    /// It waits for its turn at a single-file section, or behind the UAV admitted before it.
-    SingleFile,
-    /// It backs off out of a deadlocked neighbour's way.
-    DeadlockBackoff,
-}
-
-impl WaitReason {
-    /// The name in the API (`single_file`, `deadlock_backoff`).
-    pub fn name(&self) -> &'static str {
-        match self {
-            WaitReason::SingleFile => "single_file",
-            WaitReason::DeadlockBackoff => "deadlock_backoff",
-        }
-    }
-}
-
 /// The state of one single-file section this tick (dashboard, Rerun).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SectionUse {
@@ -59,34 +48,6 @@ pub struct SectionUse {
     pub admitted: u32,
     /// UAVs waiting for their turn.
     pub waiting: u32,
-}
-
-/// One UAV's standing with the traffic rules.
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct UavTraffic {
-    /// Progress towards its goal (stalls).
-    pub progress: Progress,
-    /// The zone it may enter (or is in), with its entry.
-    pub grant: Option<(usize, usize)>,
-    /// Since when (s) it waits for a zone.
-    pub waiting_since: Option<f64>,
-    /// The zone (with its entry) it last crossed with a grant: pushed back over that zone's exit
-    /// edge, it does not queue for it again (the queue's hold point is on the far side: `mixed`
-    /// seed 68 with `rl` flew 12 m back through a section it had crossed).
-    pub passed: Option<(usize, usize)>,
-    /// Where it is along its route this tick, while the rules apply to it (flying towards a goal,
-    /// not arrived, not held by the operator); set by the fleet before [`TrafficRules::plan`].
-    pub route: Option<RoutePosition>,
-    /// It backs off towards this point until the time given.
-    pub back_off: Option<(Vec2, f64)>,
-    /// What the rules ask of its target this tick.
-    pub restriction: Restriction,
-    /// Why the rules keep it from its way this tick, if they do.
-    pub waiting: Option<WaitReason>,
-    /// The following rule applies to it this tick (traffic comes the other way, or a crowd funnels
-    /// into a narrower part: `fleet::following`), which also lowers its speed limit in a dense
-    /// crowd ([`crate::speed::crowd_limit`]).
-    pub in_traffic: bool,
 }
 
 /// The rules' state between ticks.
@@ -107,8 +68,8 @@ pub struct TrafficRules {
     front: Vec<f64>,
     /// The speed limit along the road (rebuilt with the sections when the road changes).
     speeds: SpeedProfile,
-    /// Scratch: where the UAVs are along the road by direction (`crate::following`).
-    along: crate::following::TrafficAlong,
+    /// Scratch: where the UAVs are along the road by direction (`crate::traffic::following`).
+    along: crate::traffic::following::TrafficAlong,
 }
 
 impl TrafficRules {
@@ -160,7 +121,7 @@ impl TrafficRules {
             u.traffic.waiting = None;
         }
         self.reserve(nav, now, uavs);
-        crate::following::follow(nav, uavs, neighbours, &mut self.along);
+        crate::traffic::following::follow(nav, uavs, neighbours, &mut self.along);
         self.resolve_deadlocks(nav, now, uavs, neighbours);
     }
 
@@ -323,7 +284,7 @@ impl TrafficRules {
                 continue;
             }
             // The stalled neighbours with priority (the longer stall to a tick, then the smaller id):
-            // step off their way, as an arrived UAV does ([`crate::yielding`]). A UAV held by a rule
+            // step off their way, as an arrived UAV does ([`crate::traffic::yielding`]). A UAV held by a rule
             // gives way to every stalled neighbour that is not held and heads towards it (one
             // leaving a single-file section, say), whatever their stalls.
             let (me, my_target) = (uavs[k].state.p, uavs[k].last.target);

@@ -1,9 +1,10 @@
 //! Safety metrics of a run, accumulated per tick, and the METRICS.json document.
 
-use crate::fleet::{Fleet, parallel};
-use crate::histogram::DurationHistogram;
-use crate::margins::{collision_margin, road_margin_at};
+use crate::fleet::Fleet;
 use crate::progress::stall_time_added;
+use crate::runs::histogram::DurationHistogram;
+use crate::runs::margins::{collision_margin, road_margin_at};
+use crate::tick::parallel;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::collections::BTreeMap;

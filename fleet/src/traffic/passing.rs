@@ -1,7 +1,7 @@
 //! Passing parked UAVs: a UAV flying to its goal whose straight way to its temporary target runs
 //! into an arrived UAV aims beside it, on the side away from it where the road has room.
 //!
-//! An arrived UAV makes way ([`crate::yielding`]) by stepping off the flying UAV's path, on the side
+//! An arrived UAV makes way ([`crate::traffic::yielding`]) by stepping off the flying UAV's path, on the side
 //! it already is. Against a wall it cannot step: the flying UAV, aiming through it, kept D_c from it
 //! and stayed behind it (`mixed` seed 13 with `rl`: 55 s behind a UAV parked in its lane, in a road
 //! 2.8 m wide). Passing on the side away from the parked UAV agrees with the side the parked UAV

@@ -1,10 +1,10 @@
 //! Neighbours that do not fly the filter (taking off, landing, stale or lost links): where the fleet
 //! thinks each may be (`safety::ReachDisk`, docs/safety.md §5 and `safety/src/neighbour_rows.rs`).
 
-use crate::fleet::Fleet;
+use super::TickState;
 use safety::{ReachDisk, point_disk, reach_disk};
 
-impl Fleet {
+impl TickState<'_> {
     /// Where UAV d can be now: its reach disk while its link is stale, else its last state.
     pub(crate) fn disk_of(&self, d: usize) -> ReachDisk {
         let uav = &self.uavs[d];

@@ -6,13 +6,15 @@
 //! tick"): read → neighbours → navigation → policies → rows → filter → send.
 
 use crate::condition::Condition;
-use crate::filtering::FilterStage;
-use crate::fleet::{Fleet, StageTimes, Uav, parallel};
-use crate::neighbours::NeighbourSearch;
-use crate::passing::pass_point;
-use crate::rows::{NeighbourLists, RowBuilder};
-use crate::speed::{crowd_limit, govern, keep_distance};
-use crate::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
+use crate::member::Uav;
+use crate::tick::TickState;
+use crate::tick::filtering::FilterStage;
+use crate::tick::neighbours::NeighbourSearch;
+use crate::tick::rows::{NeighbourLists, RowBuilder};
+use crate::tick::{StageTimes, parallel};
+use crate::traffic::passing::pass_point;
+use crate::traffic::speed::{crowd_limit, govern, keep_distance};
+use crate::traffic::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::LinkPhase;
 use policies::{Observation, observation};
 use rayon::prelude::*;
@@ -30,7 +32,7 @@ pub(crate) struct TickPipeline {
     velocities: Vec<Vec2>,
     /// The neighbour grid and each UAV's neighbour list of the last tick.
     pub neighbours: NeighbourSearch,
-    /// Where each foreign UAV may be this tick ([`Fleet::foreign_disk`]).
+    /// Where each foreign UAV may be this tick ([`crate::member::ForeignUav::disk`]).
     foreign_disks: Vec<ReachDisk>,
     /// Each UAV's tracked segment this tick.
     segments: Vec<usize>,
@@ -51,7 +53,7 @@ pub(crate) struct TickPipeline {
 
 impl TickPipeline {
     /// Runs one tick of `fleet`, stage after stage.
-    pub fn run(&mut self, fleet: &mut Fleet) {
+    pub fn run(&mut self, fleet: &mut TickState<'_>) {
         let mut clock = Instant::now();
         let mut lap = || {
             let now = Instant::now();
@@ -77,11 +79,11 @@ impl TickPipeline {
             foreign: &self.neighbours.foreign,
             foreign_disks: &self.foreign_disks,
         };
-        self.rows.build(&fleet.road, rule, &params, &fleet.uavs, neighbours, |d| fleet.disk_of(d));
+        self.rows.build(fleet.road, rule, &params, fleet.uavs, neighbours, |d| fleet.disk_of(d));
         self.stages.rows_us = lap();
         self.filter.run(fleet, &self.rows);
         self.stages.filter_us = lap();
-        for uav in &mut fleet.uavs {
+        for uav in fleet.uavs.iter_mut() {
             uav.link.send(uav.last.u);
         }
         self.stages.send_us = lap();
@@ -90,10 +92,10 @@ impl TickPipeline {
     /// Finds every UAV's neighbours, own and foreign, within the activation radius at twice the top
     /// speed of either (and at least the yielding radius), widened by the farthest reach of a stale
     /// or foreign UAV's disk. Foreign UAVs go into the same grid after the own ones.
-    fn find_neighbours(&mut self, fleet: &Fleet) {
+    fn find_neighbours(&mut self, fleet: &TickState<'_>) {
         let params = fleet.config.params;
         self.foreign_disks.clear();
-        self.foreign_disks.extend((0..fleet.foreign.len()).map(|f| fleet.foreign_disk(f)));
+        self.foreign_disks.extend(fleet.foreign.iter().map(|f| f.disk(fleet.config)));
         let foreign_reach = fleet
             .foreign
             .iter()
@@ -116,10 +118,10 @@ impl TickPipeline {
 
     /// Locates every UAV on its route, tracks its progress, applies the traffic rules (`traffic`
     /// navigation) and chooses its temporary target.
-    fn plan_targets(&mut self, fleet: &mut Fleet) {
+    fn plan_targets(&mut self, fleet: &mut TickState<'_>) {
         let params = fleet.config.params;
         let now = fleet.tick as f64 * params.dt;
-        let nav = Navigator::new(&fleet.road, fleet.config.nav, &params);
+        let nav = Navigator::new(fleet.road, fleet.config.nav, &params);
         let mut segments = std::mem::take(&mut self.segments);
         segments.clear();
         let paused = fleet.paused;
@@ -139,7 +141,7 @@ impl TickPipeline {
             segments.extend(fleet.uavs.iter_mut().map(locate));
         }
         if fleet.config.nav == NavMode::Traffic {
-            fleet.traffic.plan(&nav, now, &mut fleet.uavs, &self.neighbours.lists);
+            fleet.traffic.plan(&nav, now, fleet.uavs, &self.neighbours.lists);
         }
         let choose = |(uav, &segment): (&mut Uav, &usize)| {
             let restriction = uav.traffic.restriction;
@@ -154,8 +156,8 @@ impl TickPipeline {
         self.segments = segments;
     }
 
-    /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::yielding`]).
-    fn make_way(&mut self, fleet: &mut Fleet) {
+    /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::traffic::yielding`]).
+    fn make_way(&mut self, fleet: &mut TickState<'_>) {
         let d_c = fleet.config.params.kept_d_c();
         for k in 0..fleet.uavs.len() {
             let me = &fleet.uavs[k];
@@ -168,10 +170,10 @@ impl TickPipeline {
         }
     }
 
-    /// UAVs flying to their goal aim beside an arrived UAV that blocks their way ([`crate::passing`]).
-    fn pass_parked(&mut self, fleet: &mut Fleet) {
+    /// UAVs flying to their goal aim beside an arrived UAV that blocks their way ([`crate::traffic::passing`]).
+    fn pass_parked(&mut self, fleet: &mut TickState<'_>) {
         let params = fleet.config.params;
-        let nav = Navigator::new(&fleet.road, fleet.config.nav, &params);
+        let nav = Navigator::new(fleet.road, fleet.config.nav, &params);
         let need = nav.clearance_at(0.0);
         let road = &fleet.road;
         // One wall query per arrived UAV, not one per flying neighbour of it.
@@ -200,9 +202,9 @@ impl TickPipeline {
         }
     }
 
-    fn read_states(&mut self, fleet: &mut Fleet) {
+    fn read_states(&mut self, fleet: &mut TickState<'_>) {
         let (dt, stale_after) = (fleet.config.params.dt, fleet.config.stale_after);
-        for uav in &mut fleet.uavs {
+        for uav in fleet.uavs.iter_mut() {
             uav.phase = uav.link.phase();
             match uav.link.state() {
                 Some(s) if s.is_finite() => {
@@ -222,11 +224,11 @@ impl TickPipeline {
     }
 
     /// Evaluates each policy once on the batch of UAVs that use it.
-    fn run_policies(&mut self, fleet: &mut Fleet) {
+    fn run_policies(&mut self, fleet: &mut TickState<'_>) {
         let (delta, dt) = (fleet.config.params.delta, fleet.config.params.dt);
         // Every UAV brakes unless its policy gives a finite action; a fallback is counted only for
         // a UAV whose policy ran and gave none (one that is not flying runs no policy).
-        for uav in &mut fleet.uavs {
+        for uav in fleet.uavs.iter_mut() {
             uav.last.u_ref = braking_input(uav.state.v, delta, dt);
             uav.last.policy_fallback = false;
         }
@@ -263,7 +265,7 @@ impl TickPipeline {
     /// nominal input. Per UAV, reading its
     /// neighbours' states from plain copies (a link is not shared across threads): in parallel for
     /// large fleets, with the same result on any number of threads.
-    fn limit_speeds(&mut self, fleet: &mut Fleet) {
+    fn limit_speeds(&mut self, fleet: &mut TickState<'_>) {
         let params = &fleet.config.params;
         let (d_c, delta, dt) = (params.kept_d_c(), params.delta, params.dt);
         let (positions, velocities) = (&self.positions, &self.velocities);

@@ -1,8 +1,9 @@
 //! Changes to a fleet between ticks (the server's commands): UAVs in and out, goals, the road, the
 //! policy of a UAV, hold. Each either applies completely or returns why it cannot and changes nothing.
 
-use crate::fleet::{Fleet, Uav};
-use crate::margins::{collision_margin, road_margin};
+use crate::fleet::Fleet;
+use crate::member::Uav;
+use crate::runs::margins::{collision_margin, road_margin};
 use links::Link;
 use roads::{NavState, Road};
 use uav::{UavState, Vec2};

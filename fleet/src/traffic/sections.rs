@@ -1,6 +1,6 @@
 //! Single-file sections: the parts of a road where opposite UAVs cannot pass each other (or only
 //! slowly), found once per road from its clearance profile, with the hold points where UAVs wait
-//! for their turn on either side ([`crate::traffic`] reserves them through [`crate::zones`]).
+//! for their turn on either side ([`crate::traffic`] reserves them through [`crate::traffic::zones`]).
 
 use roads::{Navigator, PROFILE_STEP_M, Road, RoutePosition};
 

@@ -15,7 +15,7 @@
 //! whose QPs took no slack are not visited, so it costs nothing in free flight; it runs in index
 //! order on one thread, so runs stay the same on any number of threads.
 
-use crate::rows::RowBuilder;
+use crate::tick::rows::RowBuilder;
 use safety::{FilterSettings, Row, RowKind, SafetyFilter};
 use uav::{Params, Vec2};
 
@@ -157,7 +157,7 @@ fn list_once(list: &mut Vec<usize>, listed: &mut [bool], k: usize) {
 mod tests {
     use super::*;
     use crate::ragged::Ragged;
-    use crate::rows::NeighbourLists;
+    use crate::tick::rows::NeighbourLists;
     use proptest::prelude::*;
     use roads::{Road, RoadLayout};
     use uav::UavState;
@@ -178,8 +178,9 @@ mod tests {
         let mut rows = RowBuilder::default();
         let no_foreign = Ragged::default();
         let neighbours = NeighbourLists { own: &lists, foreign: &no_foreign, foreign_disks: &[] };
+        // Every UAV was just added with a fresh state: its disk is its position.
         rows.build(&fleet.road, fleet.config.road_rule, &params, &fleet.uavs, neighbours, |d| {
-            fleet.disk_of(d)
+            safety::point_disk(fleet.uavs[d].state.p)
         });
         (rows, params)
     }

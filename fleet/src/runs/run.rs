@@ -2,8 +2,8 @@
 //! optionally, a trajectory CSV.
 
 use crate::fleet::{Fleet, FleetConfig};
-use crate::metrics::{MetricsRecorder, RunMetrics, Stall};
-use crate::paths::{PathRecorder, UavPath};
+use crate::runs::metrics::{MetricsRecorder, RunMetrics, Stall};
+use crate::runs::paths::{PathRecorder, UavPath};
 use crate::scenario::{UavSpec, ValidScenario};
 use links::{Link, LinkPhase, SimLink};
 use policies::PolicyRegistry;

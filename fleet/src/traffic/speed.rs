@@ -6,7 +6,7 @@
 //! stop from, braking at δ, well before D_c (the `crowd` family showed blocks pressing into each
 //! other at full δ until the filter ran out of input and used slack).
 
-use crate::following::CROWD_RADIUS_M;
+use crate::traffic::following::CROWD_RADIUS_M;
 use roads::{ClearanceProfile, PROFILE_STEP_M};
 use uav::Vec2;
 

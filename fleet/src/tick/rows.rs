@@ -6,14 +6,15 @@
 //! Each UAV's rows depend only on the states read this tick, so any number of threads gives the same
 //! rows. What depends on the order of filtering (the whole pair row against a neighbour filtered
 //! earlier in the tick, given its u_d) is applied to a copy just before each UAV's QP
-//! ([`RowBuilder::rows_of`], in the order of [`crate::filtering`]).
+//! ([`RowBuilder::rows_of`], in the order of [`crate::tick::filtering`]).
 //!
 //! The rows of each block of [`UAVS_PER_BLOCK`] consecutive UAVs share one buffer ([`Ragged`]), one
 //! block per parallel task: a block's total varies far less from tick to tick than one UAV's row
 //! count, so the buffers stop growing after the first ticks (no allocation in steady state).
 
-use crate::fleet::{Uav, parallel};
+use crate::member::Uav;
 use crate::ragged::Ragged;
+use crate::tick::parallel;
 use rayon::prelude::*;
 use roads::Road;
 use safety::{Neighbour, ReachDisk, RoadRule, Row, RowKind, neighbour_rows, road_rows};

@@ -2,7 +2,7 @@
 //! the intervals in which a traffic rule held it back, with where they began.
 
 use crate::fleet::Fleet;
-use crate::traffic::WaitReason;
+use crate::member::WaitReason;
 
 /// An interval in which a traffic rule held one UAV back.
 #[derive(Debug, Clone, PartialEq)]

@@ -1,9 +1,10 @@
-//! Reversible changes: each change of [`crate::edit`] paired with the record that undoes it exactly,
+//! Reversible changes: each change of [`crate::edits::edit`] paired with the record that undoes it exactly,
 //! so a caller that applies a change first and makes it durable afterwards (the server's group
 //! commit) can take it back when the disk refuses it. Undo records are applied newest first.
 
-use crate::edit::EditError;
-use crate::fleet::{Fleet, Uav};
+use crate::edits::edit::EditError;
+use crate::fleet::Fleet;
+use crate::member::Uav;
 use links::Link;
 use roads::{NavState, Road};
 use uav::{Params, UavState, Vec2};

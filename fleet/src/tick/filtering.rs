@@ -13,9 +13,10 @@
 //! while this was written, not kept, it failed `fleet/tests/stress.rs`: a violation in `headon`, 267
 //! instead of at least 271 arrivals in `mixed`.)
 
-use crate::fleet::{Fleet, parallel};
-use crate::repair::Repair;
-use crate::rows::RowBuilder;
+use crate::tick::TickState;
+use crate::tick::parallel;
+use crate::tick::repair::Repair;
+use crate::tick::rows::RowBuilder;
 use rayon::prelude::*;
 use safety::{Row, RowKind, SafetyFilter};
 use std::time::Instant;
@@ -126,7 +127,7 @@ pub(crate) struct FilterStage {
     inputs: Vec<Vec2>,
     /// The filter's result of each UAV, by position in the order.
     results: Vec<Filtered>,
-    /// The repair pass after the levels ([`crate::repair`]).
+    /// The repair pass after the levels ([`crate::tick::repair`]).
     repair: Repair,
 }
 
@@ -172,7 +173,7 @@ fn filter_one(
 impl FilterStage {
     /// Filters every UAV's nominal input (`u_ref` of its last tick) against its rows and writes the
     /// results to the UAVs.
-    pub(crate) fn run(&mut self, fleet: &mut Fleet, rows: &RowBuilder) {
+    pub(crate) fn run(&mut self, fleet: &mut TickState<'_>, rows: &RowBuilder) {
         let settings = fleet.config.filter;
         let n = fleet.uavs.len();
         let p = fleet.config.params;

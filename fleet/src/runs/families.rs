@@ -1,12 +1,12 @@
 //! Families of random stress scenarios (`airroads stress --family`): `mixed` (the general generator
-//! of [`crate::stress`]), `bends` (one-way traffic along winding roads with tight bends: the
+//! of [`crate::runs::stress`]), `bends` (one-way traffic along winding roads with tight bends: the
 //! inner-vertex stall), `bottleneck` (two-way traffic through one narrow section), `headon` (two
 //! groups swapping ends through a long part 0.5–5 m wide), `hairpin` (opposite traffic through a
 //! U-turn) and `crowd` (two dense blocks flying through each other). Case i of a run with seed S
 //! uses seed S + i in every family.
 
+use crate::runs::stress::{STRESS_T_MAX_S, random_scenario};
 use crate::scenario::{Scenario, ScenarioUav};
-use crate::stress::{STRESS_T_MAX_S, random_scenario};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use roads::{Road, RoadLayout};

@@ -9,10 +9,10 @@
 //! travel, then the smaller index first), so following never forms a cycle: the first UAV of
 //! every column follows nobody, and following alone cannot deadlock.
 
-use crate::fleet::Uav;
+use crate::member::Uav;
 use crate::ragged::Ragged;
-use crate::speed::KEEP_MARGIN_M;
 use crate::traffic::FOLLOW_GAP_IN_DC;
+use crate::traffic::speed::KEEP_MARGIN_M;
 use roads::{Navigator, RoutePosition};
 
 /// Lateral distance (m) beyond D_c under which the UAV ahead counts as in the same lane.

@@ -1,0 +1,13 @@
+//! Headless runs and what they measure: a scenario flown to its end ([`run`]), the random stress
+//! scenarios ([`stress`], [`families`]), the trunk road of `bench scale` ([`trunk`]), the paths
+//! `run --plot` draws ([`paths`]), and the metrics and margins of a run ([`metrics`], [`margins`],
+//! [`histogram`]).
+
+pub mod families;
+pub(crate) mod histogram;
+pub(crate) mod margins;
+pub(crate) mod metrics;
+pub mod paths;
+pub(crate) mod run;
+pub mod stress;
+pub mod trunk;
