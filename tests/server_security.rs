@@ -227,6 +227,8 @@ async fn no_input_panics_and_every_error_has_a_json_body() {
     let w = send(&server, "POST", "/api/fleet/resume", &[json], r#"{"now": true}"#).await;
     assert_eq!((w.status, w.json()["error"]["code"].as_str()), (422, Some("invalid_body")));
     assert_eq!(send(&server, "POST", "/api/fleet/resume", &[json], "").await.status, 200);
+    let w = send(&server, "POST", "/api/fleet/resume", &[json], " \n").await;
+    assert_eq!((w.status, w.json()["error"]["code"].as_str()), (400, Some("malformed_json")), "{}", w.body);
     // A chunked body (no length to budget) is refused.
     let w = send(&server, "POST", "/api/fleet/pause", &[json, "Transfer-Encoding: chunked"], "").await;
     assert_eq!(w.status, 411, "{}", w.body);

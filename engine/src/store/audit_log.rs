@@ -100,8 +100,9 @@ pub(super) fn trim(tx: &rusqlite::Transaction<'_>, applied: i64, refused: i64) -
 }
 
 impl Store {
-    /// Audit entries: with `after`, the oldest `limit` entries newer than it (oldest first);
-    /// otherwise the newest `limit` entries older than `before` (if given), newest first.
+    /// Audit entries: with `after`, the oldest `limit` entries newer than it and older than `before`
+    /// (if given), oldest first; otherwise the newest `limit` entries older than `before` (if
+    /// given), newest first.
     pub fn audit(
         &self,
         after: Option<i64>,
@@ -110,17 +111,19 @@ impl Store {
     ) -> Result<Vec<AuditEntry>, StoreError> {
         let limit = i64::try_from(limit).unwrap_or(i64::MAX);
         let columns = "seq, time_ms, method, route, remote, status, outcome, detail";
-        let (sql, bound) = match after {
-            Some(after) => {
-                (format!("SELECT {columns} FROM audit WHERE seq > ?1 ORDER BY seq ASC LIMIT ?2"), after)
-            }
+        let before = before.unwrap_or(i64::MAX);
+        let (sql, after) = match after {
+            Some(after) => (
+                format!("SELECT {columns} FROM audit WHERE seq > ?1 AND seq < ?2 ORDER BY seq ASC LIMIT ?3"),
+                after,
+            ),
             None => (
-                format!("SELECT {columns} FROM audit WHERE seq < ?1 ORDER BY seq DESC LIMIT ?2"),
-                before.unwrap_or(i64::MAX),
+                format!("SELECT {columns} FROM audit WHERE seq > ?1 AND seq < ?2 ORDER BY seq DESC LIMIT ?3"),
+                i64::MIN,
             ),
         };
         let mut statement = self.conn.prepare_cached(&sql)?;
-        let rows = statement.query_map(params![bound, limit], |r| {
+        let rows = statement.query_map(params![after, before, limit], |r| {
             Ok(AuditEntry {
                 seq: r.get(0)?,
                 time: rfc3339_ms(r.get(1)?),
@@ -199,6 +202,11 @@ mod tests {
         assert_eq!(older.iter().map(|e| e.seq).collect::<Vec<_>>(), vec![7, 6]);
         let tail = store.audit(Some(8), None, 10).unwrap();
         assert_eq!(tail.iter().map(|e| e.seq).collect::<Vec<_>>(), vec![9, 10]);
+        // Both: the window between them, oldest first; an empty window is no entries.
+        let window = store.audit(Some(3), Some(7), 10).unwrap();
+        assert_eq!(window.iter().map(|e| e.seq).collect::<Vec<_>>(), vec![4, 5, 6]);
+        assert_eq!(store.audit(Some(3), Some(7), 2).unwrap().len(), 2);
+        assert!(store.audit(Some(7), Some(3), 10).unwrap().is_empty());
         assert_eq!(newest[2].time, "2023-11-14T22:13:20.007Z");
     }
 

@@ -93,13 +93,15 @@ pub async fn record(State(app): State<AppState>, request: Request, next: Next) -
 pub struct AuditParams {
     /// Entries newer than this sequence number, oldest first (for following the log).
     pub after: Option<i64>,
-    /// Entries older than this sequence number, newest first (for paging back).
+    /// Entries older than this sequence number, newest first (for paging back; with `after`, the end of
+    /// the window).
     pub before: Option<i64>,
     /// At most this many (1 to 1000, default 100).
     pub limit: Option<usize>,
 }
 
-/// `GET /api/audit[?after=SEQ | ?before=SEQ][&limit=N]`: newest first unless `after` is given.
+/// `GET /api/audit[?after=SEQ][&before=SEQ][&limit=N]`: newest first unless `after` is given (both:
+/// the entries between them, oldest first).
 pub async fn list(
     State(app): State<AppState>,
     query: Result<Query<AuditParams>, axum::extract::rejection::QueryRejection>,
@@ -108,9 +110,6 @@ pub async fn list(
     let limit = q.limit.unwrap_or(100);
     if !(1..=1000).contains(&limit) {
         return Err(ApiError::invalid("limit", "must be between 1 and 1000"));
-    }
-    if q.after.is_some() && q.before.is_some() {
-        return Err(ApiError::invalid("after", "give `after` or `before`, not both"));
     }
     let (reply, answer) = tokio::sync::oneshot::channel();
     let query = AuditQuery { after: q.after, before: q.before, limit, reply };
