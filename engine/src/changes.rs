@@ -10,7 +10,7 @@ use super::hook::{Arrival, Ownership};
 use super::linking::LinkFactory;
 use super::persist::{SavedState, SavedUav};
 use super::store::Write;
-use fleet::{EditError, Fleet, Undo, ValidScenario};
+use fleet::{Edit, EditError, Fleet, Undo, ValidScenario};
 use std::time::Instant;
 use uav::UavState;
 
@@ -87,7 +87,7 @@ impl Engine {
         let dt = self.fleet.config.params.dt;
         Ok(match command {
             Command::SetRoad(road) | Command::FollowRoad(road) => {
-                let (cleared_goals, undo) = self.fleet.replace_road_undoable(*road)?;
+                let fleet::Applied { undo, cleared_goals } = self.fleet.apply(Edit::ReplaceRoad(*road))?;
                 self.road_changed();
                 let mut writes = vec![Write::Road(self.fleet.road().layout().clone())];
                 for id in &cleared_goals {
@@ -109,7 +109,8 @@ impl Engine {
                 // Checked before the link exists: a refused UAV never starts a radio session.
                 self.fleet.check_new(&id, &policy, &state, goal)?;
                 let link = self.links.make(&id, link.as_deref(), state, dt);
-                let undo = self.fleet.add_undoable(id.clone(), policy, link, state, goal)?;
+                let add = Edit::Add { id: id.clone(), policy, link, state, goal };
+                let undo = self.fleet.apply(add)?.undo;
                 self.hook.ownership(Ownership::Opened { id: &id, how: "added" });
                 Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
             }
@@ -126,16 +127,16 @@ impl Engine {
                 Applied::urgent()
             }
             Command::RemoveUav(id) => {
-                let undo = self.fleet.remove_undoable(&id)?;
+                let undo = self.fleet.apply(Edit::Remove(id.clone()))?.undo;
                 self.hook.ownership(Ownership::Closed { id: &id, how: "removed" });
                 Applied::new(Outcome::Done, undo, vec![Write::RemoveUav(id)])
             }
             Command::SetGoal(id, goal) => {
-                let undo = self.fleet.set_goal_undoable(&id, goal)?;
+                let undo = self.fleet.apply(Edit::SetGoal(id.clone(), goal))?.undo;
                 Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
             }
             Command::SetPolicy(id, policy) => {
-                let undo = self.fleet.set_policy_undoable(&id, &policy)?;
+                let undo = self.fleet.apply(Edit::SetPolicy(id.clone(), policy))?.undo;
                 Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
             }
             Command::LoadScenario(scenario) => {
@@ -153,7 +154,7 @@ impl Engine {
                 Applied::new(Outcome::ScenarioLoaded { tick: self.ticks }, undo, writes)
             }
             Command::Pause(paused) => {
-                let undo = self.fleet.set_paused_undoable(paused);
+                let undo = self.fleet.apply(Edit::Pause(paused))?.undo;
                 Applied::new(Outcome::Done, undo, vec![Write::Paused(paused)])
             }
             Command::Adopt(arrival) => {
@@ -280,7 +281,7 @@ pub fn load_scenario(
     if !fleet.policy_names().any(|n| n == policy) {
         return Err(EditError::UnknownPolicy(format!("policy `{policy}` is not loaded")));
     }
-    let undo = fleet.reset_undoable(scenario.params, scenario.road.clone());
+    let undo = fleet.apply(Edit::Reset(scenario.params, scenario.road.clone()))?.undo;
     for u in &scenario.uavs {
         let state = UavState::at_rest(u.start);
         let link = links.make(&u.id, u.link.as_deref(), state, scenario.params.dt);

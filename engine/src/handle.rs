@@ -13,7 +13,7 @@ use crate::snapshot::Snapshot;
 use crate::stats::LoopMetrics;
 use crate::store::{AuditRecord, Store, StoreError, Write};
 use anyhow::Context as _;
-use fleet::{Fleet, FleetConfig, ValidScenario};
+use fleet::{Edit, Fleet, FleetConfig, ValidScenario};
 use policies::PolicyRegistry;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -309,10 +309,12 @@ fn first_fleet(
             continue;
         }
         let link = factory.make(&u.id, u.link.as_deref(), state, saved.params.dt);
-        if let Err(e) = fleet.try_add(u.id.clone(), policy.clone(), link, state, goal) {
+        let add = Edit::Add { id: u.id.clone(), policy: policy.clone(), link, state, goal };
+        if let Err(e) = fleet.apply(add) {
             tracing::warn!("saved UAV `{}` not resumed: {e}", u.id);
         }
     }
-    fleet.set_paused(saved.paused);
+    // The first fleet is the start: nothing to take back.
+    drop(fleet.apply(Edit::Pause(saved.paused)));
     Ok((fleet, "saved state".to_string()))
 }

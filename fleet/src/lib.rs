@@ -22,8 +22,8 @@ pub use traffic::{following, passing, sections, speed, zones};
 
 pub use condition::Condition;
 pub use config::{CollisionShare, FleetConfig};
-pub use edits::edit::EditError;
 pub use edits::undo::Undo;
+pub use edits::{Applied, Edit, EditError};
 pub use fleet::Fleet;
 pub use member::ForeignUav;
 pub use member::{Uav, UavTick};

@@ -1,7 +1,7 @@
 //! Scenario validation and the fleet's checks of new UAVs: one id rule for both, strict links,
 //! the dt bound, and the reported field for the first offending UAV in file order.
 
-use fleet::{EditError, Fleet, FleetConfig, Scenario, ScenarioError, ScenarioUav};
+use fleet::{Edit, EditError, Fleet, FleetConfig, Scenario, ScenarioError, ScenarioUav};
 use links::{LinkRules, SimLink};
 use policies::PolicyRegistry;
 use proptest::prelude::*;
@@ -70,13 +70,15 @@ fn the_fleet_refuses_the_same_ids() {
             "{id:?}"
         );
         let link = Box::new(SimLink::new(state, 0.05));
-        let refused = fleet.try_add(id.into(), "pd".into(), link, state, None);
-        assert_eq!(refused, Err(EditError::InvalidId(reason.clone())));
-        assert_eq!(refused.unwrap_err().to_string(), format!("id: {reason}"));
+        let refused = fleet.apply(Edit::Add { id: id.into(), policy: "pd".into(), link, state, goal: None });
+        let refused = refused.err().expect("refused");
+        assert_eq!(refused, EditError::InvalidId(reason.clone()));
+        assert_eq!(refused.to_string(), format!("id: {reason}"));
     }
     assert_eq!(fleet.uavs().len(), 0);
     let link = Box::new(SimLink::new(state, 0.05));
-    assert_eq!(fleet.try_add("uav-1.a_B".into(), "pd".into(), link, state, None), Ok(()));
+    let add = Edit::Add { id: "uav-1.a_B".into(), policy: "pd".into(), link, state, goal: None };
+    assert!(fleet.apply(add).is_ok());
 }
 
 #[test]

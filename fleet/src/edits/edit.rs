@@ -62,7 +62,7 @@ impl Fleet {
     }
 
     /// Pause (every UAV brakes to a hover; the filter still runs) or fly the policies again.
-    pub fn set_paused(&mut self, paused: bool) {
+    pub(crate) fn set_paused(&mut self, paused: bool) {
         self.paused = paused;
     }
 
@@ -131,7 +131,7 @@ impl Fleet {
     }
 
     /// Adds a UAV after checking its id, policy, start and goal.
-    pub fn try_add(
+    pub(crate) fn try_add(
         &mut self,
         id: String,
         policy: String,
@@ -156,7 +156,7 @@ impl Fleet {
     }
 
     /// Sets (Some) or clears (None: the UAV hovers where it is) the goal of a UAV.
-    pub fn set_goal(&mut self, id: &str, goal: Option<Vec2>) -> Result<(), EditError> {
+    pub(crate) fn set_goal(&mut self, id: &str, goal: Option<Vec2>) -> Result<(), EditError> {
         let k = self.index(id)?;
         if let Some(g) = goal {
             self.check_goal(g, "goal")?;
@@ -167,7 +167,7 @@ impl Fleet {
     }
 
     /// Gives a UAV another loaded policy.
-    pub fn set_policy(&mut self, id: &str, policy: &str) -> Result<(), EditError> {
+    pub(crate) fn set_policy(&mut self, id: &str, policy: &str) -> Result<(), EditError> {
         let k = self.index(id)?;
         self.policies.check(policy).map_err(|e| EditError::UnknownPolicy(e.to_string()))?;
         self.uavs[k].policy = policy.to_string();
@@ -196,17 +196,10 @@ impl Fleet {
         }
     }
 
-    /// Starts over on `road` with `params` and no UAVs (a scenario load); policies and ticks stay.
-    pub fn reset(&mut self, params: uav::Params, road: Road) {
-        self.config.params = params;
-        self.road = road;
-        self.uavs.clear();
-    }
-
     /// Replaces the road if every UAV would be safe on it (the same test as [`Fleet::check_start`]
     /// against the walls, with its current velocity). Goals outside the new road are cleared (those
     /// UAVs hover); their ids are returned.
-    pub fn replace_road(&mut self, road: Road) -> Result<Vec<String>, EditError> {
+    pub(crate) fn replace_road(&mut self, road: Road) -> Result<Vec<String>, EditError> {
         self.check_road(&road)?;
         let d_s = self.config.params.d_s;
         let mut cleared = Vec::new();

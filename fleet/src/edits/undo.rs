@@ -1,13 +1,12 @@
-//! Reversible changes: each change of [`crate::edits::edit`] paired with the record that undoes it exactly,
+//! Reversible changes: each edit that [`Fleet::apply`] applies comes with the record that undoes it exactly,
 //! so a caller that applies a change first and makes it durable afterwards (the server's group
 //! commit) can take it back when the disk refuses it. Undo records are applied newest first.
 
 use crate::edits::edit::EditError;
 use crate::fleet::Fleet;
 use crate::member::Uav;
-use links::Link;
 use roads::{NavState, Road};
-use uav::{Params, UavState, Vec2};
+use uav::Params;
 
 /// What restores the fleet to its state before one change.
 pub enum Undo {
@@ -69,67 +68,8 @@ impl Undo {
 }
 
 impl Fleet {
-    fn position_of(&self, id: &str) -> Result<usize, EditError> {
+    pub(super) fn position_of(&self, id: &str) -> Result<usize, EditError> {
         self.uavs.iter().position(|u| u.id == id).ok_or_else(|| EditError::UnknownUav(id.to_string()))
-    }
-
-    /// [`Fleet::try_add`], returning its undo record.
-    pub fn add_undoable(
-        &mut self,
-        id: String,
-        policy: String,
-        link: Box<dyn Link>,
-        state: UavState,
-        goal: Option<Vec2>,
-    ) -> Result<Undo, EditError> {
-        self.try_add(id.clone(), policy, link, state, goal)?;
-        Ok(Undo::Added(id))
-    }
-
-    /// [`Fleet::remove`], keeping the removed UAV (and its link) in the undo record.
-    pub fn remove_undoable(&mut self, id: &str) -> Result<Undo, EditError> {
-        let index = self.position_of(id)?;
-        let uav = self.uavs.remove(index);
-        Ok(Undo::Removed { index, uav: Box::new(uav) })
-    }
-
-    /// [`Fleet::set_goal`], returning its undo record.
-    pub fn set_goal_undoable(&mut self, id: &str, goal: Option<Vec2>) -> Result<Undo, EditError> {
-        let nav = self.uavs[self.position_of(id)?].nav;
-        self.set_goal(id, goal)?;
-        Ok(Undo::Nav { id: id.to_string(), nav })
-    }
-
-    /// [`Fleet::set_policy`], returning its undo record.
-    pub fn set_policy_undoable(&mut self, id: &str, policy: &str) -> Result<Undo, EditError> {
-        let before = self.uavs[self.position_of(id)?].policy.clone();
-        self.set_policy(id, policy)?;
-        Ok(Undo::Policy { id: id.to_string(), policy: before })
-    }
-
-    /// [`Fleet::replace_road`], returning the cleared goals and the undo record.
-    pub fn replace_road_undoable(&mut self, road: Road) -> Result<(Vec<String>, Undo), EditError> {
-        let navs = self.uavs.iter().map(|u| (u.id.clone(), u.nav)).collect();
-        let before = self.road.clone();
-        let cleared = self.replace_road(road)?;
-        Ok((cleared, Undo::Road { road: before, navs }))
-    }
-
-    /// [`Fleet::set_paused`], returning its undo record.
-    pub fn set_paused_undoable(&mut self, paused: bool) -> Undo {
-        let before = self.paused;
-        self.paused = paused;
-        Undo::Pause(before)
-    }
-
-    /// Starts over on `road` with `params` and no UAVs, like [`Fleet::reset`], keeping the old UAVs
-    /// (and their links) in the undo record.
-    pub fn reset_undoable(&mut self, params: Params, road: Road) -> Undo {
-        let uavs = std::mem::take(&mut self.uavs);
-        let before_params = std::mem::replace(&mut self.config.params, params);
-        let before_road = std::mem::replace(&mut self.road, road);
-        let paused = std::mem::replace(&mut self.paused, false);
-        Undo::Fleet { params: before_params, road: before_road, uavs, paused }
     }
 
     /// Takes a change back. Records must be undone newest first: each restores exactly the state
@@ -177,10 +117,12 @@ impl Fleet {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::Edit;
     use crate::FleetConfig;
     use links::SimLink;
     use policies::PolicyRegistry;
     use roads::RoadLayout;
+    use uav::{UavState, Vec2};
 
     fn fleet() -> Fleet {
         let road = Road::new(RoadLayout::straight(0.0, 20.0, 4.0, 2)).expect("a straight road is valid");
@@ -211,16 +153,20 @@ mod tests {
         let mut undos = Vec::new();
         let state = UavState::at_rest(Vec2::new(8.0, 0.0));
         let link = Box::new(SimLink::new(state, 0.05));
-        undos.push(f.add_undoable("new".into(), "pd".into(), link, state, None).unwrap());
-        undos.push(f.set_goal_undoable("u0", Some(Vec2::new(10.0, 1.5))).unwrap());
-        undos.push(f.set_policy_undoable("u1", "pd").unwrap());
-        undos.push(f.remove_undoable("u0").unwrap());
-        undos.push(f.set_paused_undoable(true));
         let longer = Road::new(RoadLayout::straight(0.0, 30.0, 4.0, 3)).unwrap();
-        let (_, undo) = f.replace_road_undoable(longer).unwrap();
-        undos.push(undo);
         let other = Road::new(RoadLayout::straight(-5.0, 5.0, 3.0, 1)).unwrap();
-        undos.push(f.reset_undoable(Params { dt: 0.02, ..Params::default() }, other));
+        let edits = [
+            Edit::Add { id: "new".into(), policy: "pd".into(), link, state, goal: None },
+            Edit::SetGoal("u0".into(), Some(Vec2::new(10.0, 1.5))),
+            Edit::SetPolicy("u1".into(), "pd".into()),
+            Edit::Remove("u0".into()),
+            Edit::Pause(true),
+            Edit::ReplaceRoad(longer),
+            Edit::Reset(Params { dt: 0.02, ..Params::default() }, other),
+        ];
+        for edit in edits {
+            undos.push(f.apply(edit).unwrap().undo);
+        }
         assert_ne!(summary(&f), before);
         while let Some(undo) = undos.pop() {
             f.undo(undo);
@@ -234,9 +180,9 @@ mod tests {
     fn a_refused_change_gives_no_undo_record_and_changes_nothing() {
         let mut f = fleet();
         let before = summary(&f);
-        assert!(f.remove_undoable("nope").is_err());
-        assert!(f.set_goal_undoable("u0", Some(Vec2::new(100.0, 0.0))).is_err());
-        assert!(f.set_policy_undoable("u0", "nope").is_err());
+        assert!(f.apply(Edit::Remove("nope".into())).is_err());
+        assert!(f.apply(Edit::SetGoal("u0".into(), Some(Vec2::new(100.0, 0.0)))).is_err());
+        assert!(f.apply(Edit::SetPolicy("u0".into(), "nope".into())).is_err());
         assert_eq!(summary(&f), before);
     }
 }
