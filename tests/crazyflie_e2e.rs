@@ -293,9 +293,9 @@ async fn motion_capture_poses_reach_their_crazyflie_as_external_positions() {
         tokio::time::sleep(Duration::from_millis(10)).await;
     }
     let report = server.state().mocap.report();
-    assert_eq!(report["listening"], true, "{report}");
-    assert!(report["forwarded"].as_u64() >= Some(1), "{report}");
-    assert!(report["unrouted"].as_u64() >= Some(1) && report["invalid"].as_u64() >= Some(2), "{report}");
+    assert!(report.listening, "{report:?}");
+    assert!(report.forwarded >= 1, "{report:?}");
+    assert!(report.unrouted >= 1 && report.invalid >= 2, "{report:?}");
     server.shutdown().await;
     for sim in sims {
         sim.shutdown().await;

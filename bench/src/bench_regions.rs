@@ -139,25 +139,26 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         let uavs = r.server.state().engine.snapshots.borrow().uavs.len();
         let rate = (r.shared.published_bytes.load(Relaxed) - bytes_at_start[k]) as f64 / elapsed / 1e6;
         total += rate;
-        let ages = &report["foreign_age_ms"];
-        let ms = |v: &serde_json::Value| v.as_u64().map_or("-".into(), |x| format!("{x} ms"));
+        let ages = &report.foreign_age_ms;
+        let ms = |v: Option<u64>| v.map_or("-".into(), |x| format!("{x} ms"));
         say!(
             "{:>6} {:>6} {:>10.2} {:>9} {:>9} {:>9} {:>8} {:>8} {:>8.1} {:>8.1} {:>7} {:>8}",
             r.shared.name,
             uavs,
             rate,
-            report["foreign_uavs"].as_u64().unwrap_or_default(),
-            ms(&ages["p50"]),
-            ms(&ages["p99"]),
-            ms(&ages["max"]),
-            report["handover"]["adopted"].as_u64().unwrap_or_default(),
+            report.table.foreign_uavs,
+            ms(ages.p50.map(|x| x as u64)),
+            ms(ages.p99.map(|x| x as u64)),
+            ms(ages.max),
+            report.handover.adopted,
             metrics.tick.p50_us / 1e3,
             metrics.tick.p99_us / 1e3,
             metrics.missed_ticks - missed_at_start[k],
-            report["refused"].as_u64().unwrap_or_default(),
+            report.table.refused,
         );
-        if report["refused"].as_u64().unwrap_or_default() > 0 {
-            say!("  {} refused its neighbours' messages: {}", r.shared.name, report["peer_refused"]);
+        if report.table.refused > 0 {
+            let refused = serde_json::to_string(report.peer_refused.report()).unwrap_or_default();
+            say!("  {} refused its neighbours' messages: {refused}", r.shared.name);
         }
     }
     say!("all regions: {total:.2} MB/s of state messages published ({elapsed:.1} s measured)");

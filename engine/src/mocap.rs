@@ -6,7 +6,7 @@
 //! estimate from the Crazyflie's log block. Bad datagrams are counted and dropped.
 
 use super::linking::MocapRoutes;
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use tokio::net::UdpSocket;
@@ -40,15 +40,30 @@ pub struct MocapCounters {
 
 impl MocapCounters {
     /// The counters as `GET /api/metrics` shows them.
-    pub fn report(&self) -> serde_json::Value {
-        serde_json::json!({
-            "listening": self.listening.load(Relaxed),
-            "forwarded": self.forwarded.load(Relaxed),
-            "unrouted": self.unrouted.load(Relaxed),
-            "invalid": self.invalid.load(Relaxed),
-            "rejected_sender": self.rejected_sender.load(Relaxed),
-        })
+    pub fn report(&self) -> MocapReport {
+        MocapReport {
+            listening: self.listening.load(Relaxed),
+            forwarded: self.forwarded.load(Relaxed),
+            unrouted: self.unrouted.load(Relaxed),
+            invalid: self.invalid.load(Relaxed),
+            rejected_sender: self.rejected_sender.load(Relaxed),
+        }
     }
+}
+
+/// `mocap` of `GET /api/metrics`: [`MocapCounters`] read once.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct MocapReport {
+    /// A motion-capture socket is open (`--mocap`).
+    pub listening: bool,
+    /// Poses forwarded to a Crazyflie.
+    pub forwarded: u64,
+    /// Poses for no Crazyflie of the fleet.
+    pub unrouted: u64,
+    /// Datagrams that were not a valid pose.
+    pub invalid: u64,
+    /// Datagrams from a sender that is not allowed.
+    pub rejected_sender: u64,
 }
 
 /// True when `sender` may send poses: a loopback address, or one of `allowed` (`--mocap-allow`).

@@ -33,8 +33,23 @@ pub struct QpCounters {
     pub failures: u64,
 }
 
+/// Links with an error listed by UAV in `GET /api/metrics` (`links.errors`; the count of all is
+/// `links.with_error`).
+pub const LISTED_LINK_ERRORS: usize = 16;
+
+/// A link's last error, as `links.errors` of `GET /api/metrics` lists it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct LinkError {
+    /// The UAV.
+    pub id: String,
+    /// Its link.
+    pub link: String,
+    /// What went wrong last.
+    pub error: String,
+}
+
 /// The UAVs' links (`links` in `GET /api/metrics`), counted every tick.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize)]
 pub struct LinkCounters {
     /// UAVs flown over a Crazyflie link (the others are simulated in process).
     pub crazyflies: u64,
@@ -51,6 +66,8 @@ pub struct LinkCounters {
     pub min_battery_v: Option<f64>,
     /// The lowest link quality among the Crazyflies that reported one (0–1).
     pub min_link_quality: Option<f64>,
+    /// The first [`LISTED_LINK_ERRORS`] links with an error, in fleet order.
+    pub errors: Vec<LinkError>,
 }
 
 /// The document of `GET /api/metrics`.
@@ -167,6 +184,10 @@ impl TickStats {
         for u in &snapshot.uavs {
             m.links.crazyflies += u64::from(u.link != links::SIM_LINK);
             m.links.with_error += u64::from(u.link_error.is_some());
+            if let Some(error) = u.link_error.as_ref().filter(|_| m.links.errors.len() < LISTED_LINK_ERRORS) {
+                let (id, link) = (u.id.clone(), u.link.clone());
+                m.links.errors.push(LinkError { id, link, error: error.clone() });
+            }
             if let Some(f) = &u.firmware {
                 m.links.locked += u64::from(f.locked);
                 m.links.tumbled_or_crashed += u64::from(f.tumbled || f.crashed);

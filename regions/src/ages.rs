@@ -34,7 +34,7 @@ impl AgeHistogram {
     }
 
     /// `{samples, p50, p99, max}` in ms (bucket upper edges), nulls before any sample.
-    pub fn report(&self) -> serde_json::Value {
+    pub fn report(&self) -> AgeReport {
         let counts: Vec<u64> = self.counts.iter().map(|c| c.load(Relaxed)).collect();
         let samples: u64 = counts.iter().sum();
         let quantile = |q: f64| {
@@ -46,13 +46,26 @@ impl AgeHistogram {
             })
         };
         let edge = |b: Option<usize>| b.filter(|_| samples > 0).map(|b| b + 1);
-        serde_json::json!({
-            "samples": samples,
-            "p50": edge(quantile(0.5)),
-            "p99": edge(quantile(0.99)),
-            "max": (samples > 0).then(|| self.max_ms.load(Relaxed) + 1),
-        })
+        AgeReport {
+            samples,
+            p50: edge(quantile(0.5)),
+            p99: edge(quantile(0.99)),
+            max: (samples > 0).then(|| self.max_ms.load(Relaxed) + 1),
+        }
     }
+}
+
+/// `region.foreign_age_ms` of `GET /api/metrics` (ms, bucket upper edges; None before any sample).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct AgeReport {
+    /// Foreign states used.
+    pub samples: u64,
+    /// Their median age.
+    pub p50: Option<usize>,
+    /// Their 99th percentile age.
+    pub p99: Option<usize>,
+    /// The oldest.
+    pub max: Option<u64>,
 }
 
 #[cfg(test)]
@@ -68,17 +81,14 @@ mod tests {
     #[test]
     fn quantiles_are_bucket_edges_and_old_ages_land_in_the_last_bucket() {
         let h = AgeHistogram::default();
-        assert_eq!(h.report()["p99"], serde_json::Value::Null);
+        assert_eq!(h.report().p99, None);
         let mut ages: Vec<f64> = (0..99).map(|_| 10.5).collect();
         ages.push(60_000.0);
         h.record(&aged(&ages));
         let r = h.report();
-        assert_eq!(
-            (r["samples"].as_u64(), r["p50"].as_u64(), r["p99"].as_u64()),
-            (Some(100), Some(11), Some(11))
-        );
-        assert_eq!(r["max"].as_u64(), Some(AGE_BUCKETS as u64));
+        assert_eq!((r.samples, r.p50, r.p99), (100, Some(11), Some(11)));
+        assert_eq!(r.max, Some(AGE_BUCKETS as u64));
         h.record(&aged(&[30.0; 100]));
-        assert_eq!(h.report()["p99"].as_u64(), Some(31));
+        assert_eq!(h.report().p99, Some(31));
     }
 }

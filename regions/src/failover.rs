@@ -291,18 +291,37 @@ impl Failover {
     }
 
     /// `GET /api/metrics` `region.failover`.
-    pub fn report(&self, now: Instant) -> serde_json::Value {
+    pub fn report(&self, now: Instant) -> FailoverReport {
         let mirror = self.mirror();
-        serde_json::json!({
-            "role": if self.is_owner() { "owner" } else { "standby" },
-            "epoch": self.epoch(),
-            "incarnation": self.incarnation,
-            "takeovers": self.takeovers.load(SeqCst),
-            "given_way": self.given_way.load(SeqCst),
-            "mirror_uavs": mirror.as_ref().map(|(m, _)| m.uavs.len()),
-            "mirror_age_s": mirror.as_ref().map(|(_, at)| now.saturating_duration_since(*at).as_secs_f64()),
-        })
+        FailoverReport {
+            role: if self.is_owner() { "owner" } else { "standby" },
+            epoch: self.epoch(),
+            incarnation: self.incarnation.clone(),
+            takeovers: self.takeovers.load(SeqCst),
+            given_way: self.given_way.load(SeqCst),
+            mirror_uavs: mirror.as_ref().map(|(m, _)| m.uavs.len()),
+            mirror_age_s: mirror.as_ref().map(|(_, at)| now.saturating_duration_since(*at).as_secs_f64()),
+        }
     }
+}
+
+/// `region.failover` of `GET /api/metrics`.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FailoverReport {
+    /// `owner` or `standby`.
+    pub role: &'static str,
+    /// The owner's epoch this server knows.
+    pub epoch: u64,
+    /// This server's incarnation.
+    pub incarnation: String,
+    /// Takeovers made.
+    pub takeovers: u64,
+    /// Times this server gave way to another owner.
+    pub given_way: u64,
+    /// UAVs in the owner's last mirror (a standby's).
+    pub mirror_uavs: Option<usize>,
+    /// How old that mirror is (s).
+    pub mirror_age_s: Option<f64>,
 }
 
 #[cfg(test)]

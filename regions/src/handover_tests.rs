@@ -300,7 +300,7 @@ fn a_release_is_adopted_only_for_an_offer_accepted_from_its_sender() {
     east.inbox.send(release("west", "u", 7)).unwrap();
     east.gap(t0);
     assert_eq!(east.fleet.uavs().len(), 1, "and only once");
-    assert_eq!(east.screen.report()["unrequested_release"], 4);
+    assert_eq!(serde_json::to_value(east.screen.report()).unwrap()["unrequested_release"], 4);
 }
 
 #[test]
@@ -350,7 +350,7 @@ fn offers_off_the_road_too_close_listed_elsewhere_or_too_many_are_refused_by_nam
     let first: Vec<Message> = std::iter::from_fn(|| east.sent()).collect();
     assert_eq!(first.len(), MAX_OFFERS_PER_SENDER_PER_GAP, "the rest wait for their sender to offer again");
     assert_eq!(
-        east.screen.report()["too_many_offers"],
+        serde_json::to_value(east.screen.report()).unwrap()["too_many_offers"],
         (MAX_RESERVATIONS_PER_SENDER - MAX_OFFERS_PER_SENDER_PER_GAP) as u64
     );
     for k in MAX_OFFERS_PER_SENDER_PER_GAP..MAX_RESERVATIONS_PER_SENDER {
@@ -363,7 +363,7 @@ fn offers_off_the_road_too_close_listed_elsewhere_or_too_many_are_refused_by_nam
         matches!(answers.last(), Some(Message::Refuse { reason, .. }) if reason.contains("not released")),
         "{answers:?}"
     );
-    let report = east.screen.report();
+    let report = serde_json::to_value(east.screen.report()).unwrap();
     assert_eq!(
         report["too_many_offers"],
         (MAX_RESERVATIONS_PER_SENDER - MAX_OFFERS_PER_SENDER_PER_GAP + 1) as u64

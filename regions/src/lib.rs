@@ -180,18 +180,41 @@ impl RegionShared {
     }
 
     /// `GET /api/metrics` `region`: the neighbours' table and the handover counters.
-    pub fn report(&self, now: Instant) -> serde_json::Value {
-        let mut doc = self.foreign.report(now);
-        let counts = *self.handover_counts.lock().unwrap_or_else(PoisonError::into_inner);
-        let mut handover = serde_json::to_value(counts).unwrap_or_default();
-        handover["dropped"] = (counts.dropped + self.inbox_dropped.load(Relaxed)).into();
-        doc["handover"] = handover;
-        doc["failover"] = self.failover.report(now);
-        doc["foreign_age_ms"] = self.foreign_ages.report();
-        doc["published_bytes"] = self.published_bytes.load(Relaxed).into();
-        doc["peer_refused"] = self.screen.report();
-        doc
+    pub fn report(&self, now: Instant) -> RegionReport {
+        let mut handover = *self.handover_counts.lock().unwrap_or_else(PoisonError::into_inner);
+        handover.dropped += self.inbox_dropped.load(Relaxed);
+        RegionReport {
+            table: self.foreign.report(now),
+            handover,
+            failover: self.failover.report(now),
+            foreign_age_ms: self.foreign_ages.report(),
+            published_bytes: self.published_bytes.load(Relaxed),
+            peer_refused: self.screen.clone(),
+        }
     }
+}
+
+/// `region` of `GET /api/metrics`.
+#[derive(Debug, serde::Serialize)]
+pub struct RegionReport {
+    /// The neighbours' table: this region's name, the foreign UAVs, the messages heard.
+    #[serde(flatten)]
+    pub table: table::TableReport,
+    /// The handover counters (`dropped` counts the inbox's drops too).
+    pub handover: handover::HandoverCounts,
+    /// Who owns the region.
+    pub failover: failover::FailoverReport,
+    /// Ages of the foreign states the loop used (ms).
+    pub foreign_age_ms: ages::AgeReport,
+    /// Bytes of state messages published.
+    pub published_bytes: u64,
+    /// Refusals of other regions' messages, by reason.
+    #[serde(serialize_with = "peer_refusals")]
+    pub peer_refused: Arc<screen::Screen>,
+}
+
+fn peer_refusals<S: serde::Serializer>(screen: &Arc<screen::Screen>, to: S) -> Result<S::Ok, S::Error> {
+    serde::Serialize::serialize(screen.report(), to)
 }
 
 /// The running Zenoh side: the session (closed when dropped) and its subscribers.

@@ -188,8 +188,8 @@ impl Screen {
     }
 
     /// `region.peer_refused` of `GET /api/metrics`.
-    pub fn report(&self) -> serde_json::Value {
-        serde_json::to_value(&self.refused).unwrap_or_default()
+    pub fn report(&self) -> &PeerRefusals {
+        &self.refused
     }
 }
 
@@ -237,7 +237,7 @@ mod tests {
         let dup = check(&s, "a", &[("dup", [2.0, 0.0]), ("dup", [3.0, 0.0])]);
         assert!(matches!(dup, Err(Refusal::BadId(_, ref why)) if why == "listed twice"));
         assert_eq!(check(&s, "zz", &[]), Err(Refusal::UnknownRegion("zz".into())));
-        let report = s.report();
+        let report = serde_json::to_value(s.report()).unwrap();
         assert_eq!(report["far_from_region"], 2);
         assert_eq!(report["bad_id"], 4);
         assert_eq!(report["unknown_region"], 1);

@@ -5,7 +5,7 @@
 
 use super::wire::RegionStates;
 use fleet::ForeignUav;
-use serde_json::{Value, json};
+
 use std::collections::HashMap;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use std::sync::{Mutex, MutexGuard, PoisonError};
@@ -141,23 +141,47 @@ impl ForeignTable {
     /// `GET /api/metrics` `region`: its name, the foreign UAVs known (`foreign_uavs`), per
     /// neighbouring region heard from the UAVs of its last message and that message's age at
     /// `now`, and the counts of messages accepted and refused.
-    pub fn report(&self, now: Instant) -> Value {
+    pub fn report(&self, now: Instant) -> TableReport {
         let regions = self.lock();
-        let heard: serde_json::Map<String, Value> = regions
+        let heard = regions
             .iter()
             .map(|(name, h)| {
-                let age = h.age_at_send_s + now.saturating_duration_since(h.received).as_secs_f64();
-                (name.clone(), json!({"uavs": h.uavs.len(), "age_s": age}))
+                let age_s = h.age_at_send_s + now.saturating_duration_since(h.received).as_secs_f64();
+                (name.clone(), HeardReport { uavs: h.uavs.len(), age_s })
             })
             .collect();
-        json!({
-            "name": self.own,
-            "foreign_uavs": regions.values().map(|h| h.uavs.len()).sum::<usize>(),
-            "heard": heard,
-            "messages": self.received.load(Relaxed),
-            "refused": self.refused.load(Relaxed),
-        })
+        TableReport {
+            name: self.own.clone(),
+            foreign_uavs: regions.values().map(|h| h.uavs.len()).sum::<usize>(),
+            heard,
+            messages: self.received.load(Relaxed),
+            refused: self.refused.load(Relaxed),
+        }
     }
+}
+
+/// The neighbours' table in `region` of `GET /api/metrics`.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct TableReport {
+    /// This server's region.
+    pub name: String,
+    /// The foreign UAVs known.
+    pub foreign_uavs: usize,
+    /// Per neighbouring region heard from, its last message.
+    pub heard: std::collections::BTreeMap<String, HeardReport>,
+    /// State messages accepted.
+    pub messages: u64,
+    /// State messages refused.
+    pub refused: u64,
+}
+
+/// A neighbour's last state message.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct HeardReport {
+    /// The UAVs it listed.
+    pub uavs: usize,
+    /// Its age now (s).
+    pub age_s: f64,
 }
 
 #[cfg(test)]
@@ -200,7 +224,7 @@ mod tests {
         assert!(table.accept("east", states("east", &["b"]), t0 + Duration::from_millis(150)));
         table.copy_into(t0 + Duration::from_millis(150), &mut out);
         assert_eq!(out.iter().map(|f| f.id.as_str()).collect::<Vec<_>>(), ["b"]);
-        assert_eq!(table.report(t0)["foreign_uavs"], 1);
+        assert_eq!(table.report(t0).foreign_uavs, 1);
     }
 
     #[test]
@@ -230,6 +254,6 @@ mod tests {
         let mut out = Vec::new();
         table.copy_into(t0, &mut out);
         assert!(out.is_empty());
-        assert_eq!(table.report(t0)["refused"], 2);
+        assert_eq!(table.report(t0).refused, 2);
     }
 }

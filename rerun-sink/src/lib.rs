@@ -78,15 +78,30 @@ impl RerunCounters {
     }
 
     /// The counters as `GET /api/metrics` shows them.
-    pub fn report(&self) -> serde_json::Value {
-        serde_json::json!({
-            "active": self.active.load(Relaxed),
-            "batched": self.batched.load(Relaxed),
-            "logged": self.logged.load(Relaxed),
-            "skipped": self.skipped.load(Relaxed),
-            "errors": self.errors.load(Relaxed),
-        })
+    pub fn report(&self) -> RerunReport {
+        RerunReport {
+            active: self.active.load(Relaxed),
+            batched: self.batched.load(Relaxed),
+            logged: self.logged.load(Relaxed),
+            skipped: self.skipped.load(Relaxed),
+            errors: self.errors.load(Relaxed),
+        }
     }
+}
+
+/// `rerun` of `GET /api/metrics`: [`RerunCounters`] read once.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct RerunReport {
+    /// A sink is running.
+    pub active: bool,
+    /// The last snapshot was logged as one batch.
+    pub batched: bool,
+    /// Snapshots logged.
+    pub logged: u64,
+    /// Snapshots skipped.
+    pub skipped: u64,
+    /// Log calls that failed.
+    pub errors: u64,
 }
 
 /// How long [`RerunSink::finish`] waits for the sink to flush before leaving it behind.

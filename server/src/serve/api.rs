@@ -1,6 +1,10 @@
 //! REST handlers (`docs/api.md`, `GET /api/openapi.json`; their routes are `routes::ROUTES`). Reads answer from the latest published
 //! snapshot; changes go to the fleet loop as commands and are answered once it applied them.
 
+use super::answers::{
+    GoalSet, Health, Landing, Metrics, Ownership, Paused, Policies, PolicySet, Reached, RerunSelection,
+    RoadReplaced, ScenarioLoaded, Stopped, StreamReport, UavAdded,
+};
 use super::error::{ApiError, ApiJson, NoBody};
 use super::state::{AppState, json_of};
 use axum::Json;
@@ -12,7 +16,7 @@ use engine::snapshot::{Snapshot, UavSnapshot};
 use fleet::Scenario;
 use roads::{Road, RoadLayout};
 use serde::Deserialize;
-use serde_json::{Value, json};
+use serde_json::json;
 use uav::Vec2;
 
 /// A loop that has not finished a tick for this long is reported stalled.
@@ -39,8 +43,7 @@ pub(super) async fn healthz(State(app): State<AppState>) -> Response {
     };
     let code =
         if matches!(status, "ok" | "degraded") { StatusCode::OK } else { StatusCode::SERVICE_UNAVAILABLE };
-    let body = json!({"status": status, "tick": tick, "tick_age_ms": tick_age_ms, "problems": problems});
-    (code, Json(body)).into_response()
+    (code, Json(Health { status, tick, tick_age_ms, problems })).into_response()
 }
 
 pub(super) async fn openapi() -> Response {
@@ -63,7 +66,7 @@ pub(super) async fn put_road(
     match app.apply(Command::SetRoad(Box::new(road))).await {
         Ok(Outcome::RoadReplaced { cleared_goals }) => {
             let version = app.engine.road.borrow().version;
-            Ok(Json(json!({"version": version, "cleared_goals": cleared_goals})).into_response())
+            Ok(Json(RoadReplaced { version, cleared_goals }).into_response())
         }
         Ok(_) => Ok(StatusCode::OK.into_response()),
         // A UAV that would be outside or too close to a wall is a 409 (EditError::RoadConflict).
@@ -216,8 +219,9 @@ pub(super) async fn add_uav(
     let (id, link) = (new.id.clone(), new.link.clone());
     app.apply(Command::AddUav { id: new.id, position, policy: new.policy, goal, link: new.link }).await?;
     let link = link.unwrap_or_else(|| links::SIM_LINK.into());
-    let body = json!({"id": id, "position": new.position, "goal": new.goal, "link": link});
-    Ok((StatusCode::CREATED, [(header::LOCATION, format!("/api/uavs/{id}"))], Json(body)).into_response())
+    let location = format!("/api/uavs/{id}");
+    let body = UavAdded { id, position: new.position, goal: new.goal, link };
+    Ok((StatusCode::CREATED, [(header::LOCATION, location)], Json(body)).into_response())
 }
 
 pub(super) async fn remove_uav(
@@ -240,10 +244,10 @@ pub(super) async fn set_goal(
     State(app): State<AppState>,
     Path(id): Path<String>,
     ApiJson(body): ApiJson<GoalBody>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<GoalSet>, ApiError> {
     let goal = point("goal", body.goal)?;
     app.apply(Command::SetGoal(id.clone(), Some(goal))).await?;
-    Ok(Json(json!({"id": id, "goal": body.goal})))
+    Ok(Json(GoalSet { id, goal: body.goal }))
 }
 
 pub(super) async fn clear_goal(
@@ -266,19 +270,19 @@ pub(super) async fn set_policy(
     State(app): State<AppState>,
     Path(id): Path<String>,
     ApiJson(body): ApiJson<PolicyBody>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<PolicySet>, ApiError> {
     app.apply(Command::SetPolicy(id.clone(), body.policy.clone())).await?;
-    Ok(Json(json!({"id": id, "policy": body.policy})))
+    Ok(Json(PolicySet { id, policy: body.policy }))
 }
 
-pub(super) async fn list_policies(State(app): State<AppState>) -> Json<Value> {
-    Json(json!({"policies": &*app.policies, "default": &*app.default_policy}))
+pub(super) async fn list_policies(State(app): State<AppState>) -> Json<Policies> {
+    Json(Policies { policies: app.policies.clone(), default: app.default_policy.clone() })
 }
 
 pub(super) async fn load_scenario(
     State(app): State<AppState>,
     ApiJson(scenario): ApiJson<Scenario>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<ScenarioLoaded>, ApiError> {
     // Refused before any validation work: the loop must be able to tick the fleet in dt.
     if scenario.uavs.len() > app.max_uavs {
         let full = engine::command::ChangeError::FleetFull { wanted: scenario.uavs.len(), max: app.max_uavs };
@@ -298,38 +302,44 @@ pub(super) async fn load_scenario(
         Outcome::ScenarioLoaded { tick } => tick,
         _ => app.engine.snapshots.borrow().tick,
     };
-    Ok(Json(json!({"name": name, "uavs": count, "loaded_after_tick": tick})))
+    Ok(Json(ScenarioLoaded { name, uavs: count, loaded_after_tick: tick }))
 }
 
-pub(super) async fn pause(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
+pub(super) async fn pause(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Paused>, ApiError> {
     app.apply(Command::Pause(true)).await?;
-    Ok(Json(json!({"paused": true})))
+    Ok(Json(Paused { paused: true }))
 }
 
-pub(super) async fn resume(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
+pub(super) async fn resume(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Paused>, ApiError> {
     app.apply(Command::Pause(false)).await?;
-    Ok(Json(json!({"paused": false})))
+    Ok(Json(Paused { paused: false }))
 }
 
 pub(super) async fn land_uav(
     State(app): State<AppState>,
     Path(id): Path<String>,
     NoBody: NoBody,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<Landing>, ApiError> {
     app.apply_urgent(Command::Land(Some(id.clone()))).await?;
-    Ok(Json(json!({"landing": [id]})))
+    Ok(Json(Landing { landing: Reached::Uavs(vec![id]) }))
 }
 
-pub(super) async fn land_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
+pub(super) async fn land_fleet(
+    State(app): State<AppState>,
+    NoBody: NoBody,
+) -> Result<Json<Landing>, ApiError> {
     app.apply_urgent(Command::Land(None)).await?;
-    Ok(Json(json!({"landing": "all"})))
+    Ok(Json(Landing { landing: Reached::ALL }))
 }
 
-pub(super) async fn stop_fleet(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Value>, ApiError> {
+pub(super) async fn stop_fleet(
+    State(app): State<AppState>,
+    NoBody: NoBody,
+) -> Result<Json<Stopped>, ApiError> {
     // Straight to every Crazyflie's radio session first: that works even while the loop is stalled.
     let direct = app.engine.stops.stop_all();
     match app.apply_urgent(Command::EmergencyStop).await {
-        Ok(_) => Ok(Json(json!({"stopped": "all"}))),
+        Ok(_) => Ok(Json(Stopped { stopped: Reached::ALL })),
         Err(mut e) => {
             if direct > 0 {
                 e.message = format!("{}; {direct} Crazyflies were sent the stop directly", e.message);
@@ -354,9 +364,8 @@ pub(super) struct SelectionBody {
     ids: Vec<String>,
 }
 
-pub(super) async fn get_rerun_selection(State(app): State<AppState>) -> Json<Value> {
-    let ids = app.rerun_selection.borrow().clone();
-    Json(json!({"ids": &*ids}))
+pub(super) async fn get_rerun_selection(State(app): State<AppState>) -> Json<RerunSelection> {
+    Json(RerunSelection { ids: app.rerun_selection.borrow().clone() })
 }
 
 /// Which UAVs keep their own Rerun entities when the fleet is logged as one batch. View state, like
@@ -364,7 +373,7 @@ pub(super) async fn get_rerun_selection(State(app): State<AppState>) -> Json<Val
 pub(super) async fn put_rerun_selection(
     State(app): State<AppState>,
     ApiJson(body): ApiJson<SelectionBody>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<RerunSelection>, ApiError> {
     use rerun_sink::MAX_SELECTED;
     if body.ids.len() > MAX_SELECTED {
         return Err(ApiError::invalid("ids", format!("at most {MAX_SELECTED} UAVs, got {}", body.ids.len())));
@@ -385,14 +394,11 @@ pub(super) async fn put_rerun_selection(
     }
     let ids: std::sync::Arc<[String]> = ids.into();
     app.rerun_selection.send_replace(ids.clone());
-    Ok(Json(json!({"ids": &*ids})))
+    Ok(Json(RerunSelection { ids }))
 }
 
-/// Links with an error listed by id in `GET /api/metrics` (`links.errors`).
-pub const LISTED_LINK_ERRORS: usize = 16;
-
 /// `GET /api/region/ownership`: this region's ownership intervals (404 without `--region`).
-pub(super) async fn get_ownership(State(app): State<AppState>) -> Result<Json<Value>, ApiError> {
+pub(super) async fn get_ownership(State(app): State<AppState>) -> Result<Json<Ownership>, ApiError> {
     let Some(region) = &app.region else {
         return Err(ApiError::new(
             StatusCode::NOT_FOUND,
@@ -401,40 +407,29 @@ pub(super) async fn get_ownership(State(app): State<AppState>) -> Result<Json<Va
         ));
     };
     let (intervals, forgotten) = region.ownership.intervals();
-    Ok(Json(json!({"region": region.name, "intervals": intervals, "forgotten": forgotten})))
+    Ok(Json(Ownership { region: region.name.clone(), intervals, forgotten }))
 }
 
-pub(super) async fn get_metrics(State(app): State<AppState>) -> Json<Value> {
+pub(super) async fn get_metrics(State(app): State<AppState>) -> Json<Metrics> {
     use std::sync::atomic::Ordering::Relaxed;
-    let metrics = app.engine.metrics.borrow().clone();
-    let mut doc = serde_json::to_value(&*metrics).unwrap_or_else(|_| json!({}));
     let s = &app.stream;
-    doc["stream"] = json!({
-        "clients": s.clients.load(Relaxed),
-        "frames_sent": s.frames_sent.load(Relaxed),
-        "frames_skipped": s.frames_skipped.load(Relaxed),
-        "clients_dropped": s.clients_dropped.load(Relaxed),
-        "clients_refused": s.clients_refused.load(Relaxed),
-        "max_clients": app.max_stream_clients,
-    });
-    doc["connections"] = app.connections.report();
-    doc["auth"] = app.auth_failures.report();
-    doc["storage"] = serde_json::to_value(app.engine.storage.report()).unwrap_or(Value::Null);
-    doc["mocap"] = app.mocap.report();
-    doc["rerun"] = app.rerun.report();
-    if let Some(region) = &app.region {
-        doc["region"] = region.report(std::time::Instant::now());
-    }
-    // The first links with an error, by UAV (the count of all is `links.with_error`).
-    let snapshot = app.engine.snapshots.borrow().clone();
-    let errors: Vec<Value> = snapshot
-        .uavs
-        .iter()
-        .filter_map(|u| u.link_error.as_ref().map(|e| json!({"id": u.id, "link": u.link, "error": e})))
-        .take(LISTED_LINK_ERRORS)
-        .collect();
-    doc["links"]["errors"] = json!(errors);
-    doc["tick_age_ms"] = json!(app.engine.clock.tick_age().as_secs_f64() * 1e3);
-    doc["max_uavs"] = json!(app.max_uavs);
-    Json(doc)
+    Json(Metrics {
+        fleet_loop: app.engine.metrics.borrow().clone(),
+        stream: StreamReport {
+            clients: s.clients.load(Relaxed),
+            frames_sent: s.frames_sent.load(Relaxed),
+            frames_skipped: s.frames_skipped.load(Relaxed),
+            clients_dropped: s.clients_dropped.load(Relaxed),
+            clients_refused: s.clients_refused.load(Relaxed),
+            max_clients: app.max_stream_clients,
+        },
+        connections: app.connections.report(),
+        auth: app.auth_failures.report(),
+        storage: app.engine.storage.report(),
+        mocap: app.mocap.report(),
+        rerun: app.rerun.report(),
+        region: app.region.as_ref().map(|r| r.report(std::time::Instant::now())),
+        tick_age_ms: app.engine.clock.tick_age().as_secs_f64() * 1e3,
+        max_uavs: app.max_uavs,
+    })
 }

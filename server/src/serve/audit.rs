@@ -14,7 +14,6 @@ use axum::response::Response;
 use engine::durable::{AuditQuery, ToWriter};
 use engine::store::{AuditRecord, now_ms};
 use serde::Deserialize;
-use serde_json::{Value, json};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering::Relaxed};
 
@@ -105,7 +104,7 @@ pub struct AuditParams {
 pub async fn list(
     State(app): State<AppState>,
     query: Result<Query<AuditParams>, axum::extract::rejection::QueryRejection>,
-) -> Result<Json<Value>, ApiError> {
+) -> Result<Json<super::answers::AuditLog>, ApiError> {
     let Query(q) = query.map_err(|e| ApiError::invalid("query", e.body_text()))?;
     let limit = q.limit.unwrap_or(100);
     if !(1..=1000).contains(&limit) {
@@ -127,5 +126,5 @@ pub async fn list(
         Ok(Err(_)) => return Err(unavailable("the state writer stopped")),
         Err(_) => return Err(unavailable("no answer within 10 s")),
     };
-    Ok(Json(json!({ "entries": entries })))
+    Ok(Json(super::answers::AuditLog { entries }))
 }

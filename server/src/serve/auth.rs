@@ -25,7 +25,6 @@ use axum::extract::{Request, State};
 use axum::http::{HeaderValue, Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
-use serde_json::{Value, json};
 use std::collections::HashMap;
 use std::net::{IpAddr, Ipv4Addr, Ipv6Addr};
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
@@ -274,21 +273,42 @@ impl AuthFailures {
     }
 
     /// The `auth` object of `/api/metrics`.
-    pub fn report(&self) -> Value {
+    pub fn report(&self) -> AuthReport {
         let now = Instant::now();
         let buckets = self.lock();
         let limited = buckets.networks.values().filter(|n| n.level(now) < 1.0).count();
-        json!({
-            "refused": self.refused.load(Relaxed),
-            "rate_limited": self.rate_limited.load(Relaxed),
-            "rate_limited_global": self.rate_limited_global.load(Relaxed),
-            "safety_checks": self.safety_checks.load(Relaxed),
-            "networks_tracked": buckets.networks.len(),
-            "networks_limited": limited,
-            "global_left": buckets.global_level(now).floor(),
-            "global_limited": buckets.global_level(now) < 1.0,
-        })
+        AuthReport {
+            refused: self.refused.load(Relaxed),
+            rate_limited: self.rate_limited.load(Relaxed),
+            rate_limited_global: self.rate_limited_global.load(Relaxed),
+            safety_checks: self.safety_checks.load(Relaxed),
+            networks_tracked: buckets.networks.len(),
+            networks_limited: limited,
+            global_left: buckets.global_level(now).floor(),
+            global_limited: buckets.global_level(now) < 1.0,
+        }
     }
+}
+
+/// `auth` of `GET /api/metrics`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct AuthReport {
+    /// Requests refused for a missing or wrong token.
+    pub refused: u64,
+    /// Requests refused (429) because their network, or everyone, failed too often.
+    pub rate_limited: u64,
+    /// Of those, refused because every network together failed too often.
+    pub rate_limited_global: u64,
+    /// Token checks granted to a rate-limited network on the stop and land routes.
+    pub safety_checks: u64,
+    /// Networks with failures remembered.
+    pub networks_tracked: usize,
+    /// Networks rate-limited now.
+    pub networks_limited: usize,
+    /// Failures everyone together may still make now.
+    pub global_left: f64,
+    /// Everyone is rate-limited now.
+    pub global_limited: bool,
 }
 
 /// The routes an operator must always reach with the right token (land and stop: the route
@@ -482,7 +502,6 @@ mod tests {
         // It refills at its rate: an attempt after 1/rate seconds.
         let later = now + Duration::from_secs_f64(1.5 / GLOBAL_FAILURES_PER_SECOND);
         assert_eq!(failures.admit(ip("127.201.0.1"), false, later), Admission::Check { limited: false });
-        let report = failures.report();
-        assert_eq!(report["networks_tracked"], 51, "{report}");
+        assert_eq!(failures.report().networks_tracked, 51);
     }
 }

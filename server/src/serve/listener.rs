@@ -22,7 +22,6 @@ use axum::Router;
 use axum::extract::ConnectInfo;
 use hyper::body::Incoming;
 use hyper_util::rt::{TokioIo, TokioTimer};
-use serde_json::{Value, json};
 use std::net::SocketAddr;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering::Relaxed};
@@ -106,21 +105,46 @@ pub struct ConnectionCounters {
     pub reserve_accepted: AtomicU64,
 }
 
+/// `connections` of `GET /api/metrics`: [`ConnectionCounters`] read once.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct ConnectionsReport {
+    /// Open connections (the reserve's included).
+    pub open: usize,
+    /// Most connections at once (beyond: the reserve, for the stop and land routes).
+    pub limit: usize,
+    /// Connections accepted since the start.
+    pub accepted: u64,
+    /// Idle or slow connections closed to make room.
+    pub evicted: u64,
+    /// Connections refused (no room, no idle one to close).
+    pub refused: u64,
+    /// Errors of `accept` (e.g. out of file descriptors).
+    pub accept_errors: u64,
+    /// Of the evicted, those closed while receiving a body for too long.
+    pub evicted_slow_bodies: u64,
+    /// Open reserve connections.
+    pub reserve_open: usize,
+    /// Most reserve connections.
+    pub reserve_limit: usize,
+    /// Connections admitted to the reserve since the start.
+    pub reserve_accepted: u64,
+}
+
 impl ConnectionCounters {
     /// The `connections` object of `/api/metrics`.
-    pub fn report(&self) -> Value {
-        json!({
-            "open": self.open.load(Relaxed),
-            "limit": self.limit.load(Relaxed),
-            "accepted": self.accepted.load(Relaxed),
-            "evicted": self.evicted.load(Relaxed),
-            "refused": self.refused.load(Relaxed),
-            "accept_errors": self.accept_errors.load(Relaxed),
-            "evicted_slow_bodies": self.evicted_slow_bodies.load(Relaxed),
-            "reserve_open": self.reserve_open.load(Relaxed),
-            "reserve_limit": RESERVE_CONNECTIONS,
-            "reserve_accepted": self.reserve_accepted.load(Relaxed),
-        })
+    pub fn report(&self) -> ConnectionsReport {
+        ConnectionsReport {
+            open: self.open.load(Relaxed),
+            limit: self.limit.load(Relaxed),
+            accepted: self.accepted.load(Relaxed),
+            evicted: self.evicted.load(Relaxed),
+            refused: self.refused.load(Relaxed),
+            accept_errors: self.accept_errors.load(Relaxed),
+            evicted_slow_bodies: self.evicted_slow_bodies.load(Relaxed),
+            reserve_open: self.reserve_open.load(Relaxed),
+            reserve_limit: RESERVE_CONNECTIONS,
+            reserve_accepted: self.reserve_accepted.load(Relaxed),
+        }
     }
 
     /// Counts a connection closed to make room (`reserve`: one of the reserve's).

@@ -2,6 +2,7 @@
 //! tokio/axum, and the state writer. [`Server::start`] wires them; [`serve`] runs the HTTP side on an
 //! already-bound listener until a shutdown future completes (tests bind 127.0.0.1:0).
 
+mod answers;
 mod api;
 pub mod audit;
 pub mod auth;
