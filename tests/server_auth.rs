@@ -5,7 +5,7 @@
 
 mod support;
 
-use airroads_server::serve::auth::{FAILURE_BURST, GLOBAL_FAILURE_BURST, GLOBAL_FAILURES_PER_SECOND};
+use api::auth::{FAILURE_BURST, GLOBAL_FAILURE_BURST, GLOBAL_FAILURES_PER_SECOND};
 use std::net::{IpAddr, SocketAddr};
 use std::time::{Duration, Instant};
 use support::{Running, Wire, request_text, small, start_with};

@@ -4,7 +4,7 @@
 mod support;
 
 use airroads_server::serve::Server;
-use airroads_server::serve::state::AppState;
+use api::state::AppState;
 use rerun::components::{LineStrip2D, Position2D};
 use rerun::external::re_log_encoding::DecoderApp;
 use rerun::log::{Chunk, LogMsg};

@@ -6,7 +6,8 @@
 use flights::say;
 
 use crate::BenchArgs;
-use airroads_server::serve::{ServeConfig, Server, client};
+use airroads_server::serve::{ServeConfig, Server};
+use api::client;
 use engine::persist;
 use engine::store::{Store, Write};
 use flights::load_scenario;

@@ -5,7 +5,8 @@
 use flights::say;
 
 use crate::BenchArgs;
-use airroads_server::serve::{ServeConfig, Server, client};
+use airroads_server::serve::{ServeConfig, Server};
+use api::client;
 use engine::stats::percentiles;
 use flights::load_scenario;
 use futures_util::StreamExt;

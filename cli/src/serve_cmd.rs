@@ -59,7 +59,7 @@ pub fn health(url: &str) -> ExitCode {
             .next()
             .ok_or_else(|| anyhow::anyhow!("{host}: no address"))?;
         let path = format!("/{path}");
-        let call = serve::client::request(addr, "GET", &path, None, &[]);
+        let call = api::client::request(addr, "GET", &path, None, &[]);
         let (status, body) = tokio::time::timeout(std::time::Duration::from_secs(3), call).await??;
         anyhow::ensure!(status == 200, "{url}: HTTP {status}: {body}");
         anyhow::Ok(body)
@@ -83,7 +83,7 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
     let token = args.token.clone().or_else(|| std::env::var("AIRROADS_TOKEN").ok()).filter(|t| !t.is_empty());
     if let Some(t) = &token {
         let source = if from_env { "AIRROADS_TOKEN" } else { "--token" };
-        serve::auth::check_token(t).map_err(|reason| format!("{source}: {reason}"))?;
+        api::auth::check_token(t).map_err(|reason| format!("{source}: {reason}"))?;
     }
     if token.is_none() && !args.addr.ip().is_loopback() {
         return Err(format!(
@@ -149,7 +149,7 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
     if let Some(dir) = &data_dir {
         serve::open_store(Some(dir)).map_err(|e| format!("--data-dir {}: {e}", dir.display()))?;
     }
-    let open_files = serve::listener::raise_open_files_limit();
+    let open_files = api::listener::raise_open_files_limit();
     let mut config =
         ServeConfig::new(args.flight.fleet_config(), policies, args.flight.policy.clone(), initial);
     config.token = token;
@@ -163,8 +163,8 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
     config.max_uavs = args.max_uavs;
     config.allow_hosts = args.allow_hosts.clone();
     config.allow_origins = args.allow_origins.clone();
-    config.limits = serve::listener::Limits::fitted(open_files);
-    config.max_stream_clients = serve::ws::fitted_max_clients(open_files);
+    config.limits = api::listener::Limits::fitted(open_files);
+    config.max_stream_clients = api::ws::fitted_max_clients(open_files);
     config.link_rules = link_rules;
     config.region = region;
     Ok(config)
@@ -320,7 +320,7 @@ async fn start_region(
     session: zenoh::Session,
     claim: regions::tokens::Claim,
     shared: &regions::RegionShared,
-    app: &serve::state::AppState,
+    app: &api::state::AppState,
 ) -> anyhow::Result<(regions::RegionLink, zenoh::query::Queryable<()>)> {
     let road = app.engine.road.borrow().layout.clone();
     let options = zenoh_options(args, &road)?;
@@ -328,9 +328,9 @@ async fn start_region(
     let neighbours = regions::neighbours_of(&road, &shared.name).map_err(anyhow::Error::msg)?;
     let link = regions::start(session.clone(), &options, shared, &neighbours, claim).await?;
     let federation = regions::federation::Federation::new(session.clone(), &options.prefix, &shared.name);
-    let queryable = serve::federate::answer_queries(&federation, &session, app.clone()).await?;
+    let queryable = api::federate::answer_queries(&federation, &session, app.clone()).await?;
     let _ = shared.federation.set(federation);
-    tokio::spawn(serve::road_follow::follow(app.clone()));
+    tokio::spawn(api::road_follow::follow(app.clone()));
     let key = regions::state_key(&options.prefix, &shared.name);
     let role = if shared.failover.is_owner() { "owner" } else { "standby" };
     say!(

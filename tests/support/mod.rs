@@ -64,7 +64,7 @@ pub struct Running {
     /// Its address.
     pub addr: SocketAddr,
     /// Its shared handler state (to look inside, or to stage a failure).
-    pub state: airroads_server::serve::state::AppState,
+    pub state: api::state::AppState,
     stop: Option<oneshot::Sender<()>>,
     task: Option<tokio::task::JoinHandle<anyhow::Result<()>>>,
 }
@@ -145,7 +145,7 @@ pub async fn raw(
     body: Option<&str>,
     headers: &[(&str, &str)],
 ) -> (u16, String) {
-    airroads_server::serve::client::request(addr, method, path, body, headers).await.unwrap()
+    api::client::request(addr, method, path, body, headers).await.unwrap()
 }
 
 /// A response read off the wire: status, headers (names lower-cased) and body.

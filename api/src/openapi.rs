@@ -23,10 +23,8 @@ mod tests {
                 ops.filter(|m| METHODS.contains(&m.as_str())).map(move |m| (path.clone(), m.clone()))
             })
             .collect();
-        let routes: BTreeSet<(String, String)> = super::super::routes::ROUTES
-            .iter()
-            .map(|r| (r.path.to_string(), r.verb.name().to_string()))
-            .collect();
+        let routes: BTreeSet<(String, String)> =
+            crate::routes::ROUTES.iter().map(|r| (r.path.to_string(), r.verb.name().to_string())).collect();
         let undocumented: Vec<_> = routes.difference(&documented).collect();
         let unrouted: Vec<_> = documented.difference(&routes).collect();
         assert!(

@@ -3,7 +3,7 @@
 //! operator's stop and land ([`Access::Urgent`]) and which reads need the token, the request guard
 //! which changes exist, and a test holds the OpenAPI document's paths to it.
 
-use super::api;
+use super::handlers;
 use super::state::AppState;
 use axum::Router;
 use axum::http::Method;
@@ -117,31 +117,31 @@ use Verb::{Delete, Get, Post, Put};
 
 /// The REST API (docs/api.md, `GET /api/openapi.json`).
 pub static ROUTES: &[Route] = &[
-    route(Get, "/healthz", Read, Here, |m| on(m, api::healthz)),
-    route(Get, "/api/openapi.json", Read, Here, |m| on(m, api::openapi)),
-    route(Get, "/api/road", Read, Here, |m| on(m, api::get_road)),
-    route(Put, "/api/road", Change, Deploy(Kind::Road), |m| on(m, api::put_road)),
-    route(Get, "/api/road/geometry", Read, Here, |m| on(m, api::get_road_geometry)),
-    route(Get, "/api/uavs", Read, List, |m| on(m, api::list_uavs)),
-    route(Post, "/api/uavs", Change, Add, |m| on(m, api::add_uav)),
-    route(Get, "/api/uavs/{id}", Read, Uav, |m| on(m, api::get_uav)),
-    route(Delete, "/api/uavs/{id}", Change, Uav, |m| on(m, api::remove_uav)),
-    route(Put, "/api/uavs/{id}/goal", Change, Uav, |m| on(m, api::set_goal)),
-    route(Delete, "/api/uavs/{id}/goal", Change, Uav, |m| on(m, api::clear_goal)),
-    route(Put, "/api/uavs/{id}/policy", Change, Uav, |m| on(m, api::set_policy)),
-    route(Post, "/api/uavs/{id}/land", Urgent, Uav, |m| on(m, api::land_uav)),
-    route(Get, "/api/policies", Read, Here, |m| on(m, api::list_policies)),
-    route(Post, "/api/scenario", Change, Deploy(Kind::Scenario), |m| on(m, api::load_scenario)),
-    route(Post, "/api/fleet/pause", Change, Fleet, |m| on(m, api::pause)),
-    route(Post, "/api/fleet/resume", Change, Fleet, |m| on(m, api::resume)),
-    route(Post, "/api/fleet/land", Urgent, Fleet, |m| on(m, api::land_fleet)),
-    route(Post, "/api/fleet/stop", Urgent, Fleet, |m| on(m, api::stop_fleet)),
-    route(Get, "/api/state", Read, State, |m| on(m, api::get_state)),
-    route(Get, "/api/metrics", Read, Here, |m| on(m, api::get_metrics)),
+    route(Get, "/healthz", Read, Here, |m| on(m, handlers::healthz)),
+    route(Get, "/api/openapi.json", Read, Here, |m| on(m, handlers::openapi)),
+    route(Get, "/api/road", Read, Here, |m| on(m, handlers::get_road)),
+    route(Put, "/api/road", Change, Deploy(Kind::Road), |m| on(m, handlers::put_road)),
+    route(Get, "/api/road/geometry", Read, Here, |m| on(m, handlers::get_road_geometry)),
+    route(Get, "/api/uavs", Read, List, |m| on(m, handlers::list_uavs)),
+    route(Post, "/api/uavs", Change, Add, |m| on(m, handlers::add_uav)),
+    route(Get, "/api/uavs/{id}", Read, Uav, |m| on(m, handlers::get_uav)),
+    route(Delete, "/api/uavs/{id}", Change, Uav, |m| on(m, handlers::remove_uav)),
+    route(Put, "/api/uavs/{id}/goal", Change, Uav, |m| on(m, handlers::set_goal)),
+    route(Delete, "/api/uavs/{id}/goal", Change, Uav, |m| on(m, handlers::clear_goal)),
+    route(Put, "/api/uavs/{id}/policy", Change, Uav, |m| on(m, handlers::set_policy)),
+    route(Post, "/api/uavs/{id}/land", Urgent, Uav, |m| on(m, handlers::land_uav)),
+    route(Get, "/api/policies", Read, Here, |m| on(m, handlers::list_policies)),
+    route(Post, "/api/scenario", Change, Deploy(Kind::Scenario), |m| on(m, handlers::load_scenario)),
+    route(Post, "/api/fleet/pause", Change, Fleet, |m| on(m, handlers::pause)),
+    route(Post, "/api/fleet/resume", Change, Fleet, |m| on(m, handlers::resume)),
+    route(Post, "/api/fleet/land", Urgent, Fleet, |m| on(m, handlers::land_fleet)),
+    route(Post, "/api/fleet/stop", Urgent, Fleet, |m| on(m, handlers::stop_fleet)),
+    route(Get, "/api/state", Read, State, |m| on(m, handlers::get_state)),
+    route(Get, "/api/metrics", Read, Here, |m| on(m, handlers::get_metrics)),
     route(Get, "/api/audit", PrivateRead, Here, |m| on(m, super::audit::list)),
-    route(Get, "/api/region/ownership", Read, Here, |m| on(m, api::get_ownership)),
-    route(Get, "/api/rerun/selection", Read, Here, |m| on(m, api::get_rerun_selection)),
-    route(Put, "/api/rerun/selection", Change, Here, |m| on(m, api::put_rerun_selection)),
+    route(Get, "/api/region/ownership", Read, Here, |m| on(m, handlers::get_ownership)),
+    route(Get, "/api/rerun/selection", Read, Here, |m| on(m, handlers::get_rerun_selection)),
+    route(Put, "/api/rerun/selection", Change, Here, |m| on(m, handlers::put_rerun_selection)),
 ];
 
 /// The router of every route in [`ROUTES`].

@@ -1,25 +1,8 @@
-//! `airroads serve`: the fleet loop on its own thread, the REST API and the WebSocket stream on
-//! tokio/axum, and the state writer. [`Server::start`] wires them; [`serve`] runs the HTTP side on an
+//! `airroads serve`: the engine (the fleet loop on its own thread and the state writer), the regions,
+//! and the HTTP side (`api`: the REST API and the WebSocket stream on tokio/axum). [`Server::start`] wires them; [`serve`] runs the HTTP side on an
 //! already-bound listener until a shutdown future completes (tests bind 127.0.0.1:0).
 
-mod answers;
-mod api;
-pub mod audit;
-pub mod auth;
-pub mod binary;
-pub mod client;
-pub mod deploy;
-pub mod error;
-pub mod federate;
-mod federate_merge;
-pub mod guard;
-pub mod listener;
-pub mod openapi;
-pub mod road_follow;
-pub mod routes;
-pub mod state;
-mod web;
-pub mod ws;
+use api::{audit, auth, binary, error, federate, guard, listener, routes, state, web, ws};
 
 use anyhow::Context as _;
 use axum::Router;

@@ -12,8 +12,8 @@
 //! request) and audits the change in its own log, with the asking region and the operator's
 //! address; only servers with a certificate of the deployment can ask (`region::secure`).
 
-use super::api;
 use super::error::{ApiError, MAX_BODY_BYTES};
+use super::handlers;
 use super::routes::Reach;
 use super::state::AppState;
 use axum::body::{Body, Bytes};
@@ -208,7 +208,7 @@ fn region_names(app: &AppState) -> Vec<String> {
 /// This region flies UAV `id` now (by the latest snapshot).
 fn flown_here(app: &AppState, id: &str) -> bool {
     let snapshot = app.engine.snapshots.borrow().clone();
-    api::position_of(app, &snapshot, id).is_some()
+    handlers::position_of(app, &snapshot, id).is_some()
 }
 
 /// The region of a new UAV's `position` (None: not a JSON body with a position, or on no region).

@@ -108,7 +108,7 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiErr
     let (road, scenario) = app
         .validate(move || {
             let layout = layout_of(kind, &body)?;
-            let road = super::api::road_of(layout)?;
+            let road = super::handlers::road_of(layout)?;
             let old = Road::new(current).map_err(|e| ApiError::invalid("road", e.message))?;
             check_same_regions(&old, &road)?;
             let scenario =

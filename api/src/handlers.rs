@@ -24,7 +24,7 @@ pub const STALLED_AFTER: std::time::Duration = std::time::Duration::from_secs(1)
 
 /// `ok`; `degraded` (200: flying, but changes are refused because they cannot be saved);
 /// `stalled` (503: no tick for [`STALLED_AFTER`]); `loop_stopped` (503).
-pub(super) async fn healthz(State(app): State<AppState>) -> Response {
+pub(crate) async fn healthz(State(app): State<AppState>) -> Response {
     let tick = app.engine.snapshots.borrow().tick;
     let age = app.engine.clock.tick_age();
     let tick_age_ms = age.as_secs_f64() * 1e3;
@@ -46,19 +46,19 @@ pub(super) async fn healthz(State(app): State<AppState>) -> Response {
     (code, Json(Health { status, tick, tick_age_ms, problems })).into_response()
 }
 
-pub(super) async fn openapi() -> Response {
+pub(crate) async fn openapi() -> Response {
     ([(header::CONTENT_TYPE, "application/json")], super::openapi::DOCUMENT).into_response()
 }
 
-pub(super) async fn get_road(State(app): State<AppState>) -> Json<RoadLayout> {
+pub(crate) async fn get_road(State(app): State<AppState>) -> Json<RoadLayout> {
     Json(app.engine.road.borrow().layout.clone())
 }
 
-pub(super) async fn get_road_geometry(State(app): State<AppState>) -> Response {
+pub(crate) async fn get_road_geometry(State(app): State<AppState>) -> Response {
     Json(app.engine.road.borrow().clone()).into_response()
 }
 
-pub(super) async fn put_road(
+pub(crate) async fn put_road(
     State(app): State<AppState>,
     ApiJson(layout): ApiJson<RoadLayout>,
 ) -> Result<Response, ApiError> {
@@ -144,7 +144,7 @@ pub(crate) fn no_uav_after(id: &str) -> ApiError {
 /// `GET /api/uavs[?bbox=x0,y0,x1,y1][&limit=N][&after=ID]`: the UAVs in fleet order, those inside
 /// `bbox` only, starting after the UAV `after`, at most `limit` (1–1000, default 1000 when any
 /// parameter is given). The next page starts after the last id of this one.
-pub(super) async fn list_uavs(
+pub(crate) async fn list_uavs(
     State(app): State<AppState>,
     query: Result<axum::extract::Query<ListQuery>, axum::extract::rejection::QueryRejection>,
 ) -> Result<Json<Vec<UavSnapshot>>, ApiError> {
@@ -159,7 +159,7 @@ pub(super) async fn list_uavs(
     Ok(Json(shown.take(page.limit).cloned().collect()))
 }
 
-pub(super) async fn get_uav(
+pub(crate) async fn get_uav(
     State(app): State<AppState>,
     Path(id): Path<String>,
 ) -> Result<Json<UavSnapshot>, ApiError> {
@@ -185,7 +185,7 @@ pub(crate) fn position_of(app: &AppState, snapshot: &Snapshot, id: &str) -> Opti
 /// `POST /api/uavs` body.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct NewUav {
+pub(crate) struct NewUav {
     id: String,
     position: [f64; 2],
     #[serde(default)]
@@ -206,7 +206,7 @@ fn point(field: &str, x: [f64; 2]) -> Result<Vec2, ApiError> {
     }
 }
 
-pub(super) async fn add_uav(
+pub(crate) async fn add_uav(
     State(app): State<AppState>,
     ApiJson(new): ApiJson<NewUav>,
 ) -> Result<Response, ApiError> {
@@ -224,7 +224,7 @@ pub(super) async fn add_uav(
     Ok((StatusCode::CREATED, [(header::LOCATION, location)], Json(body)).into_response())
 }
 
-pub(super) async fn remove_uav(
+pub(crate) async fn remove_uav(
     State(app): State<AppState>,
     Path(id): Path<String>,
     NoBody: NoBody,
@@ -236,11 +236,11 @@ pub(super) async fn remove_uav(
 /// `PUT /api/uavs/{id}/goal` body.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct GoalBody {
+pub(crate) struct GoalBody {
     goal: [f64; 2],
 }
 
-pub(super) async fn set_goal(
+pub(crate) async fn set_goal(
     State(app): State<AppState>,
     Path(id): Path<String>,
     ApiJson(body): ApiJson<GoalBody>,
@@ -250,7 +250,7 @@ pub(super) async fn set_goal(
     Ok(Json(GoalSet { id, goal: body.goal }))
 }
 
-pub(super) async fn clear_goal(
+pub(crate) async fn clear_goal(
     State(app): State<AppState>,
     Path(id): Path<String>,
     NoBody: NoBody,
@@ -262,11 +262,11 @@ pub(super) async fn clear_goal(
 /// `PUT /api/uavs/{id}/policy` body.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct PolicyBody {
+pub(crate) struct PolicyBody {
     policy: String,
 }
 
-pub(super) async fn set_policy(
+pub(crate) async fn set_policy(
     State(app): State<AppState>,
     Path(id): Path<String>,
     ApiJson(body): ApiJson<PolicyBody>,
@@ -275,11 +275,11 @@ pub(super) async fn set_policy(
     Ok(Json(PolicySet { id, policy: body.policy }))
 }
 
-pub(super) async fn list_policies(State(app): State<AppState>) -> Json<Policies> {
+pub(crate) async fn list_policies(State(app): State<AppState>) -> Json<Policies> {
     Json(Policies { policies: app.policies.clone(), default: app.default_policy.clone() })
 }
 
-pub(super) async fn load_scenario(
+pub(crate) async fn load_scenario(
     State(app): State<AppState>,
     ApiJson(scenario): ApiJson<Scenario>,
 ) -> Result<Json<ScenarioLoaded>, ApiError> {
@@ -305,17 +305,17 @@ pub(super) async fn load_scenario(
     Ok(Json(ScenarioLoaded { name, uavs: count, loaded_after_tick: tick }))
 }
 
-pub(super) async fn pause(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Paused>, ApiError> {
+pub(crate) async fn pause(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Paused>, ApiError> {
     app.apply(Command::Pause(true)).await?;
     Ok(Json(Paused { paused: true }))
 }
 
-pub(super) async fn resume(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Paused>, ApiError> {
+pub(crate) async fn resume(State(app): State<AppState>, NoBody: NoBody) -> Result<Json<Paused>, ApiError> {
     app.apply(Command::Pause(false)).await?;
     Ok(Json(Paused { paused: false }))
 }
 
-pub(super) async fn land_uav(
+pub(crate) async fn land_uav(
     State(app): State<AppState>,
     Path(id): Path<String>,
     NoBody: NoBody,
@@ -324,7 +324,7 @@ pub(super) async fn land_uav(
     Ok(Json(Landing { landing: Reached::Uavs(vec![id]) }))
 }
 
-pub(super) async fn land_fleet(
+pub(crate) async fn land_fleet(
     State(app): State<AppState>,
     NoBody: NoBody,
 ) -> Result<Json<Landing>, ApiError> {
@@ -332,7 +332,7 @@ pub(super) async fn land_fleet(
     Ok(Json(Landing { landing: Reached::ALL }))
 }
 
-pub(super) async fn stop_fleet(
+pub(crate) async fn stop_fleet(
     State(app): State<AppState>,
     NoBody: NoBody,
 ) -> Result<Json<Stopped>, ApiError> {
@@ -349,7 +349,7 @@ pub(super) async fn stop_fleet(
     }
 }
 
-pub(super) async fn get_state(State(app): State<AppState>) -> Response {
+pub(crate) async fn get_state(State(app): State<AppState>) -> Response {
     let frame = app.frames.borrow().clone();
     let snapshot = app.engine.snapshots.borrow().clone();
     // The serialiser may still be on the previous tick: an answered change must show at once.
@@ -360,17 +360,17 @@ pub(super) async fn get_state(State(app): State<AppState>) -> Response {
 /// `PUT /api/rerun/selection` body.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(super) struct SelectionBody {
+pub(crate) struct SelectionBody {
     ids: Vec<String>,
 }
 
-pub(super) async fn get_rerun_selection(State(app): State<AppState>) -> Json<RerunSelection> {
+pub(crate) async fn get_rerun_selection(State(app): State<AppState>) -> Json<RerunSelection> {
     Json(RerunSelection { ids: app.rerun_selection.borrow().clone() })
 }
 
 /// Which UAVs keep their own Rerun entities when the fleet is logged as one batch. View state, like
 /// the dashboard's selection: applied at once, not saved (a restart starts with none).
-pub(super) async fn put_rerun_selection(
+pub(crate) async fn put_rerun_selection(
     State(app): State<AppState>,
     ApiJson(body): ApiJson<SelectionBody>,
 ) -> Result<Json<RerunSelection>, ApiError> {
@@ -398,7 +398,7 @@ pub(super) async fn put_rerun_selection(
 }
 
 /// `GET /api/region/ownership`: this region's ownership intervals (404 without `--region`).
-pub(super) async fn get_ownership(State(app): State<AppState>) -> Result<Json<Ownership>, ApiError> {
+pub(crate) async fn get_ownership(State(app): State<AppState>) -> Result<Json<Ownership>, ApiError> {
     let Some(region) = &app.region else {
         return Err(ApiError::new(
             StatusCode::NOT_FOUND,
@@ -410,7 +410,7 @@ pub(super) async fn get_ownership(State(app): State<AppState>) -> Result<Json<Ow
     Ok(Json(Ownership { region: region.name.clone(), intervals, forgotten }))
 }
 
-pub(super) async fn get_metrics(State(app): State<AppState>) -> Json<Metrics> {
+pub(crate) async fn get_metrics(State(app): State<AppState>) -> Json<Metrics> {
     use std::sync::atomic::Ordering::Relaxed;
     let s = &app.stream;
     Json(Metrics {

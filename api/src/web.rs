@@ -15,7 +15,7 @@ struct Asset {
 
 macro_rules! asset {
     ($name:literal, $type:expr) => {
-        Asset { name: $name, content_type: $type, body: include_str!(concat!("../../../web/", $name)) }
+        Asset { name: $name, content_type: $type, body: include_str!(concat!("../../web/", $name)) }
     };
 }
 
@@ -73,10 +73,7 @@ mod tests {
         let mut embedded: Vec<String> = ASSETS.iter().map(|a| a.name.to_string()).collect();
         on_disk.sort();
         embedded.sort();
-        assert_eq!(
-            embedded, on_disk,
-            "list every file of web/ in server/src/serve/web.rs (and nothing else)"
-        );
+        assert_eq!(embedded, on_disk, "list every file of web/ in api/src/web.rs (and nothing else)");
     }
 
     #[test]

@@ -108,7 +108,7 @@ pub fn list(
     regions: &[String],
     answers: Vec<(String, Answer)>,
 ) -> Result<Response, ApiError> {
-    let q = axum::extract::Query::<super::api::ListQuery>::try_from_uri(uri)
+    let q = axum::extract::Query::<super::handlers::ListQuery>::try_from_uri(uri)
         .map_err(|e| ApiError::invalid("limit", e.body_text()))?
         .0;
     let own_uavs = serde_json::to_value(&snapshot.uavs).unwrap_or(Value::Null);
@@ -132,7 +132,10 @@ pub fn list(
             let start = match &q.after {
                 None => 0,
                 Some(id) => {
-                    all.iter().position(|u| u["id"] == *id).ok_or_else(|| super::api::no_uav_after(id))? + 1
+                    all.iter()
+                        .position(|u| u["id"] == *id)
+                        .ok_or_else(|| super::handlers::no_uav_after(id))?
+                        + 1
                 }
             };
             let at =
