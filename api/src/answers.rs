@@ -146,7 +146,7 @@ pub struct StreamReport {
 pub struct Metrics {
     /// The loop's statistics (ticks, timing, margins, QP, links, ...), at the top level.
     #[serde(flatten)]
-    pub fleet_loop: Arc<LoopMetrics>,
+    pub fleet_loop: LoopMetrics,
     /// The WebSocket stream.
     pub stream: StreamReport,
     /// The HTTP connections.

@@ -13,6 +13,7 @@ use axum::http::{StatusCode, header};
 use axum::response::{IntoResponse, Response};
 use engine::command::{Command, Outcome};
 use engine::snapshot::{Snapshot, UavSnapshot};
+use engine::stats::LoopMetrics;
 use fleet::Scenario;
 use roads::{Road, RoadLayout};
 use serde::Deserialize;
@@ -413,8 +414,10 @@ pub(crate) async fn get_ownership(State(app): State<AppState>) -> Result<Json<Ow
 pub(crate) async fn get_metrics(State(app): State<AppState>) -> Json<Metrics> {
     use std::sync::atomic::Ordering::Relaxed;
     let s = &app.stream;
+    let mut fleet_loop = LoopMetrics::clone(&app.engine.metrics.borrow());
+    fleet_loop.links.list_errors(&app.engine.snapshots.borrow());
     Json(Metrics {
-        fleet_loop: app.engine.metrics.borrow().clone(),
+        fleet_loop,
         stream: StreamReport {
             clients: s.clients.load(Relaxed),
             frames_sent: s.frames_sent.load(Relaxed),

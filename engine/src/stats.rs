@@ -66,8 +66,21 @@ pub struct LinkCounters {
     pub min_battery_v: Option<f64>,
     /// The lowest link quality among the Crazyflies that reported one (0–1).
     pub min_link_quality: Option<f64>,
-    /// The first [`LISTED_LINK_ERRORS`] links with an error, in fleet order.
+    /// The first [`LISTED_LINK_ERRORS`] links with an error, in fleet order. The loop leaves it
+    /// empty (filling it would allocate every tick while links fail); `GET /api/metrics` fills it
+    /// from the snapshot it answers with ([`LinkCounters::list_errors`]).
     pub errors: Vec<LinkError>,
+}
+
+impl LinkCounters {
+    /// Lists the first [`LISTED_LINK_ERRORS`] links of `snapshot` with an error.
+    pub fn list_errors(&mut self, snapshot: &Snapshot) {
+        let failing = snapshot.uavs.iter().filter_map(|u| {
+            let error = u.link_error.clone()?;
+            Some(LinkError { id: u.id.clone(), link: u.link.clone(), error })
+        });
+        self.errors = failing.take(LISTED_LINK_ERRORS).collect();
+    }
 }
 
 /// The document of `GET /api/metrics`.
@@ -184,10 +197,6 @@ impl TickStats {
         for u in &snapshot.uavs {
             m.links.crazyflies += u64::from(u.link != links::SIM_LINK);
             m.links.with_error += u64::from(u.link_error.is_some());
-            if let Some(error) = u.link_error.as_ref().filter(|_| m.links.errors.len() < LISTED_LINK_ERRORS) {
-                let (id, link) = (u.id.clone(), u.link.clone());
-                m.links.errors.push(LinkError { id, link, error: error.clone() });
-            }
             if let Some(f) = &u.firmware {
                 m.links.locked += u64::from(f.locked);
                 m.links.tumbled_or_crashed += u64::from(f.tumbled || f.crashed);
