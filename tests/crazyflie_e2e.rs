@@ -256,7 +256,7 @@ async fn motion_capture_poses_reach_their_crazyflie_as_external_positions() {
     let mocap_addr = socket.local_addr().unwrap();
     // The server's own counters, as `/api/metrics` shows them (`serve --mocap` passes the same).
     let counters = server.state().mocap.clone();
-    tokio::spawn(ingest(socket, server.mocap.clone(), counters.clone(), Vec::new()));
+    tokio::spawn(ingest(socket, server.mocap().clone(), counters.clone(), Vec::new()));
     // The Crazyflie links register once created; wait until cf2 is connected.
     let deadline = Instant::now() + Duration::from_secs_f64(PATIENCE);
     while server

@@ -205,7 +205,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
             let socket = tokio::net::UdpSocket::bind(at).await.with_context(|| format!("--mocap {at}"))?;
             let counters = server.state().mocap.clone();
             let senders = args.mocap_allow.clone();
-            tokio::spawn(engine::mocap::ingest(socket, server.mocap.clone(), counters, senders));
+            tokio::spawn(engine::mocap::ingest(socket, server.mocap().clone(), counters, senders));
             Some(at)
         }
         None => None,
@@ -215,7 +215,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     say!(
         "  fleet      {} UAVs from {}",
         server.state().engine.snapshots.borrow().uavs.len(),
-        server.resumed_from
+        server.resumed_from()
     );
     match &data_dir {
         Some(dir) => say!("  data dir   {}", dir.display()),

@@ -96,10 +96,6 @@ pub struct Server {
     allow_hosts: Vec<String>,
     allow_origins: Vec<String>,
     limits: listener::Limits,
-    /// Where the initial fleet came from (`saved state` or the scenario's name), for the banner.
-    pub resumed_from: String,
-    /// Where motion-capture poses of each Crazyflie go.
-    pub mocap: MocapRoutes,
 }
 
 impl Server {
@@ -166,20 +162,22 @@ impl Server {
             rerun_selection: Arc::new(watch::channel(Arc::from(Vec::new())).0),
             region,
         };
-        Ok(Self {
-            resumed_from: running.resumed_from.clone(),
-            mocap: running.mocap.clone(),
-            app,
-            engine: running,
-            allow_hosts,
-            allow_origins,
-            limits,
-        })
+        Ok(Self { app, engine: running, allow_hosts, allow_origins, limits })
     }
 
     /// The shared handler state (for tests and other sinks such as Rerun).
     pub fn state(&self) -> &AppState {
         &self.app
+    }
+
+    /// Where the first fleet came from (`saved state` or the scenario's name), for the banner.
+    pub fn resumed_from(&self) -> &str {
+        &self.engine.resumed_from
+    }
+
+    /// Where motion-capture poses of each Crazyflie go.
+    pub fn mocap(&self) -> &MocapRoutes {
+        &self.engine.mocap
     }
 
     /// The HTTP application: REST API, `/ws`, the dashboard at `/`, behind the request guard, the
