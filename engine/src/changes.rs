@@ -160,8 +160,8 @@ impl Engine {
             Command::Adopt(arrival) => {
                 self.add_arrival(*arrival)?;
                 // Neither undone nor saved: only a region server adopts, and a region server never
-                // resumes saved state (its region's owner or mirror is the record: `serve_cmd`
-                // refuses `--region` with `--resume`), so a failed write must not take it back.
+                // resumes saved state (its region's owner or mirror is the record: `handle::start`
+                // resumes nothing when a hook is plugged in), so a failed write must not take it back.
                 Applied::urgent()
             }
         })
