@@ -113,8 +113,7 @@ impl LoopHook for RegionLoop {
                     self.release(uav, to, seq);
                 }
                 FleetChange::Adopt { id, uav } => {
-                    let log = self.handover.ownership.clone();
-                    if Self::adopt(edits, &id, uav, "handover", &log) {
+                    if Self::adopt(edits, &id, uav, "handover", &self.handover.ownership) {
                         self.handover.adopted(&id, now);
                     }
                 }

@@ -73,8 +73,7 @@ impl RegionLoop {
                 skipped += 1;
                 continue;
             }
-            let log = self.handover.ownership.clone();
-            if Self::adopt(edits, &id, uav, "failover", &log) {
+            if Self::adopt(edits, &id, uav, "failover", &self.handover.ownership) {
                 flown.insert(id);
                 adopted += 1;
             }
