@@ -11,7 +11,7 @@ use serde::Serialize;
 use std::sync::Arc;
 
 /// `PUT /api/road`: the road's new version and the UAVs whose goals it had no room for.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct RoadReplaced {
     /// The road's version now.
     pub version: u64,
@@ -20,7 +20,7 @@ pub struct RoadReplaced {
 }
 
 /// `POST /api/uavs` (201): the UAV as added.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct UavAdded {
     /// Its id.
     pub id: String,
@@ -33,7 +33,7 @@ pub struct UavAdded {
 }
 
 /// `PUT /api/uavs/{id}/goal`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct GoalSet {
     /// The UAV.
     pub id: String,
@@ -42,7 +42,7 @@ pub struct GoalSet {
 }
 
 /// `PUT /api/uavs/{id}/policy`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct PolicySet {
     /// The UAV.
     pub id: String,
@@ -51,7 +51,7 @@ pub struct PolicySet {
 }
 
 /// `GET /api/policies`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct Policies {
     /// The loaded policies.
     pub policies: Arc<[String]>,
@@ -60,7 +60,7 @@ pub struct Policies {
 }
 
 /// `POST /api/scenario`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct ScenarioLoaded {
     /// The scenario's name.
     pub name: String,
@@ -71,14 +71,14 @@ pub struct ScenarioLoaded {
 }
 
 /// `POST /api/fleet/pause` and `/resume`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct Paused {
     /// The fleet holds now.
     pub paused: bool,
 }
 
 /// Which UAVs a land or stop reached: a list of ids, or every one (`"all"`).
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 #[serde(untagged)]
 pub enum Reached {
     /// These UAVs.
@@ -93,28 +93,28 @@ impl Reached {
 }
 
 /// `POST /api/uavs/{id}/land` and `POST /api/fleet/land`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct Landing {
     /// The UAVs landing.
     pub landing: Reached,
 }
 
 /// `POST /api/fleet/stop`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct Stopped {
     /// The UAVs whose motors were cut.
     pub stopped: Reached,
 }
 
 /// `GET` and `PUT /api/rerun/selection`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct RerunSelection {
     /// The UAVs that keep their own Rerun entities in a batched fleet.
     pub ids: Arc<[String]>,
 }
 
 /// `GET /api/region/ownership`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct Ownership {
     /// This server's region.
     pub region: String,
@@ -125,7 +125,7 @@ pub struct Ownership {
 }
 
 /// `stream` of `GET /api/metrics`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct StreamReport {
     /// Connected clients.
     pub clients: usize,
@@ -142,7 +142,7 @@ pub struct StreamReport {
 }
 
 /// `GET /api/metrics`: the fleet loop's statistics and every bounded resource's counters.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct Metrics {
     /// The loop's statistics (ticks, timing, margins, QP, links, ...), at the top level.
     #[serde(flatten)]
@@ -169,10 +169,10 @@ pub struct Metrics {
 }
 
 /// `GET /healthz`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct Health {
-    /// `ok`, `degraded` (flying, changes refused), `stalled` or `loop_stopped`.
-    pub status: &'static str,
+    /// How the server is.
+    pub status: HealthStatus,
     /// The last tick.
     pub tick: u64,
     /// Time since it finished (ms).
@@ -182,8 +182,22 @@ pub struct Health {
 }
 
 /// `GET /api/audit`.
-#[derive(Debug, Serialize)]
+#[derive(Debug, Serialize, schemars::JsonSchema)]
 pub struct AuditLog {
     /// The entries asked for.
     pub entries: Vec<engine::store::AuditEntry>,
+}
+
+/// How the server is (`status` of `GET /healthz`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, schemars::JsonSchema)]
+#[serde(rename_all = "snake_case")]
+pub enum HealthStatus {
+    /// Flying (200).
+    Ok,
+    /// Flying, changes refused because they cannot be saved (200).
+    Degraded,
+    /// No tick for 1 s (503).
+    Stalled,
+    /// The fleet loop has stopped (503).
+    LoopStopped,
 }

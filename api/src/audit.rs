@@ -87,17 +87,24 @@ pub async fn record(State(app): State<AppState>, request: Request, next: Next) -
 }
 
 /// Query of `GET /api/audit`.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct AuditParams {
-    /// Entries newer than this sequence number, oldest first (for following the log).
+    /// Entries newer than this sequence number, oldest first (with `before`: only those older than
+    /// it too).
+    #[schemars(range(min = i64::MIN, max = i64::MAX))]
     pub after: Option<i64>,
-    /// Entries older than this sequence number, newest first (for paging back; with `after`, the end of
-    /// the window).
+    /// Entries older than this sequence number, newest first (with `after`: the end of the window,
+    /// oldest first).
+    #[schemars(range(min = i64::MIN, max = i64::MAX))]
     pub before: Option<i64>,
-    /// At most this many (1 to 1000, default 100).
+    /// At most this many (default 100).
+    #[schemars(range(min = 1, max = MAX_AUDIT_PAGE))]
     pub limit: Option<usize>,
 }
+
+/// Most entries one `GET /api/audit` answers.
+pub const MAX_AUDIT_PAGE: usize = 1000;
 
 /// `GET /api/audit[?after=SEQ][&before=SEQ][&limit=N]`: newest first unless `after` is given (both:
 /// the entries between them, oldest first).
@@ -107,8 +114,8 @@ pub async fn list(
 ) -> Result<Json<super::answers::AuditLog>, ApiError> {
     let Query(q) = query.map_err(|e| ApiError::invalid("query", e.body_text()))?;
     let limit = q.limit.unwrap_or(100);
-    if !(1..=1000).contains(&limit) {
-        return Err(ApiError::invalid("limit", "must be between 1 and 1000"));
+    if !(1..=MAX_AUDIT_PAGE).contains(&limit) {
+        return Err(ApiError::invalid("limit", format!("must be between 1 and {MAX_AUDIT_PAGE}")));
     }
     let (reply, answer) = tokio::sync::oneshot::channel();
     let query = AuditQuery { after: q.after, before: q.before, limit, reply };

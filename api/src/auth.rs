@@ -291,7 +291,7 @@ impl AuthFailures {
 }
 
 /// `auth` of `GET /api/metrics`.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, schemars::JsonSchema)]
 pub struct AuthReport {
     /// Requests refused for a missing or wrong token.
     pub refused: u64,

@@ -147,6 +147,14 @@ impl Encoder {
 /// A viewport `[x0, y0, x1, y1]` (m), x0 ≤ x1 and y0 ≤ y1.
 pub type Bbox = [f32; 4];
 
+/// The pattern of a `bbox` ([`parse_bbox`]): four decimal numbers, commas between, spaces
+/// around. Their order (x0 ≤ x1, y0 ≤ y1) and finiteness as f32 are beyond a pattern.
+pub fn bbox_pattern() -> String {
+    let space = r"[\t\n\v\f\r ]*";
+    let number = format!("{space}[+-]?([0-9]+[.]?[0-9]*|[.][0-9]+)([eE][+-]?[0-9]+)?{space}");
+    format!("^{}$", [number.as_str(); 4].join(","))
+}
+
 /// Parses `bbox=x0,y0,x1,y1`: four finite numbers with x0 ≤ x1 and y0 ≤ y1.
 pub fn parse_bbox(text: &str) -> Result<Bbox, String> {
     let parts: Vec<&str> = text.split(',').collect();

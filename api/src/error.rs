@@ -8,7 +8,6 @@ use engine::ApplyError;
 use engine::command::ChangeError;
 use fleet::EditError;
 use serde::de::DeserializeOwned;
-use serde_json::json;
 
 /// An error answered to a client.
 #[derive(Debug, Clone, PartialEq)]
@@ -124,16 +123,39 @@ pub struct ErrorInfo {
     pub message: String,
 }
 
+/// The body of every error answer: `{"error": {"code", "message", "field"?, ...}}`.
+#[derive(Debug, serde::Serialize, schemars::JsonSchema)]
+#[schemars(rename = "Error")]
+pub struct ErrorBody {
+    /// What went wrong.
+    pub error: ErrorObject,
+}
+
+/// The `error` of an [`ErrorBody`].
+#[derive(Debug, serde::Serialize, schemars::JsonSchema)]
+pub struct ErrorObject {
+    /// Stable machine-readable code, e.g. `invalid_body`, `unknown_uav`.
+    pub code: &'static str,
+    /// What is wrong, for people.
+    pub message: String,
+    /// The request field at fault (JSON path), when one is.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub field: Option<String>,
+    /// Members some errors add: `rule` and `segment` of a road's refusal, `region` and `regions`
+    /// of a deployment's.
+    #[serde(flatten)]
+    pub extra: serde_json::Map<String, serde_json::Value>,
+}
+
 impl IntoResponse for ApiError {
     fn into_response(self) -> Response {
         let info = ErrorInfo { code: self.code, message: self.message.clone() };
-        let mut error = self.extra.unwrap_or_default();
-        error.insert("code".into(), json!(self.code));
-        error.insert("message".into(), json!(self.message));
-        if let Some(field) = self.field {
-            error.insert("field".into(), json!(field));
+        let mut extra = self.extra.unwrap_or_default();
+        for key in ["code", "message", "field"] {
+            extra.remove(key);
         }
-        let mut response = (self.status, axum::Json(json!({ "error": error }))).into_response();
+        let error = ErrorObject { code: self.code, message: self.message, field: self.field, extra };
+        let mut response = (self.status, axum::Json(ErrorBody { error })).into_response();
         response.extensions_mut().insert(info);
         response
     }

@@ -69,6 +69,25 @@ fn route(method: &Method, path: &str) -> Route {
     }
 }
 
+/// The query parameter of a read every region answers (`GET /api/state`, `GET /api/uavs`), as the
+/// document states it; [`scope_is_region`] reads it.
+#[derive(schemars::JsonSchema)]
+pub struct ScopeQuery {
+    /// With `serve --region`: `fleet` (the default) answers for every region of the deployment,
+    /// `region` for this server's region alone; without `--region` both are this server's fleet.
+    pub scope: Option<Scope>,
+}
+
+/// Which fleet a read answers for.
+#[derive(schemars::JsonSchema)]
+#[serde(rename_all = "lowercase")]
+pub enum Scope {
+    /// Every region's.
+    Fleet,
+    /// This server's region's.
+    Region,
+}
+
 /// `scope` of the query string: `fleet` (the default) or `region`.
 fn scope_is_region(query: Option<&str>) -> Result<bool, ApiError> {
     let value = query.unwrap_or_default().split('&').find_map(|kv| kv.strip_prefix("scope="));

@@ -2,8 +2,8 @@
 //! snapshot; changes go to the fleet loop as commands and are answered once it applied them.
 
 use super::answers::{
-    GoalSet, Health, Landing, Metrics, Ownership, Paused, Policies, PolicySet, Reached, RerunSelection,
-    RoadReplaced, ScenarioLoaded, Stopped, StreamReport, UavAdded,
+    GoalSet, Health, HealthStatus, Landing, Metrics, Ownership, Paused, Policies, PolicySet, Reached,
+    RerunSelection, RoadReplaced, ScenarioLoaded, Stopped, StreamReport, UavAdded,
 };
 use super::error::{ApiError, ApiJson, NoBody};
 use super::state::{AppState, json_of};
@@ -32,23 +32,23 @@ pub(crate) async fn healthz(State(app): State<AppState>) -> Response {
     let mut problems = Vec::new();
     let status = if app.engine.stopped() {
         problems.push("the fleet loop has stopped".to_string());
-        "loop_stopped"
+        HealthStatus::LoopStopped
     } else if age > STALLED_AFTER {
         problems.push(format!("no tick for {:.1} s", age.as_secs_f64()));
-        "stalled"
+        HealthStatus::Stalled
     } else if let Some(reason) = app.engine.storage.refusal() {
         problems.push(format!("changes cannot be saved: {reason}"));
-        "degraded"
+        HealthStatus::Degraded
     } else {
-        "ok"
+        HealthStatus::Ok
     };
-    let code =
-        if matches!(status, "ok" | "degraded") { StatusCode::OK } else { StatusCode::SERVICE_UNAVAILABLE };
+    let flying = matches!(status, HealthStatus::Ok | HealthStatus::Degraded);
+    let code = if flying { StatusCode::OK } else { StatusCode::SERVICE_UNAVAILABLE };
     (code, Json(Health { status, tick, tick_age_ms, problems })).into_response()
 }
 
 pub(crate) async fn openapi() -> Response {
-    ([(header::CONTENT_TYPE, "application/json")], super::openapi::DOCUMENT).into_response()
+    ([(header::CONTENT_TYPE, "application/json")], super::openapi::text()).into_response()
 }
 
 pub(crate) async fn get_road(State(app): State<AppState>) -> Json<RoadLayout> {
@@ -92,11 +92,19 @@ pub(crate) fn road_of(layout: RoadLayout) -> Result<Road, ApiError> {
 pub const MAX_PAGE: usize = 1000;
 
 /// Query of `GET /api/uavs`: without any, the whole fleet (as before pages existed).
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, schemars::JsonSchema)]
 pub(crate) struct ListQuery {
+    /// `x0,y0,x1,y1` (m): only the UAVs inside this box; four decimal numbers (read as 32-bit
+    /// floats, so finite within ±3.4e38), with x0 ≤ x1 and y0 ≤ y1 (the order is beyond the schema:
+    /// a box with x0 > x1 or y0 > y1 is refused with 422).
+    #[schemars(pattern(super::binary::bbox_pattern()))]
     bbox: Option<String>,
+    /// At most this many (default 1000 when any parameter is given).
+    #[schemars(range(min = 1, max = MAX_PAGE))]
     limit: Option<usize>,
-    /// Start after the UAV with this id.
+    /// Start after the UAV with this id, in fleet order (the last id of the previous page); an id
+    /// of no UAV is refused with 422.
+    #[schemars(with = "Option<uav::schema::UavId>")]
     pub(crate) after: Option<String>,
 }
 
@@ -184,16 +192,27 @@ pub(crate) fn position_of(app: &AppState, snapshot: &Snapshot, id: &str) -> Opti
 }
 
 /// `POST /api/uavs` body.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct NewUav {
+    /// Its id, unique in the fleet.
+    #[schemars(with = "uav::schema::UavId")]
     id: String,
+    /// Where it starts, at rest.
+    #[schemars(with = "roads::schema::Point")]
     position: [f64; 2],
+    /// A policy this server has loaded (`GET /api/policies`: `pd` and `rl` always, more with
+    /// `serve --model NAME=FILE.onnx`); null or absent: the server's default (`serve --policy`).
     #[serde(default)]
+    #[schemars(example = &"pd")]
     policy: Option<String>,
+    /// Its goal; null or absent: it hovers.
     #[serde(default)]
+    #[schemars(with = "Option<roads::schema::Point>")]
     goal: Option<[f64; 2]>,
+    /// How it is flown; null or absent: `sim`.
     #[serde(default)]
+    #[schemars(with = "Option<links::schema::LinkText>")]
     link: Option<String>,
 }
 
@@ -235,9 +254,11 @@ pub(crate) async fn remove_uav(
 }
 
 /// `PUT /api/uavs/{id}/goal` body.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct GoalBody {
+    /// Where it flies to.
+    #[schemars(with = "roads::schema::Point")]
     goal: [f64; 2],
 }
 
@@ -261,9 +282,12 @@ pub(crate) async fn clear_goal(
 }
 
 /// `PUT /api/uavs/{id}/policy` body.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct PolicyBody {
+    /// A policy this server has loaded: `GET /api/policies` lists them (`pd` and `rl` always, more
+    /// with `serve --model NAME=FILE.onnx`).
+    #[schemars(example = &"pd")]
     policy: String,
 }
 
@@ -359,9 +383,12 @@ pub(crate) async fn get_state(State(app): State<AppState>) -> Response {
 }
 
 /// `PUT /api/rerun/selection` body.
-#[derive(Debug, Deserialize)]
+#[derive(Debug, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(rename = "RerunSelection")]
 pub(crate) struct SelectionBody {
+    /// UAV ids (at most 64; duplicates are dropped).
+    #[schemars(with = "Vec<uav::schema::UavId>", length(max = rerun_sink::MAX_SELECTED))]
     ids: Vec<String>,
 }
 

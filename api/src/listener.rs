@@ -106,7 +106,7 @@ pub struct ConnectionCounters {
 }
 
 /// `connections` of `GET /api/metrics`: [`ConnectionCounters`] read once.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, schemars::JsonSchema)]
 pub struct ConnectionsReport {
     /// Open connections (the reserve's included).
     pub open: usize,

@@ -4,6 +4,7 @@
 //! which changes exist, and a test holds the OpenAPI document's paths to it.
 
 use super::handlers;
+use super::openapi::{Doc, docs};
 use super::state::AppState;
 use axum::Router;
 use axum::http::Method;
@@ -97,6 +98,8 @@ pub struct Route {
     pub access: Access,
     /// Where it is answered in a deployment of regions.
     pub reach: Reach,
+    /// What the OpenAPI document says of it beyond the above.
+    pub doc: &'static Doc,
     /// Its handler, for the method filter given.
     handler: fn(MethodFilter) -> MethodRouter<AppState>,
 }
@@ -106,9 +109,10 @@ const fn route(
     path: &'static str,
     access: Access,
     reach: Reach,
+    doc: &'static Doc,
     handler: fn(MethodFilter) -> MethodRouter<AppState>,
 ) -> Route {
-    Route { verb, path, access, reach, handler }
+    Route { verb, path, access, reach, doc, handler }
 }
 
 use Access::{Change, PrivateRead, Read, Urgent};
@@ -117,31 +121,39 @@ use Verb::{Delete, Get, Post, Put};
 
 /// The REST API (docs/api.md, `GET /api/openapi.json`).
 pub static ROUTES: &[Route] = &[
-    route(Get, "/healthz", Read, Here, |m| on(m, handlers::healthz)),
-    route(Get, "/api/openapi.json", Read, Here, |m| on(m, handlers::openapi)),
-    route(Get, "/api/road", Read, Here, |m| on(m, handlers::get_road)),
-    route(Put, "/api/road", Change, Deploy(Kind::Road), |m| on(m, handlers::put_road)),
-    route(Get, "/api/road/geometry", Read, Here, |m| on(m, handlers::get_road_geometry)),
-    route(Get, "/api/uavs", Read, List, |m| on(m, handlers::list_uavs)),
-    route(Post, "/api/uavs", Change, Add, |m| on(m, handlers::add_uav)),
-    route(Get, "/api/uavs/{id}", Read, Uav, |m| on(m, handlers::get_uav)),
-    route(Delete, "/api/uavs/{id}", Change, Uav, |m| on(m, handlers::remove_uav)),
-    route(Put, "/api/uavs/{id}/goal", Change, Uav, |m| on(m, handlers::set_goal)),
-    route(Delete, "/api/uavs/{id}/goal", Change, Uav, |m| on(m, handlers::clear_goal)),
-    route(Put, "/api/uavs/{id}/policy", Change, Uav, |m| on(m, handlers::set_policy)),
-    route(Post, "/api/uavs/{id}/land", Urgent, Uav, |m| on(m, handlers::land_uav)),
-    route(Get, "/api/policies", Read, Here, |m| on(m, handlers::list_policies)),
-    route(Post, "/api/scenario", Change, Deploy(Kind::Scenario), |m| on(m, handlers::load_scenario)),
-    route(Post, "/api/fleet/pause", Change, Fleet, |m| on(m, handlers::pause)),
-    route(Post, "/api/fleet/resume", Change, Fleet, |m| on(m, handlers::resume)),
-    route(Post, "/api/fleet/land", Urgent, Fleet, |m| on(m, handlers::land_fleet)),
-    route(Post, "/api/fleet/stop", Urgent, Fleet, |m| on(m, handlers::stop_fleet)),
-    route(Get, "/api/state", Read, State, |m| on(m, handlers::get_state)),
-    route(Get, "/api/metrics", Read, Here, |m| on(m, handlers::get_metrics)),
-    route(Get, "/api/audit", PrivateRead, Here, |m| on(m, super::audit::list)),
-    route(Get, "/api/region/ownership", Read, Here, |m| on(m, handlers::get_ownership)),
-    route(Get, "/api/rerun/selection", Read, Here, |m| on(m, handlers::get_rerun_selection)),
-    route(Put, "/api/rerun/selection", Change, Here, |m| on(m, handlers::put_rerun_selection)),
+    route(Get, "/healthz", Read, Here, &docs::HEALTHZ, |m| on(m, handlers::healthz)),
+    route(Get, "/api/openapi.json", Read, Here, &docs::OPENAPI, |m| on(m, handlers::openapi)),
+    route(Get, "/api/road", Read, Here, &docs::GET_ROAD, |m| on(m, handlers::get_road)),
+    route(Put, "/api/road", Change, Deploy(Kind::Road), &docs::PUT_ROAD, |m| on(m, handlers::put_road)),
+    route(Get, "/api/road/geometry", Read, Here, &docs::GET_ROAD_GEOMETRY, |m| {
+        on(m, handlers::get_road_geometry)
+    }),
+    route(Get, "/api/uavs", Read, List, &docs::LIST_UAVS, |m| on(m, handlers::list_uavs)),
+    route(Post, "/api/uavs", Change, Add, &docs::ADD_UAV, |m| on(m, handlers::add_uav)),
+    route(Get, "/api/uavs/{id}", Read, Uav, &docs::GET_UAV, |m| on(m, handlers::get_uav)),
+    route(Delete, "/api/uavs/{id}", Change, Uav, &docs::REMOVE_UAV, |m| on(m, handlers::remove_uav)),
+    route(Put, "/api/uavs/{id}/goal", Change, Uav, &docs::SET_GOAL, |m| on(m, handlers::set_goal)),
+    route(Delete, "/api/uavs/{id}/goal", Change, Uav, &docs::CLEAR_GOAL, |m| on(m, handlers::clear_goal)),
+    route(Put, "/api/uavs/{id}/policy", Change, Uav, &docs::SET_POLICY, |m| on(m, handlers::set_policy)),
+    route(Post, "/api/uavs/{id}/land", Urgent, Uav, &docs::LAND_UAV, |m| on(m, handlers::land_uav)),
+    route(Get, "/api/policies", Read, Here, &docs::LIST_POLICIES, |m| on(m, handlers::list_policies)),
+    route(Post, "/api/scenario", Change, Deploy(Kind::Scenario), &docs::LOAD_SCENARIO, |m| {
+        on(m, handlers::load_scenario)
+    }),
+    route(Post, "/api/fleet/pause", Change, Fleet, &docs::PAUSE, |m| on(m, handlers::pause)),
+    route(Post, "/api/fleet/resume", Change, Fleet, &docs::RESUME, |m| on(m, handlers::resume)),
+    route(Post, "/api/fleet/land", Urgent, Fleet, &docs::LAND_FLEET, |m| on(m, handlers::land_fleet)),
+    route(Post, "/api/fleet/stop", Urgent, Fleet, &docs::STOP_FLEET, |m| on(m, handlers::stop_fleet)),
+    route(Get, "/api/state", Read, State, &docs::GET_STATE, |m| on(m, handlers::get_state)),
+    route(Get, "/api/metrics", Read, Here, &docs::GET_METRICS, |m| on(m, handlers::get_metrics)),
+    route(Get, "/api/audit", PrivateRead, Here, &docs::AUDIT, |m| on(m, super::audit::list)),
+    route(Get, "/api/region/ownership", Read, Here, &docs::GET_OWNERSHIP, |m| on(m, handlers::get_ownership)),
+    route(Get, "/api/rerun/selection", Read, Here, &docs::GET_RERUN_SELECTION, |m| {
+        on(m, handlers::get_rerun_selection)
+    }),
+    route(Put, "/api/rerun/selection", Change, Here, &docs::PUT_RERUN_SELECTION, |m| {
+        on(m, handlers::put_rerun_selection)
+    }),
 ];
 
 /// The router of every route in [`ROUTES`].

@@ -92,7 +92,7 @@ pub struct StorageStatus {
 }
 
 /// `storage` in `GET /api/metrics`.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, schemars::JsonSchema)]
 pub struct StorageReport {
     /// Changes are fsynced to a database file.
     pub durable: bool,

@@ -32,7 +32,8 @@ const POSITIONS_EVERY_TICKS: u64 = 20;
 pub const STORAGE_STALL: Duration = Duration::from_secs(5);
 
 /// The road as published to readers: the layout plus its drawable geometry.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
+#[schemars(rename = "RoadGeometry")]
 pub struct RoadView {
     /// Increases with every change.
     pub version: u64,

@@ -52,7 +52,7 @@ impl MocapCounters {
 }
 
 /// `mocap` of `GET /api/metrics`: [`MocapCounters`] read once.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct MocapReport {
     /// A motion-capture socket is open (`--mocap`).
     pub listening: bool,

@@ -19,7 +19,7 @@ pub fn status_code(status: UavStatus) -> u8 {
 /// What one UAV is doing, as the dashboard colours it. The numbers are the binary stream's status
 /// byte (a public format: docs/streams.md, `web/binary.js` and `scripts/airroads_stream.py` are
 /// checked against them); a new status takes the next number, none is ever renumbered.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, schemars::JsonSchema)]
 #[serde(rename_all = "snake_case")]
 #[repr(u8)]
 pub enum UavStatus {
@@ -71,7 +71,7 @@ impl UavStatus {
 }
 
 /// One UAV in a snapshot. Vectors are `[x, y]` in metres, m/s and m/s².
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct UavSnapshot {
     /// Unique id.
     pub id: String,
@@ -97,6 +97,7 @@ pub struct UavSnapshot {
     pub link: String,
     /// Where it is in its flight as its link reports it (`flying` for in-process UAVs); its name in JSON.
     #[serde(serialize_with = "phase_name")]
+    #[schemars(with = "String")]
     pub phase: LinkPhase,
     /// Its link is lost (see `status`).
     pub lost: bool,
@@ -122,7 +123,7 @@ pub struct UavSnapshot {
 
 /// What a Crazyflie's firmware reports (`firmware` in a UAV's snapshot): the supervisor's bitfield
 /// decoded (crazyflie-firmware `supervisor.c`), the battery and how much of the state log arrives.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct FirmwareSnapshot {
     /// `supervisor.info`, null until the firmware has logged it.
     pub supervisor_info: Option<u16>,
@@ -160,7 +161,7 @@ impl FirmwareSnapshot {
 }
 
 /// The fleet after one tick.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct Snapshot {
     /// Ticks run since the server started.
     pub tick: u64,
@@ -185,7 +186,7 @@ pub struct Snapshot {
 }
 
 /// A single-file section: one direction at a time.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct ReservationSnapshot {
     /// Its centre line from start to end, points about 0.5 m apart (m).
     pub path: Vec<[f64; 2]>,

@@ -10,7 +10,7 @@ use std::collections::VecDeque;
 pub const WINDOW_TICKS: usize = 1200;
 
 /// Tick durations over the window (µs).
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, schemars::JsonSchema)]
 pub struct DurationStats {
     /// Median.
     pub p50_us: f64,
@@ -21,7 +21,7 @@ pub struct DurationStats {
 }
 
 /// Solver counters since the server started.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, schemars::JsonSchema)]
 pub struct QpCounters {
     /// QPs solved.
     pub solves: u64,
@@ -38,7 +38,7 @@ pub struct QpCounters {
 pub const LISTED_LINK_ERRORS: usize = 16;
 
 /// A link's last error, as `links.errors` of `GET /api/metrics` lists it.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct LinkError {
     /// The UAV.
     pub id: String,
@@ -49,7 +49,7 @@ pub struct LinkError {
 }
 
 /// The UAVs' links (`links` in `GET /api/metrics`), counted every tick.
-#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, schemars::JsonSchema)]
 pub struct LinkCounters {
     /// UAVs flown over a Crazyflie link (the others are simulated in process).
     pub crazyflies: u64,
@@ -84,7 +84,7 @@ impl LinkCounters {
 }
 
 /// The document of `GET /api/metrics`.
-#[derive(Debug, Clone, PartialEq, Default, Serialize)]
+#[derive(Debug, Clone, PartialEq, Default, Serialize, schemars::JsonSchema)]
 pub struct LoopMetrics {
     /// Ticks run.
     pub ticks: u64,

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use uav::{Params, Vec2};
 
 /// A scenario as written in JSON.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Scenario {
     /// Scenario name (reported in the metrics).
@@ -16,26 +16,37 @@ pub struct Scenario {
     #[serde(default)]
     pub params: Params,
     /// Road segments, as in a road layout.
+    #[schemars(with = "roads::schema::Segments")]
     pub segments: Vec<[[f64; 2]; 4]>,
     /// The road's regions, as in a road layout (`airroads serve --region`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<roads::schema::Regions>")]
+    #[schemars(description = "optional, as in a road layout (null or absent: the road is not divided)")]
     pub regions: Option<Vec<roads::Region>>,
     /// The fleet.
+    #[schemars(length(min = 1))]
+    #[schemars(
+        description = "the fleet, at least one UAV with unique ids; beyond the schema each start and goal must be inside this scenario's road at least D_s from its walls and the starts D_c apart, and the fleet must not exceed `--max-uavs`"
+    )]
     pub uavs: Vec<ScenarioUav>,
 }
 
 /// One UAV of a scenario as written in JSON.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct ScenarioUav {
     /// Unique id.
+    #[schemars(with = "uav::schema::UavId")]
     pub id: String,
     /// Start position [x, y] (m), at rest.
+    #[schemars(with = "roads::schema::Point")]
     pub start: [f64; 2],
     /// Goal position [x, y] (m).
+    #[schemars(with = "roads::schema::Point")]
     pub goal: [f64; 2],
     /// How it is flown: `sim` (default, in-process) or a Crazyflie URI (`radio://…`, `udp://…`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<links::schema::LinkText>")]
     pub link: Option<String>,
 }
 

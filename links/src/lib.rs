@@ -2,6 +2,7 @@
 //! crate has the in-process simulator, and hardware links (the `crazyflie` crate's CRTP relay) slot
 //! in beside it. A fleet may mix links.
 
+pub mod schema;
 pub mod uri;
 
 use uav::{UavState, Vec2};

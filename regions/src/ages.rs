@@ -56,7 +56,7 @@ impl AgeHistogram {
 }
 
 /// `region.foreign_age_ms` of `GET /api/metrics` (ms, bucket upper edges; None before any sample).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, schemars::JsonSchema)]
 pub struct AgeReport {
     /// Foreign states used.
     pub samples: u64,

@@ -306,7 +306,7 @@ impl Failover {
 }
 
 /// `region.failover` of `GET /api/metrics`.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct FailoverReport {
     /// `owner` or `standby`.
     pub role: &'static str,

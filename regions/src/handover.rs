@@ -100,7 +100,7 @@ pub enum FleetChange {
 }
 
 /// Counters for `GET /api/metrics` `region.handover`.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, schemars::JsonSchema)]
 pub struct HandoverCounts {
     /// Offers made.
     pub offered: u64,

@@ -195,7 +195,7 @@ impl RegionShared {
 }
 
 /// `region` of `GET /api/metrics`.
-#[derive(Debug, serde::Serialize)]
+#[derive(Debug, serde::Serialize, schemars::JsonSchema)]
 pub struct RegionReport {
     /// The neighbours' table: this region's name, the foreign UAVs, the messages heard.
     #[serde(flatten)]
@@ -210,6 +210,7 @@ pub struct RegionReport {
     pub published_bytes: u64,
     /// Refusals of other regions' messages, by reason.
     #[serde(serialize_with = "peer_refusals")]
+    #[schemars(with = "screen::PeerRefusals")]
     pub peer_refused: Arc<screen::Screen>,
 }
 

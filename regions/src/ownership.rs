@@ -11,7 +11,7 @@ use std::sync::{Mutex, MutexGuard, PoisonError};
 pub const MAX_CLOSED_INTERVALS: usize = 10_000;
 
 /// One interval of ownership.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct Interval {
     /// The UAV.
     pub id: String,

@@ -26,7 +26,7 @@ pub const MESSAGES_PER_SECOND: f64 = 40.0;
 pub const MESSAGE_BURST: f64 = 8.0;
 
 /// Refusals of other regions' messages, by reason (`region.peer_refused`).
-#[derive(Debug, Default, Serialize)]
+#[derive(Debug, Default, Serialize, schemars::JsonSchema)]
 pub struct PeerRefusals {
     /// State messages beyond the sender's rate.
     pub too_fast: AtomicU64,

@@ -161,7 +161,7 @@ impl ForeignTable {
 }
 
 /// The neighbours' table in `region` of `GET /api/metrics`.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, schemars::JsonSchema)]
 pub struct TableReport {
     /// This server's region.
     pub name: String,
@@ -176,7 +176,7 @@ pub struct TableReport {
 }
 
 /// A neighbour's last state message.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, schemars::JsonSchema)]
 pub struct HeardReport {
     /// The UAVs it listed.
     pub uavs: usize,

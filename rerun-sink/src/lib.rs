@@ -90,7 +90,7 @@ impl RerunCounters {
 }
 
 /// `rerun` of `GET /api/metrics`: [`RerunCounters`] read once.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, schemars::JsonSchema)]
 pub struct RerunReport {
     /// A sink is running.
     pub active: bool,

@@ -6,14 +6,19 @@ use serde::{Deserialize, Deserializer, Serialize};
 use uav::Vec2;
 
 /// A road layout as users write it: a chain of convex quadrilateral segments.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct RoadLayout {
     /// Segment i as `[p1, p2, p3, p4]`, each vertex `[x, y]` in metres.
+    #[schemars(with = "crate::schema::Segments")]
     pub segments: Vec<[[f64; 2]; 4]>,
     /// Named ranges of segments that cover every segment exactly once; None (absent from the JSON)
     /// when the layout is not divided into regions.
     #[serde(default, skip_serializing_if = "Option::is_none", deserialize_with = "present")]
+    #[schemars(with = "crate::schema::Regions")]
+    #[schemars(
+        description = "optional: named inclusive segment ranges that cover every segment exactly once (the partition the regional servers will use); absent when the road is not divided"
+    )]
     pub regions: Option<Vec<Region>>,
 }
 

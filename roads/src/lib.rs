@@ -21,6 +21,7 @@ mod regions;
 #[cfg(test)]
 mod regions_tests;
 mod road;
+pub mod schema;
 mod traffic_nav;
 mod validate;
 

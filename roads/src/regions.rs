@@ -10,13 +10,19 @@ use std::collections::HashMap;
 pub const MAX_REGION_NAME: usize = 64;
 
 /// A named, inclusive range of segment indices (`{"name": "west", "segments": [first, last]}`).
-#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Region {
     /// 1 to [`MAX_REGION_NAME`] characters from `A-Z a-z 0-9 _ -`, so that it is one chunk of a
     /// Zenoh key expression (`airroads/region/<name>/state`).
+    #[schemars(pattern(crate::schema::region_name_pattern()))]
+    #[schemars(description = "unique among the regions; one chunk of a key expression")]
     pub name: String,
     /// `[first, last]`: the region's segments, both included.
+    #[schemars(inner(range(max = crate::validate::MAX_SEGMENTS - 1)))]
+    #[schemars(
+        description = "[first, last] segment indices, both included (first ≤ last < the number of segments), written as whole numbers without a fraction or exponent (`3`, not `3.0`: JSON Schema cannot tell them apart)"
+    )]
     pub segments: [usize; 2],
 }
 

@@ -185,6 +185,6 @@ def documented_refusals(ctx, response, case):
         raise AssertionError(
             f"Schema-valid data refused with 422 `{code}` (field `{field}`: {message}), which is not "
             f"one of the refusals {case.operation.method.upper()} {case.operation.path} documents as "
-            "beyond the schema: state the limit in openapi.json, or stop enforcing it"
+            "beyond the schema: state the limit in the schema (api/src/openapi/, the types' schemars attributes), or stop enforcing it"
         )
     return None

@@ -6,9 +6,10 @@
 
 mod id;
 mod params;
+pub mod schema;
 
 pub use id::{MAX_UAV_ID_LEN, UAV_ID_RULE, check_uav_id, is_uav_id_char};
-pub use params::{MAX_DT_S, MIN_DT_S, ParamError, Params};
+pub use params::{MAX_DT_S, MIN_DT_S, PARAM_RANGES, ParamError, ParamRange, Params};
 
 /// A 2-D vector in metres (positions), m/s (velocities) or m/s² (accelerations), world frame.
 pub type Vec2 = nalgebra::Vector2<f64>;

@@ -4,8 +4,9 @@ use serde::{Deserialize, Serialize};
 
 /// Parameters shared by the filter, navigation and simulator. JSON keys are the paper's symbols;
 /// unknown keys are rejected.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields, default)]
+#[schemars(transform = state_ranges)]
 pub struct Params {
     /// Control period dt (s), 0.001 to 0.1 ([`MIN_DT_S`], [`MAX_DT_S`]). Default 0.05 (20 Hz).
     pub dt: f64,
@@ -81,22 +82,69 @@ impl ParamError {
     }
 }
 
+/// The valid range of one parameter: `min..=max`, or `min < value <= max` when `above_min`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ParamRange {
+    /// Its JSON key.
+    pub key: &'static str,
+    /// Smallest valid value (excluded when `above_min`).
+    pub min: f64,
+    /// Largest valid value.
+    pub max: f64,
+    /// The value must be more than `min`.
+    pub above_min: bool,
+}
+
+const fn range(key: &'static str, min: f64, max: f64) -> ParamRange {
+    ParamRange { key, min, max, above_min: false }
+}
+
+/// Every parameter's valid range, in [`Params::values`]' order: [`Params::validate`] checks them
+/// and the JSON schema states them.
+pub const PARAM_RANGES: [ParamRange; 10] = [
+    range("dt", MIN_DT_S, MAX_DT_S),
+    range("delta", 1e-3, 100.0),
+    range("r_s", 1e-2, 1e3),
+    ParamRange { key: "D_s", min: 0.0, max: 100.0, above_min: true },
+    range("D_c", 1e-3, 100.0),
+    range("zeta", 0.0, 1e3),
+    range("epsilon", 1e-4, 100.0),
+    range("t_max", 1e-3, 1e6),
+    range("eta_p", 0.0, 1.0),
+    range("eta_v", 0.0, 10.0),
+];
+
+/// Adds [`PARAM_RANGES`] to the derived schema of [`Params`].
+fn state_ranges(schema: &mut schemars::Schema) {
+    let Some(properties) = schema.get_mut("properties").and_then(|p| p.as_object_mut()) else { return };
+    for r in PARAM_RANGES {
+        let Some(property) = properties.get_mut(r.key).and_then(|p| p.as_object_mut()) else { continue };
+        let low = if r.above_min { "exclusiveMinimum" } else { "minimum" };
+        property.insert(low.into(), r.min.into());
+        property.insert("maximum".into(), r.max.into());
+    }
+}
+
 impl Params {
+    /// The parameters' values in [`PARAM_RANGES`]' order.
+    pub fn values(&self) -> [f64; 10] {
+        [
+            self.dt,
+            self.delta,
+            self.r_s,
+            self.d_s,
+            self.d_c,
+            self.zeta,
+            self.epsilon,
+            self.t_max,
+            self.eta_p,
+            self.eta_v,
+        ]
+    }
+
     /// Checks that every parameter is finite and within a physically meaningful range.
     pub fn validate(&self) -> Result<(), ParamError> {
-        let checks: [(&'static str, f64, f64, f64); 10] = [
-            ("dt", self.dt, MIN_DT_S, MAX_DT_S),
-            ("delta", self.delta, 1e-3, 100.0),
-            ("r_s", self.r_s, 1e-2, 1e3),
-            ("D_s", self.d_s, 0.0, 100.0),
-            ("D_c", self.d_c, 1e-3, 100.0),
-            ("zeta", self.zeta, 0.0, 1e3),
-            ("epsilon", self.epsilon, 1e-4, 100.0),
-            ("t_max", self.t_max, 1e-3, 1e6),
-            ("eta_p", self.eta_p, 0.0, 1.0),
-            ("eta_v", self.eta_v, 0.0, 10.0),
-        ];
-        for (field, value, min, max) in checks {
+        for (ParamRange { key: field, min, max, .. }, value) in PARAM_RANGES.into_iter().zip(self.values()) {
             if !value.is_finite() {
                 return Err(ParamError { field, reason: "must be a finite number within", value, min, max });
             }
@@ -104,9 +152,12 @@ impl Params {
                 return Err(ParamError { field, reason: "is outside its valid range", value, min, max });
             }
         }
-        if self.d_s == 0.0 {
-            let (value, min, max) = (self.d_s, 0.0, 100.0);
-            return Err(ParamError { field: "D_s", reason: "must be positive, within", value, min, max });
+        for (ParamRange { key: field, min, max, above_min }, value) in
+            PARAM_RANGES.into_iter().zip(self.values())
+        {
+            if above_min && value == min {
+                return Err(ParamError { field, reason: "must be positive, within", value, min, max });
+            }
         }
         Ok(())
     }

@@ -16,7 +16,7 @@ pub const AUDIT_RETENTION: i64 = 100_000;
 pub const REFUSED_AUDIT_RETENTION: i64 = 10_000;
 
 /// One entry of the audit log.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct AuditEntry {
     /// Increasing sequence number (the cursor of `GET /api/audit`).
     pub seq: i64,
