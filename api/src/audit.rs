@@ -50,14 +50,37 @@ pub async fn record(State(app): State<AppState>, request: Request, next: Next) -
         return next.run(request).await;
     }
     let remote = match request.extensions().get::<Forwarded>() {
-        Some(f) => format!("{} via region {}", f.client.as_deref().unwrap_or("unknown"), f.region),
+        Some(f) => f.remote(),
         None => super::listener::remote(&request).map_or_else(|| "unknown".to_string(), |a| a.to_string()),
     };
+    let method = request.method().clone();
     let route = request.uri().path_and_query().map_or_else(String::new, |p| p.as_str().to_string());
+    audited(&app, &method, route, remote, next.run(request)).await
+}
+
+impl Forwarded {
+    /// The client as the audit log names it: the operator's address and the region it went through.
+    pub fn remote(&self) -> String {
+        format!("{} via region {}", self.client.as_deref().unwrap_or("unknown"), self.region)
+    }
+}
+
+/// Handles a change `method route` from `remote` (`handled`) and records it (see the module
+/// documentation); any other method is handled without a record.
+pub async fn audited(
+    app: &AppState,
+    method: &axum::http::Method,
+    route: String,
+    remote: String,
+    handled: impl Future<Output = Response>,
+) -> Response {
+    if !is_change(method) {
+        return handled.await;
+    }
     let context = Arc::new(RequestAudit {
         record: AuditRecord {
             time_ms: now_ms(),
-            method: request.method().to_string(),
+            method: method.to_string(),
             route,
             remote,
             status: 0,
@@ -66,7 +89,7 @@ pub async fn record(State(app): State<AppState>, request: Request, next: Next) -
         },
         committed: AtomicBool::new(false),
     });
-    let response = AUDIT.scope(context.clone(), next.run(request)).await;
+    let response = AUDIT.scope(context.clone(), handled).await;
     if !context.committed.load(Relaxed) {
         let (outcome, detail) = match response.extensions().get::<ErrorInfo>() {
             Some(e) => (e.code.to_string(), e.message.clone()),

@@ -331,15 +331,29 @@ fn too_many() -> Response {
 
 /// Middleware refusing unauthenticated changes with 401 (429 when rate-limited).
 pub async fn require_token(State(app): State<AppState>, request: Request, next: Next) -> Response {
-    let Some(token) = &app.token else {
-        return next.run(request).await;
-    };
-    let (method, path) = (request.method(), request.uri().path());
+    let ip = super::listener::remote(&request).map(|a| a.ip());
+    let given = request.headers().get(header::AUTHORIZATION);
+    match refusal(&app, ip, request.method(), request.uri().path(), given) {
+        None => next.run(request).await,
+        Some(refused) => refused,
+    }
+}
+
+/// The token check of a request `method path` from `ip` carrying `given` (a request another region
+/// forwarded is checked here too, with the operator's address): its refusal, or None to go on.
+pub fn refusal(
+    app: &AppState,
+    ip: Option<IpAddr>,
+    method: &Method,
+    path: &str,
+    given: Option<&HeaderValue>,
+) -> Option<Response> {
+    let Some(token) = &app.token else { return None };
     let private = super::routes::find(method, path).is_some_and(|(r, _)| r.access == Access::PrivateRead);
     if !is_change(method) && !private {
-        return next.run(request).await;
+        return None;
     }
-    let ip = super::listener::remote(&request).map_or(IpAddr::V4(Ipv4Addr::UNSPECIFIED), |a| a.ip());
+    let ip = ip.unwrap_or(IpAddr::V4(Ipv4Addr::UNSPECIFIED));
     let failures = &app.auth_failures;
     let limited = match failures.admit(ip, safety_route(method, path), Instant::now()) {
         Admission::Check { limited } => limited,
@@ -348,16 +362,16 @@ pub async fn require_token(State(app): State<AppState>, request: Request, next: 
             if global {
                 failures.rate_limited_global.fetch_add(1, Relaxed);
             }
-            return too_many();
+            return Some(too_many());
         }
     };
-    if authorised(request.headers().get(header::AUTHORIZATION), token) {
-        return next.run(request).await;
+    if authorised(given, token) {
+        return None;
     }
     failures.fail(ip, Instant::now());
     failures.refused.fetch_add(1, Relaxed);
     if limited {
-        return too_many();
+        return Some(too_many());
     }
     if failures.exhausted(ip) {
         tracing::warn!(
@@ -372,7 +386,7 @@ pub async fn require_token(State(app): State<AppState>, request: Request, next: 
     .field("Authorization")
     .into_response();
     response.headers_mut().insert(header::WWW_AUTHENTICATE, HeaderValue::from_static("Bearer"));
-    response
+    Some(response)
 }
 
 #[cfg(test)]

@@ -16,6 +16,7 @@
 //! old one) and the answer names the regions that loaded it.
 
 use super::error::ApiError;
+use super::request::ApiRequest;
 use super::state::AppState;
 use axum::Json;
 use axum::http::StatusCode;
@@ -164,10 +165,8 @@ async fn everywhere(
     timeout: Duration,
     authorization: &Option<String>,
 ) -> Vec<(String, Answer)> {
-    let query = ApiQuery {
-        method: "POST".into(),
-        uri: "/deploy".into(),
-        body: String::new(),
+    let query: ApiQuery<ApiRequest> = ApiQuery {
+        request: None,
         uav: None,
         deploy: Some(step.clone()),
         authorization: authorization.clone(),

@@ -232,19 +232,23 @@ impl<S: Send + Sync> FromRequest<S> for NoBody {
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &S) -> Result<Self, ApiError> {
-        let bytes = read_body(req, state).await?;
-        if bytes.is_empty() {
-            return Ok(NoBody);
-        }
-        match parse::<serde_json::Map<String, serde_json::Value>>(&bytes) {
-            Ok(object) if object.is_empty() => Ok(NoBody),
-            Ok(_) => Err(ApiError::new(
-                StatusCode::UNPROCESSABLE_ENTITY,
-                "invalid_body",
-                "this request takes no body (or the empty object `{}`)",
-            )),
-            Err(e) => Err(e),
-        }
+        no_body(&read_body(req, state).await?)
+    }
+}
+
+/// Reads the body of a change that takes none: nothing, or `{}`.
+pub fn no_body(bytes: &[u8]) -> Result<NoBody, ApiError> {
+    if bytes.is_empty() {
+        return Ok(NoBody);
+    }
+    match parse::<serde_json::Map<String, serde_json::Value>>(bytes) {
+        Ok(object) if object.is_empty() => Ok(NoBody),
+        Ok(_) => Err(ApiError::new(
+            StatusCode::UNPROCESSABLE_ENTITY,
+            "invalid_body",
+            "this request takes no body (or the empty object `{}`)",
+        )),
+        Err(e) => Err(e),
     }
 }
 

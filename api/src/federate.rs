@@ -6,14 +6,17 @@
 //! fleet-wide commands (`/api/fleet/pause|resume|land|stop`) are applied here first, then in every
 //! other region. `?scope=region` keeps a read to this region alone.
 //!
-//! The other side: requests from other regions arrive on this region's queryable and are run
-//! through the same API handlers (without this middleware, so nothing is forwarded twice); only
-//! the region's owner answers. The owner checks the operator's token itself (carried with the
+//! A forwarded request travels typed (`request::ApiRequest`: its route and data, parsed once
+//! here; a body its route refuses is refused here). The other side: requests from other regions
+//! arrive on this region's queryable and run through the same API handlers directly (not through
+//! the router nor this middleware, so nothing is routed or forwarded twice); only the region's
+//! owner answers. The owner checks the operator's token itself (carried with the
 //! request) and audits the change in its own log, with the asking region and the operator's
 //! address; only servers with a certificate of the deployment can ask (`region::secure`).
 
 use super::error::{ApiError, MAX_BODY_BYTES};
 use super::handlers;
+use super::request::ApiRequest;
 use super::routes::Reach;
 use super::state::AppState;
 use axum::body::{Body, Bytes};
@@ -22,7 +25,7 @@ use axum::http::{Method, StatusCode, header};
 use axum::middleware::Next;
 use axum::response::{IntoResponse, Response};
 use regions::federation::{Answer, ApiQuery, ApiReply, Federation, MAX_CARRIED_BYTES};
-use serde_json::{Value, json};
+use serde_json::json;
 use std::sync::Arc;
 use std::time::Duration;
 use tokio::sync::Semaphore;
@@ -55,9 +58,9 @@ enum Route {
     Local,
 }
 
-/// Where `method path` is answered (the route table's [`Reach`], with the UAV's id).
-fn route(method: &Method, path: &str) -> Route {
-    let Some((route, id)) = super::routes::find(method, path) else { return Route::Local };
+/// Where a request to `found` is answered (the route table's [`Reach`], with the UAV's id).
+fn route(found: Option<(&'static super::routes::Route, Option<&str>)>) -> Route {
+    let Some((route, id)) = found else { return Route::Local };
     match (route.reach, id) {
         (Reach::Uav, Some(id)) => Route::Uav(id.to_string()),
         (Reach::State, _) => Route::State,
@@ -108,7 +111,9 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
     let Some(federation) = app.region.as_ref().and_then(|r| r.federation.get()).cloned() else {
         return next.run(request).await;
     };
-    let route = route(request.method(), request.uri().path());
+    let found = super::routes::find(request.method(), request.uri().path());
+    let found = found.map(|(route, id)| (route, id.map(str::to_string)));
+    let route = route(found.as_ref().map(|(r, id)| (*r, id.as_deref())));
     // A standby flies nothing and refuses changes (409 `standby`); its reads ask every region,
     // its own included (whose owner answers).
     let owner = app.region.as_ref().is_some_and(|r| r.failover.is_owner());
@@ -128,15 +133,20 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
         parts.headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()).map(str::to_string);
     let client =
         parts.extensions.get::<axum::extract::ConnectInfo<std::net::SocketAddr>>().map(|c| c.0.to_string());
-    let query = ApiQuery {
-        method: parts.method.to_string(),
-        uri: parts.uri.path_and_query().map_or_else(|| parts.uri.path().to_string(), |p| p.to_string()),
-        body: String::from_utf8_lossy(&bytes).into_owned(),
-        uav: None,
-        deploy: None,
-        authorization,
-        client,
+    let uri = parts.uri.clone();
+    let here = |bytes: Bytes| next.run(Request::from_parts(parts, Body::from(bytes)));
+    if let Route::Deploy(kind) = route {
+        let body = String::from_utf8_lossy(&bytes).into_owned();
+        return super::deploy::coordinate(&app, &federation, kind, body, authorization).await;
+    }
+    // The request parsed once, here; a body its route refuses is refused here, as it would be there.
+    let typed = found.and_then(|(r, id)| ApiRequest::of(r, id.as_deref(), &bytes));
+    let Some(Ok(typed)) = typed else { return here(bytes).await };
+    let position = match &typed {
+        ApiRequest::AddUav { body } => Some(body.position),
+        _ => None,
     };
+    let query = ApiQuery { request: Some(typed), uav: None, deploy: None, authorization, client };
     // Requests waiting on other regions are bounded, so they never take every connection; the
     // fleet-wide commands (the emergency stop among them) are never refused here.
     let _permit = match route {
@@ -154,8 +164,6 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
     if owner {
         regions.retain(|r| *r != federation.own);
     }
-    let uri = parts.uri.clone();
-    let here = |bytes: Bytes| next.run(Request::from_parts(parts, Body::from(bytes)));
     match route {
         Route::Uav(id) => {
             let mut silent = Vec::new();
@@ -184,7 +192,7 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
                 None => here(bytes).await,
             }
         }
-        Route::Add => match region_of_position(&app, &federation, &bytes) {
+        Route::Add => match position.and_then(|p| region_of_position(&app, &federation, p)) {
             Some(region) if region != federation.own => match federation.ask(&region, &query).await {
                 Answer::Replied(reply) => replied(reply),
                 Answer::Silent => unanswered(&region),
@@ -201,8 +209,7 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
         }
         Route::State | Route::List => {
             // Each region gives all its UAVs; pages and boxes apply to the merged list.
-            let whole = ApiQuery { uri: uri.path().to_string(), ..query };
-            let answers = federation.ask_all(&regions, &whole).await;
+            let answers = federation.ask_all(&regions, &query).await;
             let merged = if route == Route::State {
                 super::federate_merge::state(&app, &federation.own, &all, answers)
             } else {
@@ -211,10 +218,7 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
             };
             merged.unwrap_or_else(IntoResponse::into_response)
         }
-        Route::Deploy(kind) => {
-            super::deploy::coordinate(&app, &federation, kind, query.body, query.authorization).await
-        }
-        Route::Local => here(bytes).await,
+        Route::Deploy(_) | Route::Local => here(bytes).await,
     }
 }
 
@@ -230,14 +234,11 @@ fn flown_here(app: &AppState, id: &str) -> bool {
     handlers::position_of(app, &snapshot, id).is_some()
 }
 
-/// The region of a new UAV's `position` (None: not a JSON body with a position, or on no region).
-fn region_of_position(app: &AppState, federation: &Federation, body: &[u8]) -> Option<String> {
-    let doc: Value = serde_json::from_slice(body).ok()?;
-    let p = doc.get("position")?.as_array()?;
-    let (x, y) = (p.first()?.as_f64()?, p.get(1)?.as_f64()?);
+/// The region of a new UAV's `position` (None: on no region).
+fn region_of_position(app: &AppState, federation: &Federation, position: [f64; 2]) -> Option<String> {
     let view = app.engine.road.borrow().clone();
     let road = federation.road(&view)?;
-    let segment = road.locate(&uav::Vec2::new(x, y), None);
+    let segment = road.locate(&uav::Vec2::new(position[0], position[1]), None);
     road.region_of(segment).map(|r| r.name.clone())
 }
 
@@ -308,7 +309,7 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
             ApiError::new(StatusCode::PAYLOAD_TOO_LARGE, "body_too_large", "too large").into_response(),
         );
     }
-    let asked: ApiQuery = match serde_json::from_slice(&payload.to_bytes()) {
+    let asked: ApiQuery<ApiRequest> = match serde_json::from_slice(&payload.to_bytes()) {
         Ok(q) => q,
         Err(e) => return Some(ApiError::invalid("query", e.to_string()).into_response()),
     };
@@ -328,30 +329,24 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
     if let Some(id) = asked.uav.as_deref().filter(|id| !flown_here(app, id)) {
         return Some(ApiError::unknown_uav(id).into_response());
     }
-    let mut request = Request::builder()
-        .method(asked.method.as_str())
-        .uri(asked.uri.as_str())
-        .header(header::CONTENT_TYPE, "application/json");
-    if let Some(given) = given {
-        request = request.header(header::AUTHORIZATION, given);
-    }
-    // The operator's address stands for the client's: wrong tokens count against its network.
-    if let Some(client) = asked.client.as_deref().and_then(|c| c.parse::<std::net::SocketAddr>().ok()) {
-        request = request.extension(axum::extract::ConnectInfo(client));
-    }
-    let forwarded = super::audit::Forwarded { region: asker.to_string(), client: asked.client };
-    let Ok(request) = request.extension(forwarded).body(Body::from(asked.body)) else {
-        return Some(ApiError::invalid("query", "not a request").into_response());
+    let Some(request) = asked.request else {
+        return Some(ApiError::invalid("query", "neither a request nor a deployment step").into_response());
     };
-    // The operator's authority is checked here, by the API's own token check and rate limit, and
-    // the change audited here, where it is applied (in its own transaction), naming the region and
-    // the operator's address.
-    let router = super::routes::router()
-        .layer(axum::middleware::from_fn_with_state(app.clone(), super::auth::require_token))
-        .layer(axum::middleware::from_fn_with_state(app.clone(), super::audit::record))
-        .with_state(app.clone());
-    // The router's error type is Infallible.
-    Some(tower::ServiceExt::oneshot(router, request).await.unwrap_or_else(|e| match e {}))
+    // The operator's authority is checked here, by the API's own token check and rate limit (the
+    // operator's address stands for the client's: wrong tokens count against its network), and
+    // the change audited here, where it is applied (in its own transaction), naming the region
+    // and the operator's address.
+    let (route, _) = request.route();
+    let (method, path) = (route.verb.method(), request.path());
+    let ip = asked.client.as_deref().and_then(|c| c.parse::<std::net::SocketAddr>().ok()).map(|c| c.ip());
+    let remote = super::audit::Forwarded { region: asker.to_string(), client: asked.client }.remote();
+    let handled = async {
+        match super::auth::refusal(app, ip, &method, &path, given.as_ref()) {
+            None => request.run(app.clone()).await,
+            Some(refused) => refused,
+        }
+    };
+    Some(super::audit::audited(app, &method, path.clone(), remote, handled).await)
 }
 
 /// A response as an [`ApiReply`] (its status and body).
@@ -376,6 +371,10 @@ async fn reply(query: &zenoh::query::Query, response: Response) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn route(method: &Method, path: &str) -> Route {
+        super::route(crate::routes::find(method, path))
+    }
 
     #[test]
     fn requests_are_routed_by_method_and_path() {

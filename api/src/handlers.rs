@@ -16,7 +16,7 @@ use engine::snapshot::{Snapshot, UavSnapshot};
 use engine::stats::LoopMetrics;
 use fleet::Scenario;
 use roads::{Road, RoadLayout};
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 use serde_json::json;
 use uav::Vec2;
 
@@ -92,7 +92,7 @@ pub(crate) fn road_of(layout: RoadLayout) -> Result<Road, ApiError> {
 pub const MAX_PAGE: usize = 1000;
 
 /// Query of `GET /api/uavs`: without any, the whole fleet (as before pages existed).
-#[derive(Debug, Deserialize, schemars::JsonSchema)]
+#[derive(Debug, Default, Deserialize, schemars::JsonSchema)]
 pub(crate) struct ListQuery {
     /// `x0,y0,x1,y1` (m): only the UAVs inside this box; four decimal numbers (read as 32-bit
     /// floats, so finite within ±3.4e38), with x0 ≤ x1 and y0 ≤ y1 (the order is beyond the schema:
@@ -192,15 +192,15 @@ pub(crate) fn position_of(app: &AppState, snapshot: &Snapshot, id: &str) -> Opti
 }
 
 /// `POST /api/uavs` body.
-#[derive(Debug, Deserialize, schemars::JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct NewUav {
+pub struct NewUav {
     /// Its id, unique in the fleet.
     #[schemars(with = "uav::schema::UavId")]
     id: String,
     /// Where it starts, at rest.
     #[schemars(with = "roads::schema::Point")]
-    position: [f64; 2],
+    pub(crate) position: [f64; 2],
     /// A policy this server has loaded (`GET /api/policies`: `pd` and `rl` always, more with
     /// `serve --model NAME=FILE.onnx`); null or absent: the server's default (`serve --policy`).
     #[serde(default)]
@@ -254,9 +254,9 @@ pub(crate) async fn remove_uav(
 }
 
 /// `PUT /api/uavs/{id}/goal` body.
-#[derive(Debug, Deserialize, schemars::JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct GoalBody {
+pub struct GoalBody {
     /// Where it flies to.
     #[schemars(with = "roads::schema::Point")]
     goal: [f64; 2],
@@ -282,9 +282,9 @@ pub(crate) async fn clear_goal(
 }
 
 /// `PUT /api/uavs/{id}/policy` body.
-#[derive(Debug, Deserialize, schemars::JsonSchema)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct PolicyBody {
+pub struct PolicyBody {
     /// A policy this server has loaded: `GET /api/policies` lists them (`pd` and `rl` always, more
     /// with `serve --model NAME=FILE.onnx`).
     #[schemars(example = &"pd")]

@@ -18,6 +18,7 @@ pub mod guard;
 mod handlers;
 pub mod listener;
 pub mod openapi;
+mod request;
 pub mod road_follow;
 pub mod routes;
 pub mod state;

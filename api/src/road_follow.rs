@@ -3,6 +3,7 @@
 //! the region's queryable) and takes it (`Command::FollowRoad`, the one change a standby accepts).
 //! So a takeover flies on with the road the owner last flew, whatever was changed since the start.
 
+use super::request::ApiRequest;
 use super::state::AppState;
 use engine::command::Command;
 use regions::federation::{Answer, ApiQuery};
@@ -26,15 +27,7 @@ pub async fn follow(app: AppState) {
         if taken == Some(mirror.road_version) {
             continue;
         }
-        let query = ApiQuery {
-            method: "GET".into(),
-            uri: "/api/road".into(),
-            body: String::new(),
-            uav: None,
-            deploy: None,
-            authorization: None,
-            client: None,
-        };
+        let query = ApiQuery::of(ApiRequest::GetRoad);
         let Answer::Replied(reply) = federation.ask(&region.name, &query).await else { continue };
         let layout =
             (reply.status == 200).then(|| serde_json::from_str::<roads::RoadLayout>(&reply.body).ok());

@@ -36,6 +36,16 @@ impl Verb {
         }
     }
 
+    /// Its HTTP method.
+    pub fn method(self) -> Method {
+        match self {
+            Verb::Get => Method::GET,
+            Verb::Put => Method::PUT,
+            Verb::Post => Method::POST,
+            Verb::Delete => Method::DELETE,
+        }
+    }
+
     /// Its name in an OpenAPI document (`get`, `put`, ...).
     pub fn name(self) -> &'static str {
         match self {

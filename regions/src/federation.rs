@@ -32,17 +32,14 @@ pub fn asker_of<'k>(prefix: &str, own: &str, key: &'k str) -> Option<&'k str> {
     (!asker.is_empty() && !asker.contains('/')).then_some(asker)
 }
 
-/// A REST request carried to another region (JSON).
+/// A request carried to another region (JSON): the HTTP side's typed request `R` (its route and
+/// data, run there without routing again), or a step of a deployment.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct ApiQuery {
-    /// `GET`, `PUT`, `POST` or `DELETE`.
-    pub method: String,
-    /// Path and query, e.g. `/api/uavs/u1/goal`.
-    pub uri: String,
-    /// The JSON body (empty: none).
-    #[serde(default)]
-    pub body: String,
+pub struct ApiQuery<R> {
+    /// The request (None with `deploy`).
+    #[serde(default = "none")]
+    pub request: Option<R>,
     /// Answer only if this UAV is flown there (a change forwarded to its owner).
     #[serde(default)]
     pub uav: Option<String>,
@@ -55,6 +52,17 @@ pub struct ApiQuery {
     /// The operator's address, for the applying region's audit log.
     #[serde(default)]
     pub client: Option<String>,
+}
+
+fn none<R>() -> Option<R> {
+    None
+}
+
+impl<R> ApiQuery<R> {
+    /// `request`, with nothing else.
+    pub fn of(request: R) -> Self {
+        Self { request: Some(request), uav: None, deploy: None, authorization: None, client: None }
+    }
 }
 
 /// What is deployed.
@@ -159,7 +167,7 @@ impl Federation {
     }
 
     /// Sends `query` to region `region` and returns its owner's answer (the first; there is one).
-    pub async fn ask(&self, region: &str, query: &ApiQuery) -> Answer {
+    pub async fn ask<R: Serialize + Sync>(&self, region: &str, query: &ApiQuery<R>) -> Answer {
         self.ask_within(region, query, ASK_TIMEOUT).await
     }
 
@@ -180,7 +188,12 @@ impl Federation {
     }
 
     /// [`Federation::ask`], waiting at most `timeout`; a region remembered silent is not asked.
-    pub async fn ask_within(&self, region: &str, query: &ApiQuery, timeout: Duration) -> Answer {
+    pub async fn ask_within<R: Serialize + Sync>(
+        &self,
+        region: &str,
+        query: &ApiQuery<R>,
+        timeout: Duration,
+    ) -> Answer {
         if self.remembered_silent(region) {
             return Answer::Silent;
         }
@@ -196,7 +209,7 @@ impl Federation {
         answer
     }
 
-    async fn ask_now(&self, region: &str, query: &ApiQuery, timeout: Duration) -> Answer {
+    async fn ask_now<R: Serialize>(&self, region: &str, query: &ApiQuery<R>, timeout: Duration) -> Answer {
         let Ok(payload) = serde_json::to_vec(query) else { return Answer::Silent };
         let key = api_key(&self.prefix, region, &self.own);
         let asked = self
@@ -228,7 +241,11 @@ impl Federation {
     }
 
     /// Sends `query` to every region of `regions` at once; their answers in that order.
-    pub async fn ask_all(&self, regions: &[String], query: &ApiQuery) -> Vec<(String, Answer)> {
+    pub async fn ask_all<R: Serialize + Sync>(
+        &self,
+        regions: &[String],
+        query: &ApiQuery<R>,
+    ) -> Vec<(String, Answer)> {
         let answers = futures_util::future::join_all(regions.iter().map(|r| self.ask(r, query))).await;
         regions.iter().cloned().zip(answers).collect()
     }
@@ -241,18 +258,19 @@ mod tests {
     #[test]
     fn queries_and_replies_are_plain_json_and_refuse_unknown_fields() {
         let q = ApiQuery {
-            method: "PUT".into(),
-            uri: "/api/uavs/u1/goal".into(),
-            body: "{}".into(),
+            request: Some("a request".to_string()),
             uav: None,
             deploy: None,
             authorization: Some("Bearer t".into()),
             client: Some("127.0.0.1:5000".into()),
         };
         let text = serde_json::to_string(&q).unwrap();
-        assert_eq!(serde_json::from_str::<ApiQuery>(&text).unwrap(), q);
-        let bare: ApiQuery = serde_json::from_str(r#"{"method": "GET", "uri": "/api/state"}"#).unwrap();
-        assert_eq!((bare.body.as_str(), bare.uav), ("", None));
+        assert_eq!(serde_json::from_str::<ApiQuery<String>>(&text).unwrap(), q);
+        let bare: ApiQuery<String> = serde_json::from_str(r#"{"request": "r"}"#).unwrap();
+        assert_eq!((bare.request.as_deref(), bare.uav), (Some("r"), None));
+        assert!(
+            serde_json::from_str::<ApiQuery<String>>(r#"{"method": "GET", "uri": "/api/state"}"#).is_err()
+        );
         assert!(serde_json::from_str::<ApiReply>(r#"{"status": 200, "body": "", "x": 1}"#).is_err());
         assert_eq!(api_key("airroads", "west", "east"), "airroads/region/west/api/east");
         assert_eq!(asker_of("airroads", "west", "airroads/region/west/api/east"), Some("east"));
