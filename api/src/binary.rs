@@ -7,7 +7,6 @@
 
 use axum::body::Bytes;
 use engine::snapshot::Snapshot;
-use serde_json::json;
 use std::collections::HashMap;
 use std::sync::Arc;
 
@@ -84,15 +83,15 @@ impl Encoder {
             self.roster_version = self.roster_version.wrapping_add(1).max(1);
             self.last.clear();
             self.last.extend(uavs.iter().map(|u| (u.id.clone(), u.policy.clone(), u.goal, u.link.clone())));
-            let list: Vec<_> = uavs
+            let list = uavs
                 .iter()
-                .map(|u| json!({"id": u.id, "policy": u.policy, "goal": u.goal, "link": u.link}))
+                .map(|u| RosterUav { id: &u.id, policy: &u.policy, goal: u.goal, link: &u.link })
                 .collect();
             let mut roster = Vec::with_capacity(ROSTER_HEADER_BYTES + 64 * uavs.len());
             roster.extend_from_slice(&[VERSION, KIND_ROSTER, 0, 0]);
             roster.extend_from_slice(&self.roster_version.to_le_bytes());
-            // Serialising a Value built from strings and finite numbers cannot fail.
-            serde_json::to_writer(&mut roster, &json!({ "uavs": list })).unwrap_or_default();
+            // Serialising strings and numbers into a Vec cannot fail (a NaN goal is written null).
+            serde_json::to_writer(&mut roster, &Roster { uavs: list }).unwrap_or_default();
             self.roster = Bytes::from(roster);
         }
         let mut body = Vec::with_capacity(TICK_HEADER_BYTES + RECORD_BYTES * uavs.len());
@@ -142,6 +141,21 @@ impl Encoder {
             reservations: self.reservations.clone(),
         }
     }
+}
+
+/// The JSON of a roster frame: the UAVs in index order.
+#[derive(serde::Serialize)]
+struct Roster<'s> {
+    uavs: Vec<RosterUav<'s>>,
+}
+
+/// One UAV of a roster frame.
+#[derive(serde::Serialize)]
+struct RosterUav<'s> {
+    id: &'s str,
+    policy: &'s str,
+    goal: Option<[f64; 2]>,
+    link: &'s str,
 }
 
 /// A viewport `[x0, y0, x1, y1]` (m), x0 ≤ x1 and y0 ≤ y1.

@@ -15,7 +15,9 @@
 //! and the answer is 502 `deployment_failed`; a scenario cannot be taken back (its fleet replaced the
 //! old one) and the answer names the regions that loaded it.
 
+use super::answers::{RoadReplaced, ScenarioLoaded};
 use super::error::ApiError;
+use super::federate_merge::RegionAnswer;
 use super::request::ApiRequest;
 use super::state::AppState;
 use axum::Json;
@@ -27,7 +29,8 @@ use fleet::{Scenario, ValidScenario};
 use regions::federation::{Answer, ApiQuery, ApiReply, Federation, Kind, Step};
 use roads::{Road, RoadLayout};
 
-use serde_json::{Value, json};
+use serde_json::{Map, Value, json};
+use std::collections::BTreeMap;
 use std::time::Duration;
 
 /// How far ahead of the commit the regions switch: room for every region to receive it.
@@ -100,7 +103,34 @@ pub async fn answer(app: &AppState, own: &str, step: Step) -> Response {
     }
 }
 
-async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiError> {
+/// What a region answers to a deployment's step: ready (a prepare), or what it put in place.
+#[derive(Debug, serde::Serialize)]
+#[serde(untagged)]
+enum StepDone {
+    /// The prepare passed: the region can take it.
+    Ready {
+        /// Always true.
+        ready: bool,
+    },
+    /// The road is in place (`PUT /api/road`'s answer).
+    Road {
+        /// Its version and the goals it cleared.
+        #[serde(flatten)]
+        replaced: RoadReplaced,
+        /// When the loop put it in place (ms since the Unix epoch, this server's clock).
+        switched_at_ms: u64,
+    },
+    /// The scenario is loaded (`POST /api/scenario`'s answer).
+    Scenario {
+        /// Its name, UAVs and tick.
+        #[serde(flatten)]
+        loaded: ScenarioLoaded,
+        /// When the loop put it in place.
+        switched_at_ms: u64,
+    },
+}
+
+async fn run_step(app: &AppState, own: &str, step: Step) -> Result<StepDone, ApiError> {
     let current = app.engine.road.borrow().layout.clone();
     let (kind, body) = (step.kind, step.body.clone());
     let own_name = own.to_string();
@@ -128,31 +158,33 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<Value, ApiErr
         if kind == Kind::Road {
             app.apply(Command::CheckRoad(Box::new(road))).await?;
         }
-        return Ok(json!({"ready": true}));
+        return Ok(StepDone::Ready { ready: true });
     }
     // Queued half a tick before the boundary: the loop takes it in the gap at the boundary.
     let half_tick = (app.engine.metrics.borrow().dt * 500.0) as u64;
     let wait =
         step.at_ms.saturating_sub(half_tick).saturating_sub(now_ms()).min(COMMIT_TIMEOUT.as_millis() as u64);
     tokio::time::sleep(Duration::from_millis(wait)).await;
-    let mut done = match scenario {
-        None => match app.apply(Command::SetRoad(Box::new(road))).await? {
-            Outcome::RoadReplaced { cleared_goals } => {
-                json!({"version": app.engine.road.borrow().version, "cleared_goals": cleared_goals})
-            }
-            _ => json!({"version": app.engine.road.borrow().version}),
-        },
+    let done = match scenario {
+        None => {
+            let cleared_goals = match app.apply(Command::SetRoad(Box::new(road))).await? {
+                Outcome::RoadReplaced { cleared_goals } => cleared_goals,
+                _ => Vec::new(),
+            };
+            let replaced = RoadReplaced { version: app.engine.road.borrow().version, cleared_goals };
+            StepDone::Road { replaced, switched_at_ms: app.engine.road.borrow().since_ms }
+        }
         Some(valid) => {
-            let (name, count) = (valid.name.clone(), valid.uavs.len());
-            let tick = match app.apply(Command::LoadScenario(Box::new(valid))).await? {
+            let (name, uavs) = (valid.name.clone(), valid.uavs.len());
+            let loaded_after_tick = match app.apply(Command::LoadScenario(Box::new(valid))).await? {
                 Outcome::ScenarioLoaded { tick } => tick,
                 _ => app.engine.snapshots.borrow().tick,
             };
-            json!({"name": name, "uavs": count, "loaded_after_tick": tick})
+            let loaded = ScenarioLoaded { name, uavs, loaded_after_tick };
+            // When the loop put the new road in place (the gap at the boundary, on this server's clock).
+            StepDone::Scenario { loaded, switched_at_ms: app.engine.road.borrow().since_ms }
         }
     };
-    // When the loop put the new road in place (the gap at the boundary, on this server's clock).
-    done["switched_at_ms"] = json!(app.engine.road.borrow().since_ms);
     Ok(done)
 }
 
@@ -199,6 +231,18 @@ fn refused(region: &str, answer: Answer) -> Response {
     (status, Json(doc)).into_response()
 }
 
+/// The answer of a deployment every region applied: this region's own answer with each region's.
+#[derive(Debug, serde::Serialize)]
+struct Deployed {
+    /// This region's answer (`StepDone`), at the top level.
+    #[serde(flatten)]
+    own: Map<String, Value>,
+    /// Each region's answer, by name.
+    regions: BTreeMap<String, RegionAnswer>,
+    /// The tick boundary every region switched at (ms since the Unix epoch).
+    switch_at_ms: u64,
+}
+
 /// Deploys `body` (a `kind`) to every region of the served road, as the coordinator.
 /// `authorization`: the operator's, for each region to check itself.
 pub async fn coordinate(
@@ -225,34 +269,26 @@ pub async fn coordinate(
     let at_ms = (now_ms() + SWITCH_DELAY.as_millis() as u64).div_ceil(dt_ms) * dt_ms;
     let commit = Step { commit: true, kind, body, at_ms };
     let answers = everywhere(app, federation, &regions, &commit, COMMIT_TIMEOUT, &authorization).await;
-    let mut report = serde_json::Map::new();
+    let mut report = BTreeMap::new();
     let (mut failed, mut switched) = (Vec::new(), Vec::new());
-    let mut own_body = json!({});
+    let mut own_body = Map::new();
     for (region, answer) in answers {
-        match answer {
-            Answer::Replied(reply) if (200..300).contains(&reply.status) => {
-                let doc: Value = serde_json::from_str(&reply.body).unwrap_or(Value::Null);
+        let entry = RegionAnswer::of(&answer);
+        match (&answer, &entry) {
+            (Answer::Replied(reply), RegionAnswer::Replied { body, .. })
+                if (200..300).contains(&reply.status) =>
+            {
                 if region == federation.own {
-                    own_body = doc.clone();
+                    own_body = body.as_object().cloned().unwrap_or_default();
                 }
-                report.insert(region.clone(), json!({"status": reply.status, "body": doc}));
-                switched.push(region);
+                switched.push(region.clone());
             }
-            Answer::Replied(reply) => {
-                let doc: Value = serde_json::from_str(&reply.body).unwrap_or(Value::Null);
-                report.insert(region.clone(), json!({"status": reply.status, "body": doc}));
-                failed.push(region);
-            }
-            Answer::Silent => {
-                report.insert(region.clone(), json!({"answered": false}));
-                failed.push(region);
-            }
+            _ => failed.push(region.clone()),
         }
+        report.insert(region, entry);
     }
     if failed.is_empty() {
-        own_body["regions"] = Value::Object(report);
-        own_body["switch_at_ms"] = json!(at_ms);
-        return Json(own_body).into_response();
+        return Json(Deployed { own: own_body, regions: report, switch_at_ms: at_ms }).into_response();
     }
     let mut message = format!("not applied in {}", failed.join(", "));
     if kind == Kind::Road && !switched.is_empty() {
@@ -272,7 +308,8 @@ pub async fn coordinate(
         message = format!("{message}; loaded in {}", switched.join(", "));
     }
     let mut error = ApiError::new(StatusCode::BAD_GATEWAY, "deployment_failed", message);
-    error.extra = Some(serde_json::Map::from_iter([("regions".to_string(), Value::Object(report))]));
+    let report = serde_json::to_value(report).unwrap_or_default();
+    error.extra = Some(Map::from_iter([("regions".to_string(), report)]));
     error.into_response()
 }
 

@@ -10,6 +10,7 @@ use axum::response::{IntoResponse, Response};
 use engine::snapshot::Snapshot;
 use regions::federation::Answer;
 use serde_json::{Value, json};
+use std::collections::BTreeMap;
 
 /// The header of a merged `GET /api/uavs` naming the regions that did not answer (comma-separated).
 pub const UNANSWERED_HEADER: &str = "x-airroads-unanswered-regions";
@@ -33,16 +34,73 @@ fn answered_json(answer: &Answer) -> Option<Value> {
     }
 }
 
+/// How a region answered a merged read (`regions` of a merged `GET /api/state`).
+#[derive(Debug, serde::Serialize)]
+struct ReadReport {
+    /// The region.
+    name: String,
+    /// It answered 200.
+    answered: bool,
+    /// The tick of its snapshot.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    tick: Option<u64>,
+    /// Its UAVs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    uavs: Option<usize>,
+    /// Its status when it answered otherwise.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    status: Option<u16>,
+}
+
 /// The report of a region that answered `doc`.
-fn answered_report(name: &str, doc: &Value) -> Value {
-    json!({"name": name, "answered": true, "tick": doc["tick"], "uavs": doc["uavs"].as_array().map_or(0, Vec::len)})
+fn answered_report(name: &str, doc: &Value) -> ReadReport {
+    let uavs = Some(doc["uavs"].as_array().map_or(0, Vec::len));
+    ReadReport { name: name.into(), answered: true, tick: doc["tick"].as_u64(), uavs, status: None }
 }
 
 /// The report of a region with no usable answer (`answer` says why).
-fn unanswered_report(name: &str, answer: &Answer) -> Value {
-    match answer {
-        Answer::Replied(reply) => json!({"name": name, "answered": false, "status": reply.status}),
-        Answer::Silent => json!({"name": name, "answered": false}),
+fn unanswered_report(name: &str, answer: &Answer) -> ReadReport {
+    let status = match answer {
+        Answer::Replied(reply) => Some(reply.status),
+        Answer::Silent => None,
+    };
+    ReadReport { name: name.into(), answered: false, tick: None, uavs: None, status }
+}
+
+/// One region's answer to a command or a deployment step sent to every region (`regions` of the
+/// answer, by name).
+#[derive(Debug, serde::Serialize)]
+#[serde(untagged)]
+pub enum RegionAnswer {
+    /// Its status and body, as it gave them.
+    Replied {
+        /// HTTP status.
+        status: u16,
+        /// Its answer.
+        body: Value,
+    },
+    /// This region's own: its status (its body is the answer's).
+    Here {
+        /// HTTP status.
+        status: u16,
+    },
+    /// It did not answer.
+    Silent {
+        /// Always false.
+        answered: bool,
+    },
+}
+
+impl RegionAnswer {
+    /// The entry of `answer`.
+    pub fn of(answer: &Answer) -> Self {
+        match answer {
+            Answer::Replied(reply) => {
+                let body = serde_json::from_str(&reply.body).unwrap_or(Value::Null);
+                Self::Replied { status: reply.status, body }
+            }
+            Answer::Silent => Self::Silent { answered: false },
+        }
     }
 }
 
@@ -71,8 +129,9 @@ pub fn state(
     let standby = answers.iter().any(|(name, _)| name == own);
     let mut reports = Vec::new();
     if !standby {
+        let uavs = Some(snapshot.uavs.len());
         let report =
-            json!({"name": own, "answered": true, "tick": snapshot.tick, "uavs": snapshot.uavs.len()});
+            ReadReport { name: own.into(), answered: true, tick: Some(snapshot.tick), uavs, status: None };
         reports.push((own.to_string(), report));
     }
     let mut uavs = tagged(doc["uavs"].take(), own);
@@ -94,7 +153,8 @@ pub fn state(
     }
     doc["uavs"] = Value::Array(uavs);
     reports.sort_by_key(|(name, _)| regions.iter().position(|r| r == name).unwrap_or(usize::MAX));
-    doc["regions"] = Value::Array(reports.into_iter().map(|(_, r)| r).collect());
+    let reports: Vec<ReadReport> = reports.into_iter().map(|(_, r)| r).collect();
+    doc["regions"] = serde_json::to_value(reports).unwrap_or_default();
     Ok(Json(doc).into_response())
 }
 
@@ -157,31 +217,23 @@ pub async fn fleet_command(local: Response, own: &str, answers: Vec<(String, Ans
     let status = local.status();
     let body = axum::body::to_bytes(local.into_body(), 1 << 20).await.unwrap_or_default();
     let mut doc: Value = serde_json::from_slice(&body).unwrap_or_else(|_| json!({}));
-    let mut report = serde_json::Map::new();
-    report.insert(own.into(), json!({"status": status.as_u16()}));
+    let mut report = BTreeMap::new();
+    report.insert(own.to_string(), RegionAnswer::Here { status: status.as_u16() });
     let mut failed = Vec::new();
     for (name, answer) in answers {
-        let entry = match &answer {
-            Answer::Replied(reply) => {
-                if !(200..300).contains(&reply.status) {
-                    failed.push(name.clone());
-                }
-                let body: Value = serde_json::from_str(&reply.body).unwrap_or(Value::Null);
-                json!({"status": reply.status, "body": body})
-            }
-            Answer::Silent => {
-                failed.push(name.clone());
-                json!({"answered": false})
-            }
-        };
-        report.insert(name, entry);
+        let confirmed = matches!(&answer, Answer::Replied(reply) if (200..300).contains(&reply.status));
+        if !confirmed {
+            failed.push(name.clone());
+        }
+        report.insert(name, RegionAnswer::of(&answer));
     }
+    let report = serde_json::to_value(report).unwrap_or_default();
     if failed.is_empty() {
-        doc["regions"] = Value::Object(report);
+        doc["regions"] = report;
         return (status, Json(doc)).into_response();
     }
     let message = format!("applied in region `{own}`, not confirmed by {}", failed.join(", "));
     let mut error = ApiError::new(StatusCode::BAD_GATEWAY, "regions_failed", message);
-    error.extra = Some(serde_json::Map::from_iter([("regions".to_string(), Value::Object(report))]));
+    error.extra = Some(serde_json::Map::from_iter([("regions".to_string(), report)]));
     error.into_response()
 }
