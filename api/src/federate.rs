@@ -133,19 +133,15 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
         parts.headers.get(header::AUTHORIZATION).and_then(|v| v.to_str().ok()).map(str::to_string);
     let client =
         parts.extensions.get::<axum::extract::ConnectInfo<std::net::SocketAddr>>().map(|c| c.0.to_string());
-    let uri = parts.uri.clone();
-    let here = |bytes: Bytes| next.run(Request::from_parts(parts, Body::from(bytes)));
+    let held = Held { parts, next, bytes };
+    let bytes = &held.bytes;
     if let Route::Deploy(kind) = route {
-        let body = String::from_utf8_lossy(&bytes).into_owned();
+        let body = String::from_utf8_lossy(bytes).into_owned();
         return super::deploy::coordinate(&app, &federation, kind, body, authorization).await;
     }
     // The request parsed once, here; a body its route refuses is refused here, as it would be there.
-    let typed = found.and_then(|(r, id)| ApiRequest::of(r, id.as_deref(), &bytes));
-    let Some(Ok(typed)) = typed else { return here(bytes).await };
-    let position = match &typed {
-        ApiRequest::AddUav { body } => Some(body.position),
-        _ => None,
-    };
+    let typed = found.and_then(|(r, id)| ApiRequest::of(r, id.as_deref(), bytes));
+    let Some(Ok(typed)) = typed else { return held.here().await };
     let query = ApiQuery { request: Some(typed), uav: None, deploy: None, authorization, client };
     // Requests waiting on other regions are bounded, so they never take every connection; the
     // fleet-wide commands (the emergency stop among them) are never refused here.
@@ -159,48 +155,53 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
             }
         },
     };
-    let all = region_names(&app);
+    send(&app, &federation, route, query, held).await
+}
+
+/// A request held by the middleware: answered here when it comes to that.
+struct Held {
+    parts: axum::http::request::Parts,
+    next: Next,
+    bytes: Bytes,
+}
+
+impl Held {
+    /// Answers it here (the router and its handler).
+    async fn here(self) -> Response {
+        self.next.run(Request::from_parts(self.parts, Body::from(self.bytes))).await
+    }
+}
+
+/// Sends `query` where its `route` is answered (see the module documentation).
+async fn send(
+    app: &AppState,
+    federation: &Federation,
+    route: Route,
+    query: ApiQuery<ApiRequest>,
+    held: Held,
+) -> Response {
+    let owner = app.region.as_ref().is_some_and(|r| r.failover.is_owner());
+    let position = match &query.request {
+        Some(ApiRequest::AddUav { body }) => Some(body.position),
+        _ => None,
+    };
+    let uri = held.parts.uri.clone();
+    let all = region_names(app);
     let mut regions = all.clone();
     if owner {
         regions.retain(|r| *r != federation.own);
     }
     match route {
-        Route::Uav(id) => {
-            let mut silent = Vec::new();
-            for attempt in 0..2 {
-                // Adopted here meanwhile (it was between two regions at the first ask).
-                if attempt > 0 && flown_here(&app, &id) {
-                    return here(bytes).await;
-                }
-                let asked = ApiQuery { uav: Some(id.clone()), ..query.clone() };
-                silent.clear();
-                for (region, answer) in federation.ask_all(&regions, &asked).await {
-                    match answer {
-                        // Every owner answers: 404 `unknown_uav` when it does not fly the UAV.
-                        Answer::Replied(reply) if reply.status != 404 => return replied(reply),
-                        Answer::Replied(_) => {}
-                        Answer::Silent => silent.push(region),
-                    }
-                }
-                if attempt == 0 {
-                    // Between two regions (released, not yet adopted), or a region restarting.
-                    tokio::time::sleep(RETRY_AFTER).await;
-                }
-            }
-            match silent.first() {
-                Some(region) => unanswered(region),
-                None => here(bytes).await,
-            }
-        }
-        Route::Add => match position.and_then(|p| region_of_position(&app, &federation, p)) {
+        Route::Uav(id) => ask_owner(app, federation, &regions, &id, query, held).await,
+        Route::Add => match position.and_then(|p| region_of_position(app, federation, p)) {
             Some(region) if region != federation.own => match federation.ask(&region, &query).await {
                 Answer::Replied(reply) => replied(reply),
                 Answer::Silent => unanswered(&region),
             },
-            _ => here(bytes).await,
+            _ => held.here().await,
         },
         Route::Fleet => {
-            let response = here(bytes).await;
+            let response = held.here().await;
             if !response.status().is_success() {
                 return response;
             }
@@ -211,14 +212,51 @@ pub async fn forward(State(app): State<AppState>, request: Request, next: Next) 
             // Each region gives all its UAVs; pages and boxes apply to the merged list.
             let answers = federation.ask_all(&regions, &query).await;
             let merged = if route == Route::State {
-                super::federate_merge::state(&app, &federation.own, &all, answers)
+                super::federate_merge::state(app, &federation.own, &all, answers)
             } else {
                 let snapshot = app.engine.snapshots.borrow().clone();
                 super::federate_merge::list(&uri, snapshot, &federation.own, &all, answers)
             };
             merged.unwrap_or_else(IntoResponse::into_response)
         }
-        Route::Deploy(_) | Route::Local => here(bytes).await,
+        Route::Deploy(_) | Route::Local => held.here().await,
+    }
+}
+
+/// A request about UAV `id`, not flown here: its owner's answer (every region is asked, twice if
+/// none flies it: it may have been between two regions), here if it was adopted meanwhile.
+async fn ask_owner(
+    app: &AppState,
+    federation: &Federation,
+    regions: &[String],
+    id: &str,
+    query: ApiQuery<ApiRequest>,
+    held: Held,
+) -> Response {
+    let mut silent = Vec::new();
+    let asked = ApiQuery { uav: Some(id.to_string()), ..query };
+    for attempt in 0..2 {
+        // Adopted here meanwhile (it was between two regions at the first ask).
+        if attempt > 0 && flown_here(app, id) {
+            return held.here().await;
+        }
+        silent.clear();
+        for (region, answer) in federation.ask_all(regions, &asked).await {
+            match answer {
+                // Every owner answers: 404 `unknown_uav` when it does not fly the UAV.
+                Answer::Replied(reply) if reply.status != 404 => return replied(reply),
+                Answer::Replied(_) => {}
+                Answer::Silent => silent.push(region),
+            }
+        }
+        if attempt == 0 {
+            // Between two regions (released, not yet adopted), or a region restarting.
+            tokio::time::sleep(RETRY_AFTER).await;
+        }
+    }
+    match silent.first() {
+        Some(region) => unanswered(region),
+        None => held.here().await,
     }
 }
 
