@@ -17,6 +17,7 @@ mod index_tests;
 mod lanes;
 mod layout;
 mod nav;
+pub mod network;
 mod regions;
 #[cfg(test)]
 mod regions_tests;

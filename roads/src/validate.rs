@@ -50,6 +50,23 @@ pub enum RoadRule {
     RegionOverlap,
     /// A segment is in no region.
     RegionGap,
+    /// A network's road or junction name is empty, longer than 64 characters or has a character
+    /// outside `A-Za-z0-9_-`.
+    InvalidName,
+    /// Two roads, or two junctions, of a network have the same name.
+    DuplicateName,
+    /// A junction has fewer than 3 or more than 8 vertices.
+    JunctionSides,
+    /// A road's speed limit is not a number above 0 and at most 100 m/s.
+    SpeedLimit,
+    /// An edge of a network belongs to three cells or more.
+    SharedByThree,
+    /// A vertex of a cell lies inside an edge of another: cells must meet along whole edges.
+    PartialEdge,
+    /// A cell of a network cannot be reached from the first through shared edges.
+    Disconnected,
+    /// A passable edge is narrower than a UAV needs to cross it.
+    NarrowPassage,
 }
 
 impl RoadRule {
@@ -73,6 +90,14 @@ impl RoadRule {
             RoadRule::RegionOutOfRange => "region_out_of_range",
             RoadRule::RegionOverlap => "region_overlap",
             RoadRule::RegionGap => "region_gap",
+            RoadRule::InvalidName => "invalid_name",
+            RoadRule::DuplicateName => "duplicate_name",
+            RoadRule::JunctionSides => "junction_sides",
+            RoadRule::SpeedLimit => "speed_limit",
+            RoadRule::SharedByThree => "shared_by_three",
+            RoadRule::PartialEdge => "partial_edge",
+            RoadRule::Disconnected => "disconnected",
+            RoadRule::NarrowPassage => "narrow_passage",
         }
     }
 }

@@ -1,0 +1,220 @@
+use super::*;
+use crate::validate::RoadRule;
+use proptest::prelude::*;
+
+/// A straight road of `n` equal segments along x from `x0` to `x1` (both exact), `width` wide
+/// centred on y.
+fn straight(name: &str, x0: f64, x1: f64, y: f64, n: usize, width: f64) -> NetworkRoad {
+    let h = width / 2.0;
+    let at = |i: usize| if i == n { x1 } else { x0 + (x1 - x0) * i as f64 / n as f64 };
+    let segments = (0..n)
+        .map(|i| {
+            let (a, b) = (at(i), at(i + 1));
+            // p1, p2, p3, p4: p2→p1 the left wall, p4→p3 the right, entry p2–p4, exit p1–p3.
+            [[b, y + h], [a, y + h], [b, y - h], [a, y - h]]
+        })
+        .collect();
+    NetworkRoad { name: name.into(), segments, one_way: false, speed_limit: None }
+}
+
+/// `road` turned by 90° counter-clockwise about the origin.
+fn turned(mut road: NetworkRoad) -> NetworkRoad {
+    for q in &mut road.segments {
+        for p in q.iter_mut() {
+            *p = [-p[1], p[0]];
+        }
+    }
+    road
+}
+
+fn square(name: &str, cx: f64, cy: f64, half: f64) -> Junction {
+    let polygon =
+        vec![[cx - half, cy - half], [cx + half, cy - half], [cx + half, cy + half], [cx - half, cy + half]];
+    Junction { name: name.into(), polygon }
+}
+
+/// A 4-way crossing: a 4 m junction at the origin and four 3-segment roads from its sides.
+fn crossing() -> NetworkLayout {
+    let east = straight("east", 2.0, 8.0, 0.0, 3, 4.0);
+    let west = straight("west", -8.0, -2.0, 0.0, 3, 4.0);
+    let north = turned(straight("north", 2.0, 8.0, 0.0, 3, 4.0));
+    let south = turned(straight("south", -8.0, -2.0, 0.0, 3, 4.0));
+    NetworkLayout { roads: vec![east, west, north, south], junctions: vec![square("x", 0.0, 0.0, 2.0)] }
+}
+
+fn rule(layout: NetworkLayout) -> (RoadRule, String) {
+    let e = Network::new(layout, 0.5).expect_err("refused");
+    (e.rule, e.field)
+}
+
+#[test]
+fn a_chain_is_the_network_of_one_road() {
+    let layout = RoadLayout::new(straight("r", 0.0, 8.0, 0.0, 4, 3.0).segments);
+    let net = Network::new(NetworkLayout::from(&layout), 0.5).unwrap();
+    assert_eq!(net.cells().len(), 4);
+    // Two side walls per segment and the two end caps; three joins passable both ways.
+    assert_eq!(net.walls().count(), 4 * 2 + 2);
+    assert_eq!((0..4).map(|c| net.passages(c).len()).sum::<usize>(), 6);
+}
+
+#[test]
+fn a_crossing_joins_four_roads_through_its_junction() {
+    let net = Network::new(crossing(), 0.5).unwrap();
+    let junction = net.cells().iter().position(|c| matches!(c.kind, CellKind::Junction { .. })).unwrap();
+    assert_eq!(net.passages(junction).len(), 4, "every side of the junction is open");
+    // The roads' outer ends stay walls: 4 roads × (3 × 2 sides + 1 end cap).
+    assert_eq!(net.walls().count(), 4 * 7);
+    for (a, b, c) in net.walls() {
+        assert!(net.passages(c).iter().all(|p| {
+            let v = &net.cells()[c].vertices;
+            let (x, y) = (v[p.edge], v[(p.edge + 1) % v.len()]);
+            (x, y) != (a, b)
+        }));
+    }
+}
+
+#[test]
+fn each_rule_is_named_with_the_field_at_fault() {
+    let mut nine = crossing();
+    nine.junctions[0].polygon = (0..9).map(|k| [f64::from(k).cos(), f64::from(k).sin()]).collect();
+    assert_eq!(rule(nine), (RoadRule::JunctionSides, "junctions[0].polygon".into()));
+
+    let mut dart = crossing();
+    dart.junctions[0].polygon = vec![[-2.0, -2.0], [2.0, -2.0], [0.0, 0.0], [-2.0, 2.0]];
+    assert_eq!(rule(dart).0, RoadRule::NotConvex);
+
+    let mut twice = crossing();
+    twice.roads[1].name = "east".into();
+    assert_eq!(rule(twice), (RoadRule::DuplicateName, "roads[1].name".into()));
+
+    // A road attached to half a side of the junction.
+    let mut half = crossing();
+    half.roads[0] = straight("east", 2.0, 8.0, 1.0, 3, 2.0);
+    assert_eq!(rule(half).0, RoadRule::PartialEdge);
+
+    // A fifth road on the east road's cells.
+    let mut over = crossing();
+    over.roads.push(straight("over", 3.5, 6.5, 0.0, 2, 2.0));
+    assert_eq!(rule(over).0, RoadRule::Overlap);
+
+    // A road apart from the rest.
+    let mut apart = crossing();
+    apart.roads.push(straight("apart", 50.0, 54.0, 50.0, 2, 4.0));
+    assert_eq!(rule(apart), (RoadRule::Disconnected, "roads[4].segments[0]".into()));
+
+    // The same crossing, too narrow for its UAVs.
+    let e = Network::new(crossing(), 4.5).unwrap_err();
+    assert_eq!(e.rule, RoadRule::NarrowPassage);
+
+    // A third cell on the junction's east edge: a triangle beyond the east road's first segment
+    // cannot share it, but a second junction drawn on the same edge can.
+    let mut three = crossing();
+    three.junctions.push(Junction { name: "y".into(), polygon: vec![[2.0, -2.0], [2.0, 2.0], [0.5, 0.0]] });
+    let (r, _) = rule(three);
+    assert!(matches!(r, RoadRule::SharedByThree | RoadRule::Overlap), "{r:?}");
+
+    let mut limit = crossing();
+    limit.roads[2].speed_limit = Some(f64::NAN);
+    assert_eq!(rule(limit), (RoadRule::SpeedLimit, "roads[2].speed_limit".into()));
+
+    let mut joints = crossing();
+    joints.roads[3].segments[1][1][0] += 0.5;
+    assert_eq!(rule(joints).1, "roads[3].segments[1]");
+}
+
+#[test]
+fn an_edge_of_three_cells_is_refused() {
+    // Three triangles around one edge cannot be convex and apart, so build the count directly:
+    // two junctions on either side of a road end, the road's end edge being both junctions' edge.
+    let cells = vec![
+        Cell {
+            kind: CellKind::Segment { road: 0, segment: 0 },
+            vertices: vec![
+                Vec2::new(2.0, 1.0),
+                Vec2::new(0.0, 1.0),
+                Vec2::new(0.0, -1.0),
+                Vec2::new(2.0, -1.0),
+            ],
+        },
+        Cell {
+            kind: CellKind::Junction { junction: 0 },
+            vertices: vec![Vec2::new(2.0, 1.0), Vec2::new(2.0, -1.0), Vec2::new(3.0, 0.0)],
+        },
+        Cell {
+            kind: CellKind::Junction { junction: 1 },
+            vertices: vec![Vec2::new(2.0, -1.0), Vec2::new(2.0, 1.0), Vec2::new(4.0, 0.0)],
+        },
+    ];
+    let e = check::passages(&cells).unwrap_err();
+    assert_eq!((e.rule, e.field.as_str()), (RoadRule::SharedByThree, "junctions[1].polygon"));
+}
+
+/// A street grid: `nx` × `ny` junctions `pitch` apart, each `2·half` wide, joined by roads of
+/// `pieces` segments.
+fn grid(nx: usize, ny: usize, pitch: f64, half: f64, pieces: usize) -> NetworkLayout {
+    let mut layout = NetworkLayout { roads: Vec::new(), junctions: Vec::new() };
+    for i in 0..nx {
+        for j in 0..ny {
+            let (x, y) = (pitch * i as f64, pitch * j as f64);
+            layout.junctions.push(square(&format!("j{i}-{j}"), x, y, half));
+            if i + 1 < nx {
+                let to = pitch * (i + 1) as f64 - half;
+                layout.roads.push(straight(&format!("h{i}-{j}"), x + half, to, y, pieces, 2.0 * half));
+            }
+            if j + 1 < ny {
+                // Built along x from the turned start, then turned: x' = -y, y' = x.
+                let to = pitch * (j + 1) as f64 - half;
+                let road = straight(&format!("v{i}-{j}"), y + half, to, -x, pieces, 2.0 * half);
+                layout.roads.push(turned(road));
+            }
+        }
+    }
+    layout
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// On random street grids every cell edge is a wall or a passage, never both; passages pair up
+    /// (each shared edge is seen from both cells); and the walls are exactly the grid's outline and
+    /// the streets' sides.
+    #[test]
+    fn a_grid_is_valid_and_its_edges_are_walls_or_passages(
+        nx in 1usize..5, ny in 1usize..5, pitch in 8.0f64..30.0, half in 1.0f64..3.0, pieces in 1usize..4,
+    ) {
+        prop_assume!(nx * ny > 1);
+        let layout = grid(nx, ny, pitch, half, pieces);
+        let net = Network::new(layout.clone(), 0.5).unwrap();
+        let cells = net.cells();
+        let edges: usize = cells.iter().map(|c| c.vertices.len()).sum();
+        let open: usize = (0..cells.len()).map(|c| net.passages(c).len()).sum();
+        prop_assert_eq!(net.walls().count() + open, edges);
+        for c in 0..cells.len() {
+            for p in net.passages(c) {
+                let back = net.passages(p.other).iter().any(|q| q.other == c && q.edge == p.other_edge);
+                prop_assert!(back);
+            }
+        }
+        // Streets: pieces segments each, two passages per inner join, one at each end.
+        let streets = nx * (ny - 1) + ny * (nx - 1);
+        prop_assert_eq!(open, streets * 2 * (pieces + 1));
+        // A junction side with no street is a wall: 4 per junction minus the streets' ends.
+        prop_assert_eq!(net.walls().count(), streets * 2 * pieces + 4 * nx * ny - 2 * streets);
+    }
+
+    /// Moving one vertex of a street's end off the junction's corner breaks the exact join: the
+    /// network is refused (a partial edge, a seam, a non-convex cell or a piece cut off), never
+    /// accepted with a gap in a wall.
+    #[test]
+    fn a_street_end_off_its_junction_is_refused(
+        nx in 2usize..4, pitch in 10.0f64..20.0, dx in -0.4f64..0.4, dy in -0.4f64..0.4, which in 0usize..4,
+    ) {
+        prop_assume!(dx.abs() > 1e-6 || dy.abs() > 1e-6);
+        let mut layout = grid(nx, 1, pitch, 2.0, 2);
+        let last = layout.roads[0].segments.len() - 1;
+        let (segment, vertex) = [(0, 1), (0, 3), (last, 0), (last, 2)][which];
+        layout.roads[0].segments[segment][vertex][0] += dx;
+        layout.roads[0].segments[segment][vertex][1] += dy;
+        prop_assert!(Network::new(layout, 0.5).is_err());
+    }
+}
