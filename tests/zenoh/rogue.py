@@ -92,11 +92,13 @@ def main():
         seen["connected"] = bool(list(session.info.peers_zid()))
         # 1. Commands without the token: on the API key as it was before regions were secured
         #    (`PREFIX/region/NAME/api`), as the sender region, and as the target itself.
-        stop = {"method": "POST", "uri": "/api/fleet/stop", "body": ""}
+        # A request travels typed (its route and data): the emergency stop has no data.
+        stop = {"request": {"route": "stop_fleet"}}
         seen["stop_on_the_bare_key"] = ask(session, f"{p}/region/{t}/api", stop)
         seen["stop_as_sender"] = ask(session, f"{p}/region/{t}/api/{me}", stop)
         seen["stop_as_target"] = ask(session, f"{p}/region/{t}/api/{t}", stop)
-        seen["audit_read"] = ask(session, f"{p}/region/{t}/api/{me}", {"method": "GET", "uri": "/api/audit"})
+        # The audit log is no request of the wire (only the routes that travel between regions are).
+        seen["audit_read"] = ask(session, f"{p}/region/{t}/api/{me}", {"request": {"route": "audit"}})
         # 2. Forged ownership: an owner token of a higher epoch, a standby token, a mirror.
         owner = session.liveliness().declare_token(f"{p}/region/{t}/owner/999999/rogue")
         standby = session.liveliness().declare_token(f"{p}/region/{t}/standby/0")
