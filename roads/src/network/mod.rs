@@ -8,6 +8,8 @@
 mod check;
 pub use check::{JUNCTION_SIDES, MAX_CELLS, MAX_SPEED_LIMIT};
 pub(crate) mod polygon;
+mod route;
+pub use route::{CRUISE_MPS, Route};
 #[cfg(test)]
 mod tests;
 

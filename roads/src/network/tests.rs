@@ -218,3 +218,99 @@ proptest! {
         prop_assert!(Network::new(layout, 0.5).is_err());
     }
 }
+
+fn cell_of(net: &Network, kind: CellKind) -> usize {
+    net.cells().iter().position(|c| c.kind == kind).unwrap()
+}
+
+#[test]
+fn a_route_crosses_the_junction_and_respects_one_way_roads() {
+    let net = Network::new(crossing(), 0.5).unwrap();
+    let east_end = cell_of(&net, CellKind::Segment { road: 0, segment: 2 });
+    let north_end = cell_of(&net, CellKind::Segment { road: 2, segment: 2 });
+    let x = cell_of(&net, CellKind::Junction { junction: 0 });
+    let (from, to) = (Vec2::new(7.0, 0.0), Vec2::new(0.0, 7.0));
+    let route = net.route((east_end, from), (north_end, to), |_, _| 0.0).unwrap();
+    assert_eq!(route.cells.len(), 7);
+    assert_eq!(route.cells[3], x);
+    // Straight to the junction's east side, across to its north side, straight on: 5 + 2·√2 + 5 m.
+    let length: f64 = route.waypoints.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+    assert!((length - (10.0 + 8f64.sqrt())).abs() < 1e-9, "{length}");
+    assert!((route.cost - length / CRUISE_MPS).abs() < 1e-9);
+
+    // East one-way, flown from the junction outwards: nobody comes back in from its end.
+    let mut layout = crossing();
+    layout.roads[0].one_way = true;
+    let one_way = Network::new(layout, 0.5).unwrap();
+    assert!(one_way.route((east_end, from), (north_end, to), |_, _| 0.0).is_none());
+    let out = one_way.route((north_end, to), (east_end, from), |_, _| 0.0).unwrap();
+    assert_eq!(out.cells.first(), Some(&north_end));
+    assert_eq!(out.cells.last(), Some(&east_end));
+}
+
+#[test]
+fn a_route_takes_the_free_branch_when_one_is_jammed() {
+    // Two junctions side by side and two below: from the top left to the bottom right there are two
+    // routes of equal length; a queue at one makes the other the faster.
+    let net = Network::new(grid(2, 2, 12.0, 2.0, 2), 0.5).unwrap();
+    let junction = |i: usize, j: usize| cell_of(&net, CellKind::Junction { junction: 2 * i + j });
+    let (a, b) = (junction(0, 1), junction(1, 0));
+    let (from, to) = (Vec2::new(0.0, 12.0), Vec2::new(12.0, 0.0));
+    let free = net.route((a, from), (b, to), |_, _| 0.0).unwrap();
+    let first_turn = free.cells[1];
+    // A queue of 60 s on the first passage of the free route.
+    let jammed = net
+        .route((a, from), (b, to), |cell, edge| {
+            let p = net.passages(cell).iter().find(|p| p.edge == edge).unwrap();
+            if cell == a && p.other == first_turn { 60.0 } else { 0.0 }
+        })
+        .unwrap();
+    assert_ne!(jammed.cells[1], first_turn, "the jammed branch is avoided");
+    assert!((jammed.cost - free.cost).abs() < 1e-9, "both branches are as long");
+}
+
+/// True when `x` is in the convex polygon `v` (either orientation), within 1e-9 m.
+fn in_cell(v: &[Vec2], x: &Vec2) -> bool {
+    let n = v.len();
+    let sides: Vec<f64> = (0..n)
+        .map(|k| {
+            let e = v[(k + 1) % n] - v[k];
+            uav::cross(&e, &(x - v[k])) / e.norm()
+        })
+        .collect();
+    sides.iter().all(|s| *s >= -1e-9) || sides.iter().all(|s| *s <= 1e-9)
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// Between any two cells of a random grid there is a route; each leg of it lies in one cell (so
+    /// the polyline never leaves the road), consecutive cells share a passage, and it costs its
+    /// length at cruise speed, never less than the straight line.
+    #[test]
+    fn routes_on_a_grid_stay_in_their_cells(
+        nx in 1usize..4, ny in 1usize..4, pitch in 8.0f64..20.0, pieces in 1usize..3,
+        a in 0usize..1000, b in 0usize..1000,
+    ) {
+        prop_assume!(nx * ny > 1);
+        let net = Network::new(grid(nx, ny, pitch, 2.0, pieces), 0.5).unwrap();
+        let cells = net.cells();
+        let (start, goal) = (a % cells.len(), b % cells.len());
+        let centre = |c: usize| cells[c].vertices.iter().sum::<Vec2>() / cells[c].vertices.len() as f64;
+        let (from, to) = (centre(start), centre(goal));
+        let route = net.route((start, from), (goal, to), |_, _| 0.0).unwrap();
+        prop_assert_eq!(route.cells.first(), Some(&start));
+        prop_assert_eq!(route.cells.last(), Some(&goal));
+        prop_assert_eq!(route.waypoints.len(), route.cells.len() + 1);
+        for (k, pair) in route.cells.windows(2).enumerate() {
+            prop_assert!(net.passages(pair[0]).iter().any(|p| p.other == pair[1]), "{} {}", k, pair[0]);
+        }
+        for (k, &c) in route.cells.iter().enumerate() {
+            let (p, q) = (route.waypoints[k], route.waypoints[k + 1]);
+            prop_assert!(in_cell(&cells[c].vertices, &p) && in_cell(&cells[c].vertices, &q), "leg {} leaves cell {}", k, c);
+        }
+        let length: f64 = route.waypoints.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
+        prop_assert!((route.cost - length / CRUISE_MPS).abs() < 1e-9);
+        prop_assert!(length >= (to - from).norm() - 1e-9);
+    }
+}
