@@ -65,6 +65,8 @@ pub enum WallKind {
     EntryCap,
     /// The closed exit edge p1–p3 of the last segment.
     ExitCap,
+    /// Edge `k` of a network's cell that no other cell shares (`segment` is the cell).
+    Edge(usize),
 }
 
 /// A finite wall `[a, b]` of the road boundary with its unit normal pointing into the road.

@@ -9,6 +9,7 @@ mod check;
 pub use check::{JUNCTION_SIDES, MAX_CELLS, MAX_SPEED_LIMIT};
 pub(crate) mod polygon;
 mod route;
+mod space;
 pub use route::{CRUISE_MPS, Route};
 #[cfg(test)]
 mod tests;
@@ -116,6 +117,8 @@ pub struct Network {
     passages: Vec<Vec<Passage>>,
     /// Every wall: (cell, edge).
     walls: Vec<(usize, usize)>,
+    /// The walls as segments and the trees over walls and cells.
+    space: space::Space,
 }
 
 impl Network {
@@ -133,8 +136,9 @@ impl Network {
                 let open: Vec<usize> = passages[c].iter().map(|p| p.edge).collect();
                 (0..cells[c].vertices.len()).filter(move |e| !open.contains(e)).map(move |e| (c, e))
             })
-            .collect();
-        Ok(Self { layout, cells, passages, walls })
+            .collect::<Vec<_>>();
+        let space = space::Space::new(&cells, &walls);
+        Ok(Self { layout, cells, passages, walls, space })
     }
 
     /// The layout it was built from.

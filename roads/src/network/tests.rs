@@ -314,3 +314,33 @@ proptest! {
         prop_assert!(length >= (to - from).norm() - 1e-9);
     }
 }
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(300))]
+
+    /// The trees answer as the definitions: membership as "in some cell", the walls near a point as
+    /// a scan of every wall, the boundary distance as the nearest wall's; and inside the network
+    /// every wall's normal points to the side the point is on when the point is in its cell.
+    #[test]
+    fn where_things_are_agrees_with_a_scan(
+        nx in 1usize..4, ny in 1usize..4, pitch in 8.0f64..20.0, pieces in 1usize..3,
+        (x, y) in (-5.0f64..65.0, -5.0f64..65.0), radius in 0.1f64..6.0,
+    ) {
+        prop_assume!(nx * ny > 1);
+        let net = Network::new(grid(nx, ny, pitch, 2.0, pieces), 0.5).unwrap();
+        let p = Vec2::new(x, y);
+        let inside = net.cells().iter().any(|c| space::margin(&c.vertices, &p) >= -1e-9);
+        prop_assert_eq!(net.contains(&p), inside);
+        let walls = net.wall_list();
+        let scan: Vec<usize> = (0..walls.len()).filter(|&k| walls[k].nearest(&p).0.metric_distance(&p) <= radius).collect();
+        prop_assert_eq!(net.walls_near(&p, radius), scan);
+        let nearest = walls.iter().map(|w| w.nearest(&p).0.metric_distance(&p)).fold(f64::INFINITY, f64::min);
+        prop_assert!((net.boundary_distance(&p) - nearest).abs() < 1e-9);
+        if let Some(c) = net.locate(&p) {
+            for w in walls.iter().filter(|w| w.segment == c) {
+                prop_assert!(w.signed_distance(&p) >= -1e-9, "{:?} behind a wall of its own cell", p);
+            }
+        }
+        prop_assert_eq!(walls.len(), net.walls().count());
+    }
+}
