@@ -9,6 +9,7 @@
 //!
 //! This crate knows nothing of UAV dynamics, barriers or solvers.
 
+mod boundary;
 mod centerline;
 mod geometry;
 mod index;
@@ -26,6 +27,7 @@ pub mod schema;
 mod traffic_nav;
 mod validate;
 
+pub use boundary::Boundary;
 pub use centerline::CenterLine;
 pub use geometry::{Quad, Wall, WallKind, nearest_on_segment, segments_intersect};
 pub use index::NearWalls;

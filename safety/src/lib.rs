@@ -25,4 +25,4 @@ pub use neighbour_rows::{
     reach_disk,
 };
 pub use qp::{CLARABEL_TOL, ConstraintRow, QpSolution, QpSolver};
-pub use road_rows::{ACTIVATION_BARRIER, RoadRule, activation_radius, road_rows};
+pub use road_rows::{ACTIVATION_BARRIER, RoadRule, activation_radius, network_rows, road_rows};

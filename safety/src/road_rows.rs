@@ -2,7 +2,8 @@
 //! (docs/safety.md §5, amended by §10.1).
 
 use crate::barrier::{Clearance, MIN_DISTANCE_M, Row, RowKind, held_for, line_row, vertex_row};
-use roads::Road;
+use roads::network::Network;
+use roads::{Boundary, Road};
 use uav::{Params, Vec2};
 
 /// Barrier value B (m/s) below which every row is present: walls and neighbours are searched within
@@ -95,6 +96,14 @@ pub fn road_rows(
     }
 }
 
+/// Appends the road rows of a UAV at `p`, `v` in cell `cell` of a network: the walls rule (R2),
+/// the only one defined on a network (docs/safety.md §5.1).
+pub fn network_rows(net: &Network, p: Vec2, v: Vec2, cell: usize, params: &Params, out: &mut Vec<Row>) {
+    let wall = Clearance::one(params.d_s, params);
+    let radius = activation_radius(wall.boundary(), v.norm() + wall.eta_v, params.delta);
+    walls_rows(net, p, v, cell, radius, params, out);
+}
+
 /// Rule R2: for a UAV inside the road, the barrier of each finite wall on the distance to that wall
 /// (a line barrier in its slab, an end-point barrier beyond its ends); for a UAV outside the road, the
 /// signed line barriers of the nearest walls to bring it back.
@@ -106,8 +115,8 @@ pub fn road_rows(
 /// barrier only when its foot left the slab, already at b ≈ 0 (stress seed 225, rl: S = 0.088 m < D_s).
 /// The unsigned distance is the true distance to that wall, so it is positive and C¹-continuous with
 /// V's end-point barrier where the foot reaches V.
-fn walls_rows(
-    road: &Road,
+fn walls_rows<B: Boundary>(
+    road: &B,
     p: Vec2,
     v: Vec2,
     segment: usize,
@@ -115,9 +124,9 @@ fn walls_rows(
     params: &Params,
     out: &mut Vec<Row>,
 ) {
-    let walls = road.walls();
-    if !road.contains(&p) {
-        let nearest = (walls[road.nearest_wall(&p)].nearest(&p).0 - p).norm();
+    let walls = road.wall_list();
+    if !road.inside(&p) {
+        let nearest = (walls[road.nearest_wall_to(&p)].nearest(&p).0 - p).norm();
         for (k, w) in walls.iter().enumerate() {
             if (w.nearest(&p).0 - p).norm() <= nearest + 0.5 {
                 out.push(wall_row(w.signed_distance(&p), w.n_in, v, params, k));
@@ -129,7 +138,7 @@ fn walls_rows(
     // index order: the same rows, in the same order, as a loop over every wall.
     let mut seen = [Vec2::zeros(); 16];
     let mut n_seen = 0;
-    for k in road.walls_near_in(segment, &p, radius) {
+    for k in road.walls_within(segment, &p, radius) {
         let w = &walls[k];
         let (c, t) = w.nearest(&p);
         if (c - p).norm() > radius {

@@ -73,8 +73,12 @@ impl Network {
         &self.space.walls
     }
 
-    /// The cell `x` is in (the lowest index when on a shared edge or corner), None outside.
+    /// The cell `x` is in (the lowest index when on a shared edge or corner), None outside (and
+    /// for a point that is not finite).
     pub fn locate(&self, x: &Vec2) -> Option<usize> {
+        if !(x.x.is_finite() && x.y.is_finite()) {
+            return None;
+        }
         let at = AABB::from_point([x.x, x.y]);
         let inside = self.space.cell_tree.locate_in_envelope_intersecting(&at).map(|b| b.data);
         inside.filter(|&c| margin(&self.cells[c].vertices, x) >= -CONTAINS_TOL_M).min()
@@ -85,16 +89,30 @@ impl Network {
         self.locate(x).is_some()
     }
 
-    /// The walls whose finite segment comes within `radius` of `x`, in index order.
+    /// The walls whose finite segment comes within `radius` of `x`, in index order (none for a
+    /// point or radius that is not finite).
     pub fn walls_near(&self, x: &Vec2, radius: f64) -> Vec<usize> {
+        if !(x.x.is_finite() && x.y.is_finite() && radius.is_finite()) {
+            return Vec::new();
+        }
         let near = self.space.wall_tree.locate_within_distance([x.x, x.y], radius * radius);
         let mut list: Vec<usize> = near.map(|w| w.data).collect();
         list.sort_unstable();
         list
     }
 
-    /// The distance from `x` to the nearest wall (m).
+    /// The index of a wall nearest to `x` (0 for a point that is not finite).
+    pub fn nearest_wall(&self, x: &Vec2) -> usize {
+        let finite = x.x.is_finite() && x.y.is_finite();
+        let nearest = finite.then(|| self.space.wall_tree.nearest_neighbor(&[x.x, x.y])).flatten();
+        nearest.map_or(0, |w| w.data)
+    }
+
+    /// The distance from `x` to the nearest wall (m; NaN for a point that is not finite).
     pub fn boundary_distance(&self, x: &Vec2) -> f64 {
+        if !(x.x.is_finite() && x.y.is_finite()) {
+            return f64::NAN;
+        }
         let nearest = self.space.wall_tree.nearest_neighbor(&[x.x, x.y]);
         nearest.map_or(f64::INFINITY, |w| w.geom().distance_2(&[x.x, x.y]).sqrt())
     }
