@@ -25,7 +25,7 @@ pub struct Gap {
 }
 
 /// A change applied to the fleet: its outcome, what takes it back and what stores it.
-pub struct Applied {
+pub struct AppliedChange {
     /// What the client is told.
     pub outcome: Outcome,
     /// What restores the fleet (None: nothing to restore, e.g. land and stop).
@@ -34,7 +34,7 @@ pub struct Applied {
     pub writes: Vec<Write>,
 }
 
-impl Applied {
+impl AppliedChange {
     fn new(outcome: Outcome, undo: Undo, writes: Vec<Write>) -> Self {
         Self { outcome, undo: Some(undo), writes }
     }
@@ -83,7 +83,7 @@ impl Engine {
     }
 
     /// Applies one command to the fleet; on an error nothing changed.
-    pub fn apply(&mut self, command: Command) -> Result<Applied, ChangeError> {
+    pub fn apply(&mut self, command: Command) -> Result<AppliedChange, ChangeError> {
         let dt = self.fleet.config.params.dt;
         Ok(match command {
             Command::SetRoad(road) | Command::FollowRoad(road) => {
@@ -93,11 +93,11 @@ impl Engine {
                 for id in &cleared_goals {
                     writes.extend(uav_record(&self.fleet, id));
                 }
-                Applied::new(Outcome::RoadReplaced { cleared_goals }, undo, writes)
+                AppliedChange::new(Outcome::RoadReplaced { cleared_goals }, undo, writes)
             }
             Command::CheckRoad(road) => {
                 self.fleet.check_road(&road)?;
-                Applied::urgent()
+                AppliedChange::urgent()
             }
             Command::AddUav { id, position, policy, goal, link } => {
                 let count = self.fleet.uavs().len();
@@ -112,32 +112,32 @@ impl Engine {
                 let add = Edit::Add { id: id.clone(), policy, link, state, goal };
                 let undo = self.fleet.apply(add)?.undo;
                 self.hook.ownership(Ownership::Opened { id: &id, how: "added" });
-                Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
+                AppliedChange::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
             }
             Command::Land(Some(id)) => {
                 self.fleet.land(&id)?;
-                Applied::urgent()
+                AppliedChange::urgent()
             }
             Command::Land(None) => {
                 self.fleet.land_all();
-                Applied::urgent()
+                AppliedChange::urgent()
             }
             Command::EmergencyStop => {
                 self.fleet.emergency_stop_all();
-                Applied::urgent()
+                AppliedChange::urgent()
             }
             Command::RemoveUav(id) => {
                 let undo = self.fleet.apply(Edit::Remove(id.clone()))?.undo;
                 self.hook.ownership(Ownership::Closed { id: &id, how: "removed" });
-                Applied::new(Outcome::Done, undo, vec![Write::RemoveUav(id)])
+                AppliedChange::new(Outcome::Done, undo, vec![Write::RemoveUav(id)])
             }
             Command::SetGoal(id, goal) => {
                 let undo = self.fleet.apply(Edit::SetGoal(id.clone(), goal))?.undo;
-                Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
+                AppliedChange::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
             }
             Command::SetPolicy(id, policy) => {
                 let undo = self.fleet.apply(Edit::SetPolicy(id.clone(), policy))?.undo;
-                Applied::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
+                AppliedChange::new(Outcome::Done, undo, uav_record(&self.fleet, &id))
             }
             Command::LoadScenario(scenario) => {
                 if scenario.uavs.len() > self.max_uavs {
@@ -151,18 +151,18 @@ impl Engine {
                 }
                 self.road_changed();
                 let writes = vec![Write::Replace(SavedState::of(&self.fleet))];
-                Applied::new(Outcome::ScenarioLoaded { tick: self.ticks }, undo, writes)
+                AppliedChange::new(Outcome::ScenarioLoaded { tick: self.ticks }, undo, writes)
             }
             Command::Pause(paused) => {
                 let undo = self.fleet.apply(Edit::Pause(paused))?.undo;
-                Applied::new(Outcome::Done, undo, vec![Write::Paused(paused)])
+                AppliedChange::new(Outcome::Done, undo, vec![Write::Paused(paused)])
             }
             Command::Adopt(arrival) => {
                 self.add_arrival(*arrival)?;
                 // Neither undone nor saved: only a region server adopts, and a region server never
                 // resumes saved state (its region's owner or mirror is the record: `handle::start`
                 // resumes nothing when a hook is plugged in), so a failed write must not take it back.
-                Applied::urgent()
+                AppliedChange::urgent()
             }
         })
     }
