@@ -98,3 +98,60 @@ for k in range(6):
 write("regions3", {"t_max": 120},
       road([[5.0 * k, 0.0] for k in range(13)], 4.0), three,
       regions=[("a", 0, 3), ("b", 4, 7), ("c", 8, 11)])
+
+
+def network_road(name, start, end, pieces, half=2.0):
+    """A straight road of a network from `start` to `end` (the middles of its end edges), 2·half wide."""
+    (ax, ay), (bx, by) = start, end
+    length = math.hypot(bx - ax, by - ay)
+    dx, dy = (bx - ax) / length, (by - ay) / length
+    nx, ny = -dy, dx
+
+    def at(i):
+        return (bx, by) if i == pieces else (ax + dx * length * i / pieces, ay + dy * length * i / pieces)
+
+    def side(q, s):
+        return [round(q[0] + s * nx * half, 9), round(q[1] + s * ny * half, 9)]
+
+    segments = [[side(at(i + 1), 1), side(at(i), 1), side(at(i + 1), -1), side(at(i), -1)] for i in range(pieces)]
+    return {"name": name, "segments": segments}
+
+
+def square_junction(name, cx, cy, half=2.0):
+    return {"name": name, "polygon": [[cx - half, cy - half], [cx + half, cy - half],
+                                      [cx + half, cy + half], [cx - half, cy + half]]}
+
+
+def write_network(name, params, roads, junctions, uavs):
+    doc = {"name": name, "params": params, "roads": roads, "junctions": junctions}
+    doc["uavs"] = [{"id": i, "start": s, "goal": g} for i, s, g in uavs]
+    path = os.path.join(os.path.dirname(__file__), name + ".json")
+    with open(path, "w") as f:
+        json.dump(doc, f, indent=1)
+        f.write("\n")
+
+
+# A depot with branches (a road network, docs/scenarios.md): the depot junction with a west spoke and
+# landing pads to the north, a trunk east to a fork, and three branches from the fork. Ten UAVs leave
+# the west spoke for the branches; six come back from the branches to the pads.
+outbound = []
+for k in range(10):
+    start = [-6.0 - 3.0 * (k // 2), -1.0 if k % 2 == 0 else 1.0]
+    if k % 3 == 0:
+        goal = [30.0, 20.0 - 1.5 * k]
+    elif k % 3 == 1:
+        goal = [30.8, -20.0 + 1.5 * k]
+    else:
+        goal = [50.0 - 1.5 * k, 0.8]
+    outbound.append((f"out{k}", start, goal))
+homebound = [(f"home{k}", list(s), [-1.0 if k % 2 else 1.0, 12.0 - 2.0 * k])
+             for k, s in enumerate([(29.0, 18.0), (31.0, 16.0), (29.0, -18.0), (31.0, -16.0), (48.0, -1.0), (44.0, -1.0)])]
+write_network("depot", {"t_max": 120},
+              [network_road("trunk", (2, 0), (28, 0), 6),
+               network_road("west-spoke", (-2, 0), (-22, 0), 5),
+               network_road("pads", (0, 2), (0, 14), 3),
+               network_road("branch-north", (30, 2), (30, 22), 5),
+               network_road("branch-south", (30, -2), (30, -22), 5),
+               network_road("branch-east", (32, 0), (52, 0), 5)],
+              [square_junction("depot", 0, 0), square_junction("fork", 30, 0)],
+              outbound + homebound)

@@ -262,6 +262,10 @@ async fn scenario_over_rest_is_validated() {
     bad["params"]["delta"] = json!(-1.0);
     let (status, body) = server.call("POST", "/api/scenario", Some(&bad.to_string())).await;
     assert_eq!((status, error_field(&body)), (422, "params.delta"), "{body}");
+    // A road network is valid, but the server flies one road so far: refused, naming `roads`.
+    let network = support::shipped("depot.json");
+    let (status, body) = server.call("POST", "/api/scenario", Some(&network.to_string())).await;
+    assert_eq!((status, error_field(&body)), (422, "roads"), "{body}");
     assert_eq!(uav_ids(&server).await, ["a", "b"]);
     let (status, body) =
         server.call("POST", "/api/scenario", Some(&support::shipped("lab3.json").to_string())).await;

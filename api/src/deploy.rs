@@ -90,8 +90,9 @@ fn scenario_for(rules: &links::LinkRules, body: &str, own: &str) -> Result<Valid
         fleet::ScenarioError::Invalid { field, reason } => ApiError::invalid(field, reason),
         other => ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", other.to_string()),
     })?;
+    engine::changes::check_flies_a_road(&valid).map_err(ApiError::from)?;
     let road = &valid.road;
-    valid.uavs.retain(|u| road.region_of(road.locate(&u.start, None)).is_some_and(|r| r.name == own));
+    valid.uavs.retain(|u| road.region_at(&u.start).is_some_and(|r| r.name == own));
     Ok(valid)
 }
 

@@ -73,7 +73,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         let name = format!("r{k}");
         let mut initial = scenario.clone();
         let road = initial.road.clone();
-        initial.uavs.retain(|u| road.region_of(road.locate(&u.start, None)).is_some_and(|r| r.name == name));
+        initial.uavs.retain(|u| road.region_at(&u.start).is_some_and(|r| r.name == name));
         let shared = RegionShared::new(&name);
         let options = ZenohOptions {
             listen: vec![endpoints[k].clone()],
@@ -104,7 +104,8 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         config.max_uavs = n;
         config.region = Some(shared.clone());
         let server = Server::start(config)?;
-        let neighbours = regions::neighbours_of(&scenario.road, &name).map_err(anyhow::Error::msg)?;
+        let road = scenario.road.road().context("the regions bench flies a road")?;
+        let neighbours = regions::neighbours_of(road, &name).map_err(anyhow::Error::msg)?;
         let link = regions::start(session, &options, &shared, &neighbours, claim).await?;
         say!("  {name}: {uavs} UAVs, neighbours {}", neighbours.join(", "));
         running.push(Running { server, shared, _link: link });

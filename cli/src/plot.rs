@@ -5,7 +5,7 @@ use fleet::paths::UavPath;
 use fleet::{Stall, traffic::WaitReason};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
-use roads::Road;
+use roads::{Airspace, Boundary};
 use std::path::Path;
 
 /// Width of the picture (px); the height follows the road's aspect ratio.
@@ -20,7 +20,7 @@ const MARK_WAIT_S: f64 = 2.0;
 /// Draws the run into an SVG file at `path`.
 pub fn draw(
     path: &Path,
-    road: &Road,
+    road: &Airspace,
     paths: &[UavPath],
     stalls: &[Stall],
     title: &str,
@@ -54,8 +54,8 @@ pub fn draw(
 }
 
 /// The bounding box of the road and of every path.
-fn extent(road: &Road, paths: &[UavPath]) -> ([f64; 2], [f64; 2]) {
-    let road_points = road.quads().iter().flat_map(|q| q.p.map(|v| [v.x, v.y]));
+fn extent(road: &Airspace, paths: &[UavPath]) -> ([f64; 2], [f64; 2]) {
+    let road_points = road.wall_list().iter().flat_map(|w| [[w.a.x, w.a.y], [w.b.x, w.b.y]]);
     let path_points = paths.iter().flat_map(|p| p.points.iter().copied());
     road_points
         .chain(path_points)
@@ -67,16 +67,26 @@ fn extent(road: &Road, paths: &[UavPath]) -> ([f64; 2], [f64; 2]) {
 
 type Area<'a> = DrawingArea<SVGBackend<'a>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
 
-fn draw_road(area: &Area, road: &Road) -> anyhow::Result<()> {
+fn draw_road(area: &Area, airspace: &Airspace) -> anyhow::Result<()> {
     let surface = RGBColor(235, 238, 242);
-    for q in road.quads() {
-        // p2 → p1 along one barrier line, p3 → p4 back along the other: the quad's outline.
-        let outline: Vec<(f64, f64)> = [1, 0, 2, 3].iter().map(|&i| (q.p[i].x, q.p[i].y)).collect();
+    let outlines: Vec<Vec<(f64, f64)>> = match airspace {
+        // p2 → p1 along one barrier line, p3 → p4 back along the other: each quad's outline.
+        Airspace::Road(road) => road
+            .quads()
+            .iter()
+            .map(|q| [1, 0, 2, 3].iter().map(|&i| (q.p[i].x, q.p[i].y)).collect())
+            .collect(),
+        Airspace::Network(net) => {
+            net.cells().iter().map(|c| c.vertices.iter().map(|v| (v.x, v.y)).collect()).collect()
+        }
+    };
+    for outline in outlines {
         area.draw(&Polygon::new(outline, surface.filled()))?;
     }
-    for w in road.walls() {
+    for w in airspace.wall_list() {
         area.draw(&PathElement::new(vec![(w.a.x, w.a.y), (w.b.x, w.b.y)], BLACK.stroke_width(2)))?;
     }
+    let Some(road) = airspace.road() else { return Ok(()) };
     let line = road.centerline();
     let steps = (line.length() / 0.25).ceil().max(1.0) as usize;
     let centre: Vec<(f64, f64)> = (0..=steps)

@@ -96,6 +96,9 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
         Some(path) => load_scenario_with(path, &link_rules)?,
         None => serve::demo_scenario().map_err(|e| format!("{e:#}"))?,
     };
+    if let (Some(path), Err(e)) = (&args.scenario, engine::changes::check_flies_a_road(&initial)) {
+        return Err(format!("{}: {e}", path.display()));
+    }
     let region = match (&args.region, &args.standby_for) {
         (Some(name), _) => Some(keep_region(&mut initial, name, &args.zenoh_prefix)?),
         (None, Some(name)) => {
@@ -177,10 +180,11 @@ fn keep_region(
     name: &str,
     prefix: &str,
 ) -> Result<regions::RegionShared, String> {
-    regions::neighbours_of(&initial.road, name).map_err(|e| format!("--region {e}"))?;
+    let road = initial.road.road().ok_or("--region: a road network cannot be divided into regions yet")?;
+    regions::neighbours_of(road, name).map_err(|e| format!("--region {e}"))?;
     regions::check_prefix(prefix).map_err(|e| format!("--zenoh-prefix {e}"))?;
     let road = &initial.road;
-    initial.uavs.retain(|u| road.region_of(road.locate(&u.start, None)).is_some_and(|r| r.name == name));
+    initial.uavs.retain(|u| road.region_at(&u.start).is_some_and(|r| r.name == name));
     Ok(regions::RegionShared::new(name))
 }
 
@@ -192,7 +196,11 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     // A region's ownership is settled before the loop starts: a server started while the region's
     // owner lives joins as its standby and flies nothing.
     let zenoh = match &config.region {
-        Some(shared) => Some(claim_region(args, shared, config.initial.road.layout()).await?),
+        Some(shared) => {
+            let road =
+                config.initial.road.road().context("--region: a road network cannot be divided yet")?;
+            Some(claim_region(args, shared, road.layout()).await?)
+        }
         None => None,
     };
     if config.region.as_ref().is_some_and(|r| !r.failover.is_owner()) {

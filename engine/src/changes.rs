@@ -87,16 +87,18 @@ impl Engine {
         let dt = self.fleet.config.params.dt;
         Ok(match command {
             Command::SetRoad(road) | Command::FollowRoad(road) => {
-                let fleet::Applied { undo, cleared_goals } = self.fleet.apply(Edit::ReplaceRoad(*road))?;
+                let layout = road.layout().clone();
+                let fleet::Applied { undo, cleared_goals } =
+                    self.fleet.apply(Edit::ReplaceRoad((*road).into()))?;
                 self.road_changed();
-                let mut writes = vec![Write::Road(self.fleet.road().layout().clone())];
+                let mut writes = vec![Write::Road(layout)];
                 for id in &cleared_goals {
                     writes.extend(uav_record(&self.fleet, id));
                 }
                 AppliedChange::new(Outcome::RoadReplaced { cleared_goals }, undo, writes)
             }
             Command::CheckRoad(road) => {
-                self.fleet.check_road(&road)?;
+                self.fleet.check_road(&*road)?;
                 AppliedChange::urgent()
             }
             Command::AddUav { id, position, policy, goal, link } => {
@@ -281,6 +283,7 @@ pub fn load_scenario(
     if !fleet.policy_names().any(|n| n == policy) {
         return Err(EditError::UnknownPolicy(format!("policy `{policy}` is not loaded")));
     }
+    check_flies_a_road(scenario)?;
     let undo = fleet.apply(Edit::Reset(scenario.params, scenario.road.clone()))?.undo;
     for u in &scenario.uavs {
         let state = UavState::at_rest(u.start);
@@ -288,6 +291,18 @@ pub fn load_scenario(
         fleet.add(u.id.clone(), policy.to_string(), link, state, Some(u.goal));
     }
     Ok(undo)
+}
+
+/// The server flies one road so far: a scenario on a network is refused (`airroads run` flies it).
+pub fn check_flies_a_road(scenario: &ValidScenario) -> Result<(), EditError> {
+    match scenario.road.road() {
+        Some(_) => Ok(()),
+        None => Err(EditError::Unsafe {
+            field: "roads".into(),
+            reason: "the server flies one road (`segments`) so far; `airroads run` flies road networks"
+                .into(),
+        }),
+    }
 }
 
 #[cfg(test)]

@@ -40,7 +40,12 @@ fn rig(max_uavs: usize) -> Rig {
         urgent: urgent_requests,
         snapshots: watch::channel(Arc::new(Snapshot::of(&fleet, 0, 0.0, 0))).0,
         metrics: watch::channel(Arc::new(LoopMetrics::default())).0,
-        road: watch::channel(Arc::new(RoadView::of(fleet.road(), 0, 0))).0,
+        road: watch::channel(Arc::new(RoadView::of(
+            fleet.road().expect("the test fleet flies a road"),
+            0,
+            0,
+        )))
+        .0,
         writer: writer_tx,
         written: written_rx,
         storage: storage.clone(),

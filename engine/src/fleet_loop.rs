@@ -342,9 +342,11 @@ impl Engine {
 
     pub(crate) fn publish_road(&mut self) {
         let since_ms = if self.boundary_ms > 0 { self.boundary_ms } else { now_ms() };
-        let view = RoadView::of(self.fleet.road(), self.road_version, since_ms);
+        // The engine's fleet flies a road (`changes::check_flies_a_road`).
+        let Some(road) = self.fleet.road() else { return };
+        let view = RoadView::of(road, self.road_version, since_ms);
         self.channels.road.send_replace(Arc::new(view));
-        self.hook.road_changed(self.fleet.road());
+        self.hook.road_changed(road);
     }
 }
 

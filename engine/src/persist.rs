@@ -70,8 +70,9 @@ impl SavedState {
         Self {
             format: FORMAT.to_string(),
             params: fleet.config.params,
-            segments: fleet.road().layout().segments.clone(),
-            regions: fleet.road().layout().regions.clone(),
+            // The engine's fleet flies a road (`changes::check_flies_a_road`).
+            segments: fleet.road().map(|r| r.layout().segments.clone()).unwrap_or_default(),
+            regions: fleet.road().and_then(|r| r.layout().regions.clone()),
             paused: fleet.paused(),
             uavs: fleet.uavs().iter().map(SavedUav::of).collect(),
         }

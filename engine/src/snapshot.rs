@@ -202,7 +202,7 @@ pub struct ReservationSnapshot {
 const PATH_STEP_M: f64 = 0.5;
 
 fn reservations(fleet: &Fleet) -> Vec<ReservationSnapshot> {
-    let line = fleet.road().centerline();
+    let Some(line) = fleet.road().map(|r| r.centerline()) else { return Vec::new() };
     fleet
         .section_use()
         .map(|z| {
@@ -261,7 +261,7 @@ impl Snapshot {
     /// The snapshot of `fleet` after its last tick; margins use the neighbour lists of that tick.
     pub fn of(fleet: &Fleet, tick: u64, time: f64, road_version: u64) -> Self {
         let p = fleet.config.params;
-        let road = fleet.road();
+        let road = fleet.airspace();
         let lists = fleet.neighbour_lists();
         let all = fleet.uavs();
         // The margins of each UAV on its own, from plain copies of the states (in parallel for

@@ -10,14 +10,14 @@ use crate::tick::{StageTimes, TickState};
 use crate::traffic::TrafficRules;
 use links::Link;
 use policies::PolicyRegistry;
-use roads::{NavMode, NavState, Road};
+use roads::{Airspace, NavMode, NavState, Road};
 use uav::{UavState, Vec2};
 
-/// The fleet: road, UAVs, policies and the reusable filter and scratch buffers.
+/// The fleet: road (or network), UAVs, policies and the reusable filter and scratch buffers.
 pub struct Fleet {
     /// Configuration.
     pub config: FleetConfig,
-    pub(crate) road: Road,
+    pub(crate) road: Airspace,
     pub(crate) uavs: Vec<Uav>,
     pub(crate) policies: PolicyRegistry,
     /// Paused: every UAV brakes to a hover instead of flying its policy (the filter still runs).
@@ -32,11 +32,11 @@ pub struct Fleet {
 }
 
 impl Fleet {
-    /// An empty fleet on `road`.
-    pub fn new(config: FleetConfig, road: Road, policies: PolicyRegistry) -> Self {
+    /// An empty fleet on `road` (a [`Road`] or a network).
+    pub fn new(config: FleetConfig, road: impl Into<Airspace>, policies: PolicyRegistry) -> Self {
         Self {
             config,
-            road,
+            road: road.into(),
             uavs: Vec::new(),
             policies,
             paused: false,
@@ -47,15 +47,21 @@ impl Fleet {
         }
     }
 
-    /// The road.
-    pub fn road(&self) -> &Road {
+    /// What it flies in: a road or a network.
+    pub fn airspace(&self) -> &Airspace {
         &self.road
     }
 
+    /// The road, when it flies one (None on a network).
+    pub fn road(&self) -> Option<&Road> {
+        self.road.road()
+    }
+
     /// The single-file sections of the road and their use as of the last tick (`traffic`
-    /// navigation only; none otherwise).
+    /// navigation on a road only; none otherwise).
     pub fn section_use(&self) -> impl Iterator<Item = crate::traffic::SectionUse> + '_ {
-        let rules = (self.config.nav == NavMode::Traffic).then_some(&self.traffic);
+        let on_road = self.config.nav == NavMode::Traffic && self.road.road().is_some();
+        let rules = on_road.then_some(&self.traffic);
         rules.into_iter().flat_map(|r| r.section_use(&self.uavs))
     }
 
@@ -85,7 +91,7 @@ impl Fleet {
         goal: Option<Vec2>,
     ) -> &mut Uav {
         let mut nav = NavState::new(state.p);
-        nav.set_goal(&self.road, goal, state.p);
+        nav.set_goal_in(&self.road, goal, state.p);
         let phase = link.phase();
         self.uavs.push(Uav {
             id,

@@ -1,7 +1,9 @@
-//! Scenario files: `{"name", "params"?, "segments", "regions"?, "uavs": [{"id", "start", "goal"}]}`.
+//! Scenario files: `{"name", "params"?, "segments", "regions"?, "uavs": [{"id", "start", "goal"}]}`
+//! on one road, or `{"name", "params"?, "roads", "junctions"?, "uavs"}` on a network.
 
 use links::LinkRules;
-use roads::{Road, RoadLayout};
+use roads::network::{Junction, Network, NetworkLayout, NetworkRoad};
+use roads::{Airspace, CLEARANCE_MARGIN_M, Road, RoadLayout};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
 use uav::{Params, Vec2};
@@ -15,9 +17,19 @@ pub struct Scenario {
     /// Parameters; missing keys take their defaults, unknown keys are an error.
     #[serde(default)]
     pub params: Params,
-    /// Road segments, as in a road layout.
+    /// Road segments, as in a road layout (one road; or give `roads` for a network).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
     #[schemars(with = "roads::schema::Segments")]
+    #[schemars(
+        description = "one road's segments, as in a road layout; a scenario gives these or `roads`, not both"
+    )]
     pub segments: Vec<[[f64; 2]; 4]>,
+    /// A network's roads (instead of `segments`): named chains of segments.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roads: Option<Vec<NetworkRoad>>,
+    /// A network's junctions (with `roads`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub junctions: Option<Vec<Junction>>,
     /// The road's regions, as in a road layout (`airroads serve --region`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     #[schemars(with = "Option<roads::schema::Regions>")]
@@ -70,8 +82,8 @@ pub struct ValidScenario {
     pub name: String,
     /// Parameters.
     pub params: Params,
-    /// The validated road.
-    pub road: Road,
+    /// The validated road or network.
+    pub road: Airspace,
     /// The fleet.
     pub uavs: Vec<UavSpec>,
 }
@@ -103,7 +115,38 @@ fn invalid(field: impl Into<String>, reason: impl Into<String>) -> ScenarioError
     ScenarioError::Invalid { field: field.into(), reason: reason.into() }
 }
 
+/// The narrowest passage a network may have: what a UAV needs to cross it, 2·D_s + D_c and the
+/// paths' clearance margin on both sides (as the filter keeps them, `Params::kept_d_s`, `kept_d_c`).
+pub fn min_passage_m(params: &Params) -> f64 {
+    2.0 * (params.kept_d_s() + CLEARANCE_MARGIN_M) + params.kept_d_c()
+}
+
 impl Scenario {
+    /// The road (`segments`, `regions`) or the network (`roads`, `junctions`), validated.
+    fn airspace(&self) -> Result<Airspace, ScenarioError> {
+        let refused = |e: roads::RoadError| invalid(e.field, format!("{} ({})", e.message, e.rule.name()));
+        let Some(roads) = &self.roads else {
+            if self.junctions.is_some() {
+                return Err(invalid("junctions", "junctions belong to a network: give its `roads` too"));
+            }
+            let layout =
+                RoadLayout { regions: self.regions.clone(), ..RoadLayout::new(self.segments.clone()) };
+            return Ok(Airspace::Road(Road::new(layout).map_err(refused)?));
+        };
+        if !self.segments.is_empty() {
+            return Err(invalid("segments", "give `segments` (one road) or `roads` (a network), not both"));
+        }
+        if self.regions.is_some() {
+            return Err(invalid(
+                "regions",
+                "regions divide one road's segments; a network cannot be divided yet",
+            ));
+        }
+        let layout =
+            NetworkLayout { roads: roads.clone(), junctions: self.junctions.clone().unwrap_or_default() };
+        Ok(Airspace::Network(Network::new(layout, min_passage_m(&self.params)).map_err(refused)?))
+    }
+
     /// Parses scenario JSON text.
     pub fn from_json(text: &str) -> Result<Self, ScenarioError> {
         serde_json::from_str(text).map_err(|e| ScenarioError::Parse {
@@ -126,9 +169,7 @@ impl Scenario {
     /// starts through a grid of cells D_c wide, and each point query through the road's index.
     pub fn validate_with(&self, rules: &LinkRules) -> Result<ValidScenario, ScenarioError> {
         self.params.validate().map_err(|e| invalid(format!("params.{}", e.field), e.detail()))?;
-        let layout = RoadLayout { regions: self.regions.clone(), ..RoadLayout::new(self.segments.clone()) };
-        let road =
-            Road::new(layout).map_err(|e| invalid(e.field, format!("{} ({})", e.message, e.rule.name())))?;
+        let road = self.airspace()?;
         if self.uavs.is_empty() {
             return Err(invalid("uavs", "a scenario needs at least one UAV"));
         }
@@ -200,7 +241,7 @@ impl StartGrid {
 /// Checks that a point is finite, inside the road and at least `clearance` from every wall;
 /// `field` names it in the error (built only then).
 pub(crate) fn check_point(
-    road: &Road,
+    road: &Airspace,
     field: impl Fn() -> String,
     x: [f64; 2],
     clearance: f64,

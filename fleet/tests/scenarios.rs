@@ -40,7 +40,7 @@ fn lab_scale_three_uavs_are_safe_and_arrive() {
 #[test]
 fn ten_uavs_on_a_ten_segment_road_are_safe_and_arrive() {
     let s = load("snake10");
-    assert!(s.uavs.len() >= 8 && s.road.quads().len() >= 8);
+    assert!(s.uavs.len() >= 8 && s.road.road().expect("one road").quads().len() >= 8);
     assert_safe_and_arrived("snake10", &fly(&s, FleetConfig::default()), &s.params);
 }
 
@@ -79,6 +79,8 @@ fn hairpin() -> Scenario {
         params: Params { t_max: 60.0, ..Params::default() },
         segments: layout.segments,
         regions: None,
+        roads: None,
+        junctions: None,
         uavs: vec![
             uav(0, [1.0, -0.8], [11.0, 6.9]),
             uav(1, [1.0, 0.8], [10.0, 7.6]),
@@ -92,4 +94,15 @@ fn hairpin() -> Scenario {
 fn hairpin_uavs_cut_the_inner_corner_without_getting_stuck() {
     let s = hairpin().validate().unwrap();
     assert_safe_and_arrived("hairpin", &fly(&s, FleetConfig::default()), &s.params);
+}
+
+#[test]
+fn a_depot_with_branches_is_flown_through_its_junctions_safely_home_with_pd_and_rl() {
+    let s = load("depot");
+    let net = s.road.network().expect("depot is a road network");
+    assert!(net.layout().junctions.len() >= 2 && net.layout().roads.len() >= 5);
+    for policy in ["pd", "rl"] {
+        let m = fly_policy(&s, FleetConfig::default(), policy);
+        assert_safe_and_arrived(&format!("depot {policy}"), &m, &s.params);
+    }
 }

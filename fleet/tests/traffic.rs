@@ -34,6 +34,8 @@ fn stall_time_counts_a_uav_that_hovers_with_a_goal_and_nothing_else() {
         params,
         segments: layout.segments.clone(),
         regions: None,
+        roads: None,
+        junctions: None,
         uavs: vec![uav("a", [1.0, -0.5], [1.0, 8.5])],
     };
     let m = fly(&stuck.validate().unwrap(), NavMode::Alg1, "pd");
@@ -71,11 +73,20 @@ fn a_single_file_section_passes_both_directions_in_turn() {
         uavs.push(uav(&format!("e{i}"), [10.5, y], [-10.0, y]));
     }
     let params = Params { t_max: 120.0, ..Params::default() };
-    let s = Scenario { name: "single-file".into(), params, segments: layout.segments, regions: None, uavs }
-        .validate()
-        .unwrap();
-    let nav = roads::Navigator::new(&s.road, NavMode::Traffic, &s.params);
-    let sections = fleet::sections::sections(&s.road, &nav);
+    let s = Scenario {
+        name: "single-file".into(),
+        params,
+        segments: layout.segments,
+        regions: None,
+        roads: None,
+        junctions: None,
+        uavs,
+    }
+    .validate()
+    .unwrap();
+    let road = s.road.road().expect("one road");
+    let nav = roads::Navigator::new(road, NavMode::Traffic, &s.params);
+    let sections = fleet::sections::sections(road, &nav);
     assert_eq!(sections.len(), 1, "{sections:?}");
     assert!(sections[0].start > 8.0 && sections[0].end < 16.0, "{sections:?}");
     for policy in ["pd", "rl"] {
@@ -183,7 +194,9 @@ fn sharp_left_bend_road() -> Vec<[[f64; 2]; 4]> {
 
 fn on_road(name: &str, segments: Vec<[[f64; 2]; 4]>, uavs: Vec<ScenarioUav>) -> ValidScenario {
     let params = Params { t_max: 30.0, ..Params::default() };
-    Scenario { name: name.into(), params, segments, regions: None, uavs }.validate().unwrap()
+    Scenario { name: name.into(), params, segments, regions: None, roads: None, junctions: None, uavs }
+        .validate()
+        .unwrap()
 }
 
 #[test]

@@ -30,6 +30,8 @@ fn scenario(uavs: Vec<ScenarioUav>) -> Scenario {
         params: Default::default(),
         segments: RoadLayout::straight(0.0, 30.0, 4.0, 3).segments,
         regions: None,
+        roads: None,
+        junctions: None,
         uavs,
     }
 }

@@ -280,7 +280,8 @@ impl Handover {
     pub fn offer(&mut self, fleet: &Fleet, road_version: u64, now: Instant) {
         if self.road_version != Some(road_version) {
             self.road_version = Some(road_version);
-            let road = fleet.road();
+            // A region's fleet flies a road (a network cannot be divided yet: `serve` refuses it).
+            let Some(road) = fleet.road() else { return };
             let neighbours = super::neighbours_of(road, &self.own).unwrap_or_default();
             self.segment_owner = (0..road.quads().len())
                 .map(|s| road.region_of(s).map(|r| r.name.clone()).filter(|n| neighbours.contains(n)))

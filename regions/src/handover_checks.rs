@@ -43,7 +43,9 @@ impl Handover {
             return refused(&self.screen.refused.unsafe_uav, format!("unsafe here: {e}"));
         }
         // In this region or the segment next to either end (the tracker's hysteresis).
-        let road = fleet.road();
+        let Some(road) = fleet.road() else {
+            return refused(&self.screen.refused.far_from_region, "this server flies no road".into());
+        };
         let segment = road.locate(&state.p, None);
         let own = road.layout().regions.iter().flatten().find(|r| r.name == self.own);
         if own.is_none_or(|r| segment + 1 < r.first() || segment > r.last() + 1) {

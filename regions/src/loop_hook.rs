@@ -228,7 +228,7 @@ mod tests {
             link: None,
         };
         assert_eq!(side.admits(&add), Err(ChangeError::Standby("west".into())));
-        let road = edits(true).fleet.road().clone();
+        let road = edits(true).fleet.road().expect("the test fleet flies a road").clone();
         assert_eq!(side.admits(&Command::FollowRoad(Box::new(road))), Ok(()));
         assert_eq!(NoHook.admits(&add), Ok(()), "a single server admits every change");
     }

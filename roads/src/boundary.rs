@@ -15,6 +15,9 @@ pub trait Boundary {
     /// Every wall within `radius` of `x` (and perhaps a few more), in index order; `hint` is the
     /// segment or cell the UAV is tracked in.
     fn walls_within(&self, hint: usize, x: &Vec2, radius: f64) -> impl Iterator<Item = usize> + '_;
+    /// The distance (m) from `x` to the nearest wall, negative outside; `hint` as for
+    /// [`Boundary::walls_within`].
+    fn signed_distance_in(&self, hint: usize, x: &Vec2) -> f64;
 }
 
 impl Boundary for crate::Road {
@@ -33,6 +36,10 @@ impl Boundary for crate::Road {
     fn walls_within(&self, hint: usize, x: &Vec2, radius: f64) -> impl Iterator<Item = usize> + '_ {
         self.walls_near_in(hint, x, radius)
     }
+
+    fn signed_distance_in(&self, hint: usize, x: &Vec2) -> f64 {
+        self.boundary_distance_in(hint, x)
+    }
 }
 
 impl Boundary for crate::network::Network {
@@ -50,5 +57,10 @@ impl Boundary for crate::network::Network {
 
     fn walls_within(&self, _hint: usize, x: &Vec2, radius: f64) -> impl Iterator<Item = usize> + '_ {
         self.walls_near(x, radius).into_iter()
+    }
+
+    fn signed_distance_in(&self, _hint: usize, x: &Vec2) -> f64 {
+        let d = self.boundary_distance(x);
+        if self.contains(x) { d } else { -d }
     }
 }

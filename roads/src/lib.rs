@@ -9,6 +9,7 @@
 //!
 //! This crate knows nothing of UAV dynamics, barriers or solvers.
 
+mod airspace;
 mod boundary;
 mod centerline;
 mod geometry;
@@ -19,6 +20,7 @@ mod lanes;
 mod layout;
 mod nav;
 pub mod network;
+mod network_nav;
 mod regions;
 #[cfg(test)]
 mod regions_tests;
@@ -27,6 +29,7 @@ pub mod schema;
 mod traffic_nav;
 mod validate;
 
+pub use airspace::Airspace;
 pub use boundary::Boundary;
 pub use centerline::CenterLine;
 pub use geometry::{Quad, Wall, WallKind, nearest_on_segment, segments_intersect};
@@ -34,6 +37,7 @@ pub use index::NearWalls;
 pub use lanes::{ClearanceProfile, PROFILE_STEP_M, segment_distance};
 pub use layout::RoadLayout;
 pub use nav::{NavMode, NavState, Navigator, Restriction, RoutePosition};
+pub use network_nav::NetworkNavigator;
 pub use regions::{MAX_REGION_NAME, Region};
 pub use road::{Road, SegmentTracker};
 pub use traffic_nav::{CLEARANCE_MARGIN_M, LANE_GAP_MARGIN_M, MIN_CLEARANCE_MARGIN_M};

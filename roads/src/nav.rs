@@ -2,6 +2,8 @@
 //! the E8 initialisation fix), road-aware (`route`, `lanes`) or with the traffic rules (`traffic`,
 //! the default: corner clearance and keep-right lanes here, holds and back-offs from the fleet).
 
+use crate::airspace::Airspace;
+use crate::network::Way;
 use crate::road::{Road, SegmentTracker};
 use crate::traffic_nav::Route;
 use uav::{Params, Vec2};
@@ -86,10 +88,11 @@ impl RoutePosition {
     }
 }
 
-/// A goal with its segment and road coordinates, cached when it is set.
+/// A goal with its segment and road coordinates, cached when it is set (on a network: its cell,
+/// and no road coordinates, which only a road's navigation reads).
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Goal {
-    p: Vec2,
+pub(crate) struct Goal {
+    pub(crate) p: Vec2,
     segment: usize,
     s: f64,
     lateral: f64,
@@ -101,10 +104,17 @@ impl Goal {
         let line = road.centerline();
         Self { p, segment, s: line.project_on_piece(segment, &p), lateral: line.lateral(segment, &p) }
     }
+
+    fn on(airspace: &Airspace, p: Vec2) -> Self {
+        match airspace {
+            Airspace::Road(road) => Self::new(road, p),
+            Airspace::Network(_) => Self { p, segment: airspace.locate(&p, None), s: 0.0, lateral: 0.0 },
+        }
+    }
 }
 
 /// Per-UAV navigation state.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, PartialEq)]
 pub struct NavState {
     /// The current temporary target p^r (initialised to p(0), erratum E8).
     pub target: Vec2,
@@ -114,13 +124,16 @@ pub struct NavState {
     pub tracker: SegmentTracker,
     /// Where it is along its route (None without a goal), as of the last [`Navigator::locate`].
     pub position: Option<RoutePosition>,
-    goal: Option<Goal>,
+    pub(crate) goal: Option<Goal>,
+    /// Its way through a network to its goal (None on a road, and until planned).
+    pub(crate) way: Option<Way>,
 }
 
 impl NavState {
     /// State of a UAV starting at `p0` with no goal (it hovers at `p0`).
     pub fn new(p0: Vec2) -> Self {
-        Self { target: p0, arrived: false, tracker: SegmentTracker::default(), position: None, goal: None }
+        let tracker = SegmentTracker::default();
+        Self { target: p0, arrived: false, tracker, position: None, goal: None, way: None }
     }
 
     /// The current goal p_g, if any.
@@ -128,21 +141,37 @@ impl NavState {
         self.goal.map(|g| g.p)
     }
 
-    /// Sets a new goal (clears `arrived`), or clears it so the UAV hovers where it is (`p`).
+    /// Its way through a network (None on a road, and until planned).
+    pub fn way(&self) -> Option<&Way> {
+        self.way.as_ref()
+    }
+
+    /// Sets a new goal on `road` (clears `arrived`), or clears it so the UAV hovers where it is (`p`).
     pub fn set_goal(&mut self, road: &Road, goal: Option<Vec2>, p: Vec2) {
+        self.put_goal(goal.map(|g| Goal::new(road, g)), p);
+    }
+
+    /// [`NavState::set_goal`] on a road or a network.
+    pub fn set_goal_in(&mut self, airspace: &Airspace, goal: Option<Vec2>, p: Vec2) {
+        self.put_goal(goal.map(|g| Goal::on(airspace, g)), p);
+    }
+
+    fn put_goal(&mut self, goal: Option<Goal>, p: Vec2) {
         self.arrived = false;
-        self.goal = goal.map(|g| Goal::new(road, g));
+        self.goal = goal;
         self.position = None;
+        self.way = None;
         if goal.is_none() {
             self.target = p;
         }
     }
 
-    /// Re-locates the goal after the road changed.
-    pub fn road_changed(&mut self, road: &Road) {
+    /// Re-locates the goal after the road changed (a way through a network is planned afresh).
+    pub fn road_changed(&mut self, airspace: &Airspace) {
         self.tracker = SegmentTracker::default();
         self.position = None;
-        self.goal = self.goal.map(|g| Goal::new(road, g.p));
+        self.way = None;
+        self.goal = self.goal.map(|g| Goal::on(airspace, g.p));
     }
 }
 

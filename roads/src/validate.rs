@@ -67,6 +67,8 @@ pub enum RoadRule {
     Disconnected,
     /// A passable edge is narrower than a UAV needs to cross it.
     NarrowPassage,
+    /// Walls meet inside the road at less than 90°: a corner too sharp to brake for both at once.
+    SharpCorner,
 }
 
 impl RoadRule {
@@ -98,6 +100,7 @@ impl RoadRule {
             RoadRule::PartialEdge => "partial_edge",
             RoadRule::Disconnected => "disconnected",
             RoadRule::NarrowPassage => "narrow_passage",
+            RoadRule::SharpCorner => "sharp_corner",
         }
     }
 }

@@ -14,7 +14,7 @@ const SAMPLING_SLACK_M: f64 = 0.001;
 
 /// A regular `sides`-gon of circumradius `radius` turned by `turn`, with a straight road of
 /// `pieces` segments of `length` m leaving each side whose bit is set in `open` (at least one).
-fn junction(sides: usize, radius: f64, turn: f64, open: u8, pieces: usize, length: f64) -> Network {
+fn junction(sides: usize, radius: f64, turn: f64, open: u8, pieces: usize, length: f64) -> Option<Network> {
     let corner = |k: usize| {
         let a = turn + std::f64::consts::TAU * k as f64 / sides as f64;
         Vec2::new(radius * a.cos(), radius * a.sin())
@@ -38,10 +38,11 @@ fn junction(sides: usize, radius: f64, turn: f64, open: u8, pieces: usize, lengt
     }
     let polygon = corners.iter().map(|c| [c.x, c.y]).collect();
     let layout = NetworkLayout { roads, junctions: vec![Junction { name: "j".into(), polygon }] };
-    Network::new(layout, 0.5).expect("a valid junction")
+    // A triangle with a closed side has a corner of 60° between walls: refused (`sharp_corner`).
+    Network::new(layout, 0.5).ok()
 }
 
-fn network() -> impl Strategy<Value = Network> {
+fn network() -> impl Strategy<Value = Option<Network>> {
     (3usize..=8, 1.0f64..4.0, 0.0..std::f64::consts::TAU, any::<u8>(), 1usize..4, 0.5f64..3.0).prop_map(
         |(sides, radius, turn, open, pieces, length)| junction(sides, radius, turn, open, pieces, length),
     )
@@ -65,6 +66,7 @@ proptest! {
         (fraction, angle) in (0.0..0.8f64, 0.0..std::f64::consts::TAU),
         push in 0.0..std::f64::consts::TAU,
     ) {
+        let Some(net) = net else { return Ok(()) };
         let params = Params::default();
         let p = point_in(&net, cell, w);
         let d = net.boundary_distance(&p);

@@ -81,7 +81,7 @@ impl Rig {
         for (i, uav) in json["uavs"].as_array_mut().expect("uavs").iter_mut().enumerate() {
             uav["link"] = Value::String(sitl.uri(i).expect("drone"));
         }
-        let road = scenario(&json).road;
+        let road = scenario(&json).road.road().expect("lab3 is one road").clone();
         let policies = policies::PolicyRegistry::standard(5.0).map_err(|e| e.to_string())?;
         let config = airroads_server::serve::ServeConfig::new(
             fleet::FleetConfig::default(),

@@ -55,7 +55,15 @@ pub fn scenario(count: usize) -> Scenario {
             link: None,
         })
         .collect();
-    Scenario { name: "big".into(), params: Params::default(), segments: road().segments, regions: None, uavs }
+    Scenario {
+        name: "big".into(),
+        params: Params::default(),
+        segments: road().segments,
+        regions: None,
+        roads: None,
+        junctions: None,
+        uavs,
+    }
 }
 
 /// The same scenario with its last UAV starting 0.1 m from the first one (closer than D_c).

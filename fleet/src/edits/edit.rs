@@ -5,7 +5,7 @@ use crate::fleet::Fleet;
 use crate::member::Uav;
 use crate::runs::margins::{collision_margin, road_margin};
 use links::Link;
-use roads::{NavState, Road};
+use roads::{Airspace, NavState};
 use uav::{UavState, Vec2};
 
 /// Why a change to the fleet was refused; `field` names the offending request field.
@@ -162,7 +162,7 @@ impl Fleet {
             self.check_goal(g, "goal")?;
         }
         let uav = &mut self.uavs[k];
-        uav.nav.set_goal(&self.road, goal, uav.state.p);
+        uav.nav.set_goal_in(&self.road, goal, uav.state.p);
         Ok(())
     }
 
@@ -199,7 +199,7 @@ impl Fleet {
     /// Replaces the road if every UAV would be safe on it (the same test as [`Fleet::check_start`]
     /// against the walls, with its current velocity). Goals outside the new road are cleared (those
     /// UAVs hover); their ids are returned.
-    pub(crate) fn replace_road(&mut self, road: Road) -> Result<Vec<String>, EditError> {
+    pub(crate) fn replace_road(&mut self, road: Airspace) -> Result<Vec<String>, EditError> {
         self.check_road(&road)?;
         let d_s = self.config.params.d_s;
         let mut cleared = Vec::new();
@@ -210,7 +210,7 @@ impl Fleet {
             }
             let arrived = uav.nav.arrived && goal.is_some();
             uav.nav = NavState::new(uav.state.p);
-            uav.nav.set_goal(&road, goal, uav.state.p);
+            uav.nav.set_goal_in(&road, goal, uav.state.p);
             uav.nav.arrived = arrived;
         }
         self.road = road;
@@ -219,7 +219,7 @@ impl Fleet {
 
     /// Whether every UAV in the air would be safe on `road` now (what [`Fleet::replace_road`]
     /// checks first); changes nothing.
-    pub fn check_road(&self, road: &Road) -> Result<(), EditError> {
+    pub fn check_road(&self, road: &impl roads::Boundary) -> Result<(), EditError> {
         let p = self.config.params;
         // UAVs on the ground (landed, stopped, not yet taken off) are not in the road's airspace.
         for uav in self.uavs.iter().filter(|u| u.condition.in_the_air()) {
@@ -237,7 +237,7 @@ impl Fleet {
     }
 }
 
-fn check_goal_on(road: &Road, goal: Vec2, field: &str, d_s: f64) -> Result<(), EditError> {
+fn check_goal_on(road: &Airspace, goal: Vec2, field: &str, d_s: f64) -> Result<(), EditError> {
     if !uav::is_finite(&goal) {
         return Err(unsafe_at(field, "must be two finite numbers".into()));
     }

@@ -7,7 +7,7 @@ pub(crate) mod undo;
 
 use crate::fleet::Fleet;
 use links::Link;
-use roads::Road;
+use roads::Airspace;
 use uav::{Params, UavState, Vec2};
 use undo::Undo;
 
@@ -34,9 +34,9 @@ pub enum Edit {
     SetPolicy(String, String),
     /// Replace the road, if every UAV in the air would be safe on it; goals it has no room for are
     /// cleared ([`Applied::cleared_goals`]).
-    ReplaceRoad(Road),
+    ReplaceRoad(Airspace),
     /// Start over with these parameters on this road, with no UAVs and not paused (a scenario).
-    Reset(Params, Road),
+    Reset(Params, Airspace),
     /// Pause (every UAV brakes to a hover) or resume.
     Pause(bool),
 }
@@ -64,7 +64,7 @@ impl Fleet {
                 Undo::Removed { index, uav: Box::new(uav) }
             }
             Edit::SetGoal(id, goal) => {
-                let nav = self.uavs[self.position_of(&id)?].nav;
+                let nav = self.uavs[self.position_of(&id)?].nav.clone();
                 self.set_goal(&id, goal)?;
                 Undo::Nav { id, nav }
             }
@@ -74,7 +74,7 @@ impl Fleet {
                 Undo::Policy { id, policy: before }
             }
             Edit::ReplaceRoad(road) => {
-                let navs = self.uavs.iter().map(|u| (u.id.clone(), u.nav)).collect();
+                let navs = self.uavs.iter().map(|u| (u.id.clone(), u.nav.clone())).collect();
                 let before = self.road.clone();
                 cleared_goals = self.replace_road(road)?;
                 Undo::Road { road: before, navs }

@@ -5,7 +5,7 @@
 use crate::edits::edit::EditError;
 use crate::fleet::Fleet;
 use crate::member::Uav;
-use roads::{NavState, Road};
+use roads::{Airspace, NavState};
 use uav::Params;
 
 /// What restores the fleet to its state before one change.
@@ -36,7 +36,7 @@ pub enum Undo {
     /// The road was replaced (every UAV's navigation was reset with it).
     Road {
         /// The road before.
-        road: Road,
+        road: Airspace,
         /// Every UAV's navigation state before, by id.
         navs: Vec<(String, NavState)>,
     },
@@ -45,7 +45,7 @@ pub enum Undo {
         /// Parameters before.
         params: Params,
         /// Road before.
-        road: Road,
+        road: Airspace,
         /// The UAVs before, links and all.
         uavs: Vec<Uav>,
         /// Paused before.
@@ -121,7 +121,7 @@ mod tests {
     use crate::FleetConfig;
     use links::SimLink;
     use policies::PolicyRegistry;
-    use roads::RoadLayout;
+    use roads::{Road, RoadLayout};
     use uav::{UavState, Vec2};
 
     fn fleet() -> Fleet {
@@ -143,7 +143,12 @@ mod tests {
             .iter()
             .map(|u| format!("{}:{}:{:?}:{:?}", u.id, u.policy, u.nav.goal(), u.state.p))
             .collect();
-        format!("{uavs:?} paused={} road={:?} dt={}", f.paused(), f.road().layout(), f.config.params.dt)
+        format!(
+            "{uavs:?} paused={} road={:?} dt={}",
+            f.paused(),
+            f.road().map(|r| r.layout()),
+            f.config.params.dt
+        )
     }
 
     #[test]
@@ -161,8 +166,8 @@ mod tests {
             Edit::SetPolicy("u1".into(), "pd".into()),
             Edit::Remove("u0".into()),
             Edit::Pause(true),
-            Edit::ReplaceRoad(longer),
-            Edit::Reset(Params { dt: 0.02, ..Params::default() }, other),
+            Edit::ReplaceRoad(longer.into()),
+            Edit::Reset(Params { dt: 0.02, ..Params::default() }, other.into()),
         ];
         for edit in edits {
             undos.push(f.apply(edit).unwrap().undo);

@@ -144,6 +144,8 @@ fn bends(seed: u64) -> Scenario {
             params: p,
             segments: layout.segments,
             regions: None,
+            roads: None,
+            junctions: None,
             uavs,
         };
         if scenario.validate().is_ok() {
@@ -201,7 +203,15 @@ fn swap_ends(road: &Road, west: usize, east: usize, p: &Params) -> Option<Vec<Sc
 
 /// The scenario if it validates with at least two UAVs.
 fn valid(name: String, params: Params, layout: RoadLayout, uavs: Vec<ScenarioUav>) -> Option<Scenario> {
-    let scenario = Scenario { name, params, segments: layout.segments, regions: None, uavs };
+    let scenario = Scenario {
+        name,
+        params,
+        segments: layout.segments,
+        regions: None,
+        roads: None,
+        junctions: None,
+        uavs,
+    };
     (scenario.uavs.len() >= 2 && scenario.validate().is_ok()).then_some(scenario)
 }
 

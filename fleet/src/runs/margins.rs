@@ -1,6 +1,6 @@
 //! The safety margins a run reports: eq. (2) and eq. (6) left sides with the corrected sign (E1).
 
-use roads::{Road, Wall};
+use roads::{Boundary, Wall};
 use safety::barrier::braking_margin;
 use uav::{UavState, Vec2};
 
@@ -15,38 +15,38 @@ pub fn collision_margin(k: &UavState, d: &UavState, delta_sum: f64) -> f64 {
 /// min over the finite walls of `dist − min(ḋist, 0)²/(2δ)`: the closest the UAV gets to the road
 /// boundary if it brakes now. Walls are measured as the filter enforces them (rule R2): a wall's
 /// line distance in its slab from either side, its end points as points. Negative distance when outside.
-pub fn road_margin(road: &Road, s: &UavState, delta: f64) -> f64 {
-    road_margin_at(road, None, s, delta, road.boundary_distance(&s.p))
+pub fn road_margin(road: &impl Boundary, s: &UavState, delta: f64) -> f64 {
+    road_margin_at(road, None, s, delta, road.signed_distance_in(0, &s.p))
 }
 
 /// [`road_margin`] for a UAV tracked in segment `hint`, if any: the segment's list of nearby walls
 /// instead of the road's tree where it answers (the same value, a fraction of the cost).
-pub fn road_margin_in(road: &Road, hint: Option<usize>, s: &UavState, delta: f64) -> f64 {
-    let boundary = match hint {
-        Some(segment) => road.boundary_distance_in(segment, &s.p),
-        None => road.boundary_distance(&s.p),
-    };
+pub fn road_margin_in(road: &impl Boundary, hint: Option<usize>, s: &UavState, delta: f64) -> f64 {
+    let boundary = road.signed_distance_in(hint.unwrap_or(0), &s.p);
     road_margin_at(road, hint, s, delta, boundary)
 }
 
-/// [`road_margin`] given the UAV's [`Road::boundary_distance`] `boundary` (the metrics need both)
-/// and perhaps the segment it is tracked in (a hint that saves a tree query; same result).
-pub fn road_margin_at(road: &Road, hint: Option<usize>, s: &UavState, delta: f64, boundary: f64) -> f64 {
+/// [`road_margin`] given the UAV's signed distance to the boundary `boundary` (the metrics need
+/// both) and perhaps the segment or cell it is tracked in (a hint that saves a tree query; same
+/// result).
+pub fn road_margin_at(
+    road: &impl Boundary,
+    hint: Option<usize>,
+    s: &UavState,
+    delta: f64,
+    boundary: f64,
+) -> f64 {
     // A positive distance is only ever returned inside; at 0 the sign does not tell.
-    let inside = boundary > 0.0 || (boundary == 0.0 && road.contains(&s.p));
+    let inside = boundary > 0.0 || (boundary == 0.0 && road.inside(&s.p));
     if !inside {
         return boundary;
     }
     // A wall at distance d has a margin of at least d − v²/(2δ), and the nearest wall's is at most
     // its distance: walls farther than that distance plus v²/(2δ) cannot hold the minimum.
-    let walls = road.walls();
+    let walls = road.wall_list();
     let radius = boundary + s.v.norm_squared() / (2.0 * delta) + 1e-9 * (1.0 + boundary);
     let mut best = f64::INFINITY;
-    let near = match hint {
-        Some(segment) => road.walls_near_in(segment, &s.p, radius),
-        None => road.walls_near(&s.p, radius),
-    };
-    for k in near {
+    for k in road.walls_within(hint.unwrap_or(0), &s.p, radius) {
         best = best.min(wall_margin(&walls[k], s, delta));
     }
     best
@@ -71,6 +71,7 @@ fn wall_margin(w: &Wall, s: &UavState, delta: f64) -> f64 {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+    use roads::Road;
 
     /// `road_margin` as a loop over every wall.
     fn road_margin_scan(road: &Road, s: &UavState, delta: f64) -> f64 {

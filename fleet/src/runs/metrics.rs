@@ -6,6 +6,7 @@ use crate::runs::histogram::DurationHistogram;
 use crate::runs::margins::{collision_margin, road_margin_at};
 use crate::tick::parallel;
 use rayon::prelude::*;
+use roads::Boundary;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use uav::UavState;
@@ -148,7 +149,7 @@ impl MetricsRecorder {
 
     fn record_with(&mut self, fleet: &Fleet, t: f64, truth: Option<&[Option<UavState>]>) {
         let p = fleet.config.params;
-        let road = fleet.road();
+        let road = fleet.airspace();
         let uavs = fleet.uavs();
         let lists = fleet.neighbour_lists();
         self.states.clear();
@@ -164,10 +165,7 @@ impl MetricsRecorder {
             let Some(state) = state else {
                 return UavMargins { wall: f64::INFINITY, road_margin: f64::INFINITY, closest: None };
             };
-            let wall = match hint {
-                Some(segment) => road.boundary_distance_in(segment, &state.p),
-                None => road.boundary_distance(&state.p),
-            };
+            let wall = road.signed_distance_in(hint.unwrap_or(0), &state.p);
             let road_margin = road_margin_at(road, hint, &state, p.delta, wall);
             // The pairs of this tick's neighbour search: any other pair is farther apart than the
             // activation radius at twice the fleet's top speed, so its S_kd exceeds D_c.

@@ -25,6 +25,8 @@ pub fn random_scenario(seed: u64) -> Scenario {
                 params,
                 segments: layout.segments,
                 regions: None,
+                roads: None,
+                junctions: None,
                 uavs,
             };
         }
@@ -135,7 +137,15 @@ pub fn crowd_scenario(n: usize) -> Scenario {
         })
         .collect();
     let params = Params { t_max: 120.0, ..Params::default() };
-    Scenario { name: format!("crowd{n}"), params, segments, regions: None, uavs }
+    Scenario {
+        name: format!("crowd{n}"),
+        params,
+        segments,
+        regions: None,
+        roads: None,
+        junctions: None,
+        uavs,
+    }
 }
 
 #[cfg(test)]

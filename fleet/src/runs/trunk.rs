@@ -54,7 +54,15 @@ pub fn trunk_scenario(n: usize, seed: u64) -> Result<Scenario, RoadError> {
         })
         .collect();
     let params = Params { t_max: 300.0, ..Params::default() };
-    Ok(Scenario { name: format!("trunk{n}"), params, segments: layout.segments, regions: None, uavs })
+    Ok(Scenario {
+        name: format!("trunk{n}"),
+        params,
+        segments: layout.segments,
+        regions: None,
+        roads: None,
+        junctions: None,
+        uavs,
+    })
 }
 
 #[cfg(test)]
@@ -67,7 +75,7 @@ mod tests {
             let s = trunk_scenario(n, seed).unwrap();
             assert_eq!(s.uavs.len(), n);
             let valid = s.validate().unwrap_or_else(|e| panic!("trunk {n}: {e}"));
-            let length = valid.road.centerline().length();
+            let length = valid.road.road().expect("a trunk is one road").centerline().length();
             assert!(length >= n as f64 * TRUNK_M_PER_UAV * 0.95, "{n} UAVs on {length} m");
             assert_eq!(s, trunk_scenario(n, seed).unwrap());
         }

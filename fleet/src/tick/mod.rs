@@ -13,15 +13,15 @@ use crate::config::FleetConfig;
 use crate::member::{ForeignUav, Uav};
 use crate::traffic::TrafficRules;
 use policies::PolicyRegistry;
-use roads::Road;
+use roads::Airspace;
 
 /// What one tick reads and writes of the fleet, borrowed field by field: the stages know the fleet
 /// only through this (the fields are named as the fleet's).
 pub(crate) struct TickState<'a> {
     /// Configuration.
     pub config: &'a FleetConfig,
-    /// The road.
-    pub road: &'a Road,
+    /// The road or network.
+    pub road: &'a Airspace,
     /// The UAVs.
     pub uavs: &'a mut Vec<Uav>,
     /// The policies.

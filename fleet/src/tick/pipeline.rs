@@ -18,7 +18,8 @@ use crate::traffic::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::LinkPhase;
 use policies::{Observation, observation};
 use rayon::prelude::*;
-use roads::{NavMode, Navigator};
+use roads::network::Network;
+use roads::{Airspace, NavMode, Navigator, NetworkNavigator, Road};
 use safety::barrier::Clearance;
 use safety::{ReachDisk, activation_radius};
 use std::time::Instant;
@@ -65,10 +66,18 @@ impl TickPipeline {
         self.stages.read_us = lap();
         self.find_neighbours(fleet);
         self.stages.neighbours_us = lap();
-        self.plan_targets(fleet);
-        self.make_way(fleet);
-        if fleet.config.nav == NavMode::Traffic {
-            self.pass_parked(fleet);
+        match fleet.road {
+            Airspace::Road(road) => {
+                self.plan_targets(road, fleet);
+                self.make_way(fleet);
+                if fleet.config.nav == NavMode::Traffic {
+                    self.pass_parked(road, fleet);
+                }
+            }
+            Airspace::Network(net) => {
+                self.plan_ways(net, fleet);
+                self.make_way(fleet);
+            }
         }
         self.stages.navigation_us = lap();
         self.run_policies(fleet);
@@ -118,10 +127,10 @@ impl TickPipeline {
 
     /// Locates every UAV on its route, tracks its progress, applies the traffic rules (`traffic`
     /// navigation) and chooses its temporary target.
-    fn plan_targets(&mut self, fleet: &mut TickState<'_>) {
+    fn plan_targets(&mut self, road: &Road, fleet: &mut TickState<'_>) {
         let params = fleet.config.params;
         let now = fleet.tick as f64 * params.dt;
-        let nav = Navigator::new(fleet.road, fleet.config.nav, &params);
+        let nav = Navigator::new(road, fleet.config.nav, &params);
         let mut segments = std::mem::take(&mut self.segments);
         segments.clear();
         let paused = fleet.paused;
@@ -156,6 +165,29 @@ impl TickPipeline {
         self.segments = segments;
     }
 
+    /// On a network: follows (or plans) every UAV's way through the cells, tracks its progress and
+    /// chooses its temporary target ([`NetworkNavigator`]; the traffic rules of a road do not apply).
+    fn plan_ways(&mut self, net: &Network, fleet: &mut TickState<'_>) {
+        let params = fleet.config.params;
+        let now = fleet.tick as f64 * params.dt;
+        let nav = NetworkNavigator::new(net, &params);
+        let paused = fleet.paused;
+        // Per UAV and independent of the others (as `plan_targets`).
+        let plan = |uav: &mut Uav| {
+            uav.last.target = nav.target(&mut uav.nav, uav.state.p);
+            let tracked = !paused && uav.condition.flying();
+            uav.traffic.route = None;
+            uav.traffic.waiting = None;
+            uav.traffic.progress.update(nav.remaining(&uav.nav, uav.state.p).filter(|_| tracked), now);
+            uav.last.stall_s = uav.traffic.progress.stalled_for(now).unwrap_or(0.0);
+        };
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter_mut().for_each(plan);
+        } else {
+            fleet.uavs.iter_mut().for_each(plan);
+        }
+    }
+
     /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::traffic::yielding`]).
     fn make_way(&mut self, fleet: &mut TickState<'_>) {
         let d_c = fleet.config.params.kept_d_c();
@@ -171,11 +203,10 @@ impl TickPipeline {
     }
 
     /// UAVs flying to their goal aim beside an arrived UAV that blocks their way ([`crate::traffic::passing`]).
-    fn pass_parked(&mut self, fleet: &mut TickState<'_>) {
+    fn pass_parked(&mut self, road: &Road, fleet: &mut TickState<'_>) {
         let params = fleet.config.params;
-        let nav = Navigator::new(fleet.road, fleet.config.nav, &params);
+        let nav = Navigator::new(road, fleet.config.nav, &params);
         let need = nav.clearance_at(0.0);
-        let road = &fleet.road;
         // One wall query per arrived UAV, not one per flying neighbour of it.
         let stuck = &mut self.cannot_step_aside;
         stuck.clear();
@@ -255,8 +286,39 @@ impl TickPipeline {
                 }
             }
         }
-        if fleet.config.nav == NavMode::Traffic {
-            self.limit_speeds(fleet);
+        match fleet.road {
+            Airspace::Road(_) if fleet.config.nav == NavMode::Traffic => self.limit_speeds(fleet),
+            Airspace::Road(_) => {}
+            Airspace::Network(net) => self.limit_network_speeds(net, fleet),
+        }
+    }
+
+    /// On a network: each flying UAV keeps to the speed limit of the road it is on ([`govern`])
+    /// and, with `traffic` navigation, the distance to every neighbour ([`keep_distance`]). Per UAV
+    /// from plain copies, as [`TickPipeline::limit_speeds`].
+    fn limit_network_speeds(&mut self, net: &Network, fleet: &mut TickState<'_>) {
+        let params = &fleet.config.params;
+        let (d_c, delta, dt) = (params.kept_d_c(), params.delta, params.dt);
+        let keep = fleet.config.nav == NavMode::Traffic;
+        let (positions, velocities, lists) = (&self.positions, &self.velocities, &self.neighbours.lists);
+        let limit = |(k, me): (usize, &mut Uav)| {
+            if !me.condition.flying() || me.nav.arrived || me.nav.goal().is_none() {
+                return;
+            }
+            let (p, v) = (me.state.p, me.state.v);
+            let mut u = me.last.u_ref;
+            if let Some(limit) = me.nav.way().and_then(|w| net.speed_limit(w.cell())) {
+                u = govern(v, u, limit, delta, dt);
+            }
+            for &d in lists[k].iter().filter(|_| keep) {
+                u = keep_distance(v, u, positions[d] - p, velocities[d], d_c, delta, dt);
+            }
+            me.last.u_ref = u;
+        };
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter_mut().enumerate().for_each(limit);
+        } else {
+            fleet.uavs.iter_mut().enumerate().for_each(limit);
         }
     }
 

@@ -16,8 +16,8 @@ use crate::member::Uav;
 use crate::ragged::Ragged;
 use crate::tick::parallel;
 use rayon::prelude::*;
-use roads::Road;
-use safety::{Neighbour, ReachDisk, RoadRule, Row, RowKind, neighbour_rows, road_rows};
+use roads::Airspace;
+use safety::{Neighbour, ReachDisk, RoadRule, Row, RowKind, neighbour_rows, network_rows, road_rows};
 use uav::{Params, UavState, Vec2};
 
 /// What the rows of other UAVs need to know about one UAV this tick (plain data, shared by threads).
@@ -31,7 +31,7 @@ pub(crate) struct RowView {
     pub cooperates: bool,
     /// Its reach disk when it does not cooperate but may be in the air ([`crate::Condition::in_the_air`]).
     pub obstacle: Option<ReachDisk>,
-    /// Its tracked segment (a hint for the road's queries).
+    /// Its tracked segment or cell (a hint for the road's queries).
     pub segment: usize,
 }
 
@@ -64,7 +64,7 @@ impl RowBuilder {
     /// `uavs.len() + f`.
     pub fn build(
         &mut self,
-        road: &Road,
+        road: &Airspace,
         rule: RoadRule,
         params: &Params,
         uavs: &[Uav],
@@ -78,7 +78,7 @@ impl RowBuilder {
             flying: u.condition.flying(),
             cooperates: u.condition.cooperates(),
             obstacle: (!u.condition.cooperates() && u.condition.in_the_air()).then(|| disk_of(d)),
-            segment: u.nav.tracker.current.unwrap_or(0),
+            segment: u.nav.way().map_or(u.nav.tracker.current.unwrap_or(0), |w| w.cell()),
         }));
         self.views.extend(foreign_disks.iter().map(|disk| RowView {
             state: UavState { p: disk.centre, v: disk.velocity },
@@ -145,9 +145,10 @@ impl RowBuilder {
     }
 }
 
-/// The road rows and neighbour rows of one flying UAV `me` (see the module doc).
+/// The road rows (on a network: its walls, rule R2 whatever `rule` says, docs/safety.md §5.1) and
+/// neighbour rows of one flying UAV `me` (see the module doc).
 fn rows_of_one(
-    road: &Road,
+    road: &Airspace,
     rule: RoadRule,
     p: &Params,
     me: RowView,
@@ -156,7 +157,10 @@ fn rows_of_one(
     out: &mut Vec<Row>,
 ) {
     let state = me.state;
-    road_rows(road, rule, state.p, state.v, me.segment, p, out);
+    match road {
+        Airspace::Road(road) => road_rows(road, rule, state.p, state.v, me.segment, p, out),
+        Airspace::Network(net) => network_rows(net, state.p, state.v, me.segment, p, out),
+    }
     let what = |d: usize| {
         let other = views[d];
         let seen = match (other.cooperates, other.obstacle) {

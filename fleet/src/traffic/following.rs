@@ -165,7 +165,11 @@ mod tests {
             let link = Box::new(links::SimLink::new(state, params.dt));
             fleet.add(format!("u{k}"), "pd".into(), link, state, Some(*goal));
         }
-        let nav = Navigator::new(&fleet.road, NavMode::Traffic, &params);
+        let nav = Navigator::new(
+            fleet.road.road().expect("the test fleet flies a road"),
+            NavMode::Traffic,
+            &params,
+        );
         for u in &mut fleet.uavs {
             nav.locate(&mut u.nav, u.state.p);
             u.traffic.route = u.nav.position;

@@ -386,7 +386,11 @@ mod tests {
                 Some(*goal),
             );
         }
-        let nav = Navigator::new(&fleet.road, NavMode::Traffic, &params);
+        let nav = Navigator::new(
+            fleet.road.road().expect("the test fleet flies a road"),
+            NavMode::Traffic,
+            &params,
+        );
         let mut rules = TrafficRules::default();
         let neighbours: Ragged<usize> =
             (0..uavs.len()).map(|k| (0..uavs.len()).filter(|&d| d != k).collect()).collect();

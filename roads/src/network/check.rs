@@ -261,6 +261,45 @@ pub(super) fn connected(cells: &[Cell], passages: &[Vec<Passage>]) -> Result<(),
     }
 }
 
+/// Smallest angle (degrees) at which walls may meet inside a network: in a sharper corner the two
+/// walls' rows can ask for more than δ together (docs/safety.md §5.1, §8 (a)).
+pub const MIN_CORNER_DEG: f64 = 90.0;
+
+/// Refuses a corner of the network where walls meet at less than [`MIN_CORNER_DEG`]: at every vertex
+/// that ends a wall, the network's angle is the sum of the angles there of the cells that share it.
+pub(super) fn corners(cells: &[Cell], passages: &[Vec<Passage>]) -> Result<(), RoadError> {
+    // Per vertex (its exact coordinates): the angle summed so far, the first cell, whether a wall ends there.
+    let mut at: HashMap<(u64, u64), (f64, usize, bool)> = HashMap::new();
+    for (c, cell) in cells.iter().enumerate() {
+        let v = &cell.vertices;
+        let n = v.len();
+        let open = |e: usize| passages[c].iter().any(|p| p.edge == e);
+        for k in 0..n {
+            let (a, b) = (v[(k + n - 1) % n] - v[k], v[(k + 1) % n] - v[k]);
+            let angle = (a.dot(&b) / (a.norm() * b.norm())).clamp(-1.0, 1.0).acos();
+            let wall = !open((k + n - 1) % n) || !open(k);
+            let entry = at.entry((v[k].x.to_bits(), v[k].y.to_bits())).or_insert((0.0, c, false));
+            entry.0 += angle;
+            entry.2 |= wall;
+        }
+    }
+    let sharpest = at
+        .iter()
+        .filter(|(_, v)| v.2 && v.0.to_degrees() < MIN_CORNER_DEG - 1e-6)
+        .min_by(|x, y| x.1.0.total_cmp(&y.1.0).then(x.1.1.cmp(&y.1.1)));
+    if let Some((&(x, y), &(angle, c, _))) = sharpest {
+        let kind = cells[c].kind;
+        let message = format!(
+            "walls meet at {:.1}° at [{}, {}]; at least {MIN_CORNER_DEG}°: in a sharper corner a UAV cannot brake for both walls at once",
+            angle.to_degrees(),
+            f64::from_bits(x),
+            f64::from_bits(y)
+        );
+        return Err(error(field_of(kind), segment_of(kind), RoadRule::SharpCorner, message));
+    }
+    Ok(())
+}
+
 /// Refuses a passage narrower than `min_m`.
 pub(super) fn widths(cells: &[Cell], passages: &[Vec<Passage>], min_m: f64) -> Result<(), RoadError> {
     for (c, list) in passages.iter().enumerate() {

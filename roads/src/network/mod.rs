@@ -6,11 +6,13 @@
 //! [`check`]) and derives the cell graph and the walls.
 
 mod check;
-pub use check::{JUNCTION_SIDES, MAX_CELLS, MAX_SPEED_LIMIT};
+pub use check::{JUNCTION_SIDES, MAX_CELLS, MAX_SPEED_LIMIT, MIN_CORNER_DEG};
 pub(crate) mod polygon;
 mod route;
 mod space;
+mod way;
 pub use route::{CRUISE_MPS, Route};
+pub use way::{GateRule, Way};
 #[cfg(test)]
 mod tests;
 
@@ -33,12 +35,13 @@ pub struct NetworkLayout {
 
 /// One road of a network: a chain of quadrilateral segments `[p1, p2, p3, p4]` (p1, p3 of segment
 /// i are p2, p4 of segment i + 1; its walls are p2→p1 and p4→p3 unless another cell shares them).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NetworkRoad {
     /// Unique among the roads: 1 to 64 characters from `A-Z a-z 0-9 _ -`.
     pub name: String,
     /// Its segments in order, from its start to its end.
+    #[schemars(with = "crate::schema::Segments")]
     pub segments: Vec<[[f64; 2]; 4]>,
     /// Flown from its start to its end only.
     #[serde(default)]
@@ -49,12 +52,13 @@ pub struct NetworkRoad {
 }
 
 /// A junction: a convex polygon of 3 to 8 vertices `[x, y]` in order (either way round).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct Junction {
     /// Unique among the junctions: 1 to 64 characters from `A-Z a-z 0-9 _ -`.
     pub name: String,
     /// Its vertices.
+    #[schemars(with = "Vec<crate::schema::Point>", length(min = 3, max = 8))]
     pub polygon: Vec<[f64; 2]>,
 }
 
@@ -123,14 +127,16 @@ pub struct Network {
 
 impl Network {
     /// Validates `layout`: every rule of `check` (convex cells, seamless roads, exact shared edges,
-    /// no overlap, no edge of three cells, connected), and no passage narrower than `min_passage_m`
-    /// (what a UAV needs to cross it: 2·D_s + D_c and margins).
+    /// no overlap, no edge of three cells, connected, no walls meeting at less than
+    /// [`MIN_CORNER_DEG`]), and no passage narrower than `min_passage_m` (what a UAV needs to cross
+    /// it: 2·D_s + D_c and margins).
     pub fn new(layout: NetworkLayout, min_passage_m: f64) -> Result<Self, RoadError> {
         let cells = check::cells(&layout)?;
         let passages = check::passages(&cells)?;
         check::overlaps(&cells)?;
         check::connected(&cells, &passages)?;
         check::widths(&cells, &passages, min_passage_m)?;
+        check::corners(&cells, &passages)?;
         let walls = (0..cells.len())
             .flat_map(|c| {
                 let open: Vec<usize> = passages[c].iter().map(|p| p.edge).collect();

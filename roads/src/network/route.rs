@@ -73,13 +73,17 @@ impl Network {
         leaving_ok && entering_ok
     }
 
+    /// The speed limit (m/s) in cell `cell`: its road's, if it has one (none in a junction).
+    pub fn speed_limit(&self, cell: usize) -> Option<f64> {
+        match self.cells.get(cell)?.kind {
+            CellKind::Segment { road, .. } => self.layout.roads[road].speed_limit,
+            CellKind::Junction { .. } => None,
+        }
+    }
+
     /// Seconds to fly `metres` in cell `cell` (its road's speed limit, else [`CRUISE_MPS`]).
     fn time_in(&self, cell: usize, metres: f64) -> f64 {
-        let speed = match self.cells[cell].kind {
-            CellKind::Segment { road, .. } => self.layout.roads[road].speed_limit.unwrap_or(CRUISE_MPS),
-            CellKind::Junction { .. } => CRUISE_MPS,
-        };
-        metres / speed.min(CRUISE_MPS)
+        metres / self.speed_limit(cell).unwrap_or(CRUISE_MPS).min(CRUISE_MPS)
     }
 
     /// The fastest route from `from` in cell `start` to `to` in cell `goal`; `extra(cell, edge)` is
@@ -87,10 +91,38 @@ impl Network {
     /// goal cannot be reached (one-way roads).
     pub fn route(
         &self,
+        start: (usize, Vec2),
+        goal: (usize, Vec2),
+        extra: impl Fn(usize, usize) -> f64,
+    ) -> Option<Route> {
+        self.route_with(start, goal, extra, true)
+    }
+
+    /// [`Network::route`] that may also fly one-way roads backwards: the way back for a UAV pushed
+    /// past its goal on one (`one_way` false), which no legal route has.
+    pub fn route_back(
+        &self,
+        start: (usize, Vec2),
+        goal: (usize, Vec2),
+        extra: impl Fn(usize, usize) -> f64,
+    ) -> Option<Route> {
+        self.route_with(start, goal, extra, false)
+    }
+
+    fn route_with(
+        &self,
         (start, from): (usize, Vec2),
         (goal, to): (usize, Vec2),
         extra: impl Fn(usize, usize) -> f64,
+        one_way: bool,
     ) -> Option<Route> {
+        let may_cross = |cell: usize, edge: usize| {
+            if one_way {
+                self.may_cross(cell, edge)
+            } else {
+                self.passages[cell].iter().any(|p| p.edge == edge)
+            }
+        };
         if start == goal {
             let cost = self.time_in(start, (to - from).norm());
             return Some(Route { cells: vec![start], waypoints: vec![from, to], cost });
@@ -118,7 +150,7 @@ impl Network {
         let (mut best, mut came) = (vec![f64::INFINITY; nodes.len()], vec![usize::MAX; nodes.len()]);
         let mut heap = BinaryHeap::new();
         for (k, p) in self.passages[start].iter().enumerate() {
-            if self.may_cross(start, p.edge) {
+            if may_cross(start, p.edge) {
                 let at = self.edge_middle(start, p.edge);
                 let cost = self.time_in(start, (at - from).norm()) + extra(start, p.edge);
                 best[offsets[start] + k] = cost;
@@ -140,7 +172,7 @@ impl Network {
                 continue;
             }
             for q in &self.passages[into] {
-                if q.edge == p.other_edge || !self.may_cross(into, q.edge) {
+                if q.edge == p.other_edge || !may_cross(into, q.edge) {
                     continue;
                 }
                 let next = self.edge_middle(into, q.edge);

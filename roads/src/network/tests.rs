@@ -34,7 +34,7 @@ fn square(name: &str, cx: f64, cy: f64, half: f64) -> Junction {
 }
 
 /// A 4-way crossing: a 4 m junction at the origin and four 3-segment roads from its sides.
-fn crossing() -> NetworkLayout {
+pub(super) fn crossing() -> NetworkLayout {
     let east = straight("east", 2.0, 8.0, 0.0, 3, 4.0);
     let west = straight("west", -8.0, -2.0, 0.0, 3, 4.0);
     let north = turned(straight("north", 2.0, 8.0, 0.0, 3, 4.0));
@@ -151,7 +151,7 @@ fn an_edge_of_three_cells_is_refused() {
 
 /// A street grid: `nx` × `ny` junctions `pitch` apart, each `2·half` wide, joined by roads of
 /// `pieces` segments.
-fn grid(nx: usize, ny: usize, pitch: f64, half: f64, pieces: usize) -> NetworkLayout {
+pub(super) fn grid(nx: usize, ny: usize, pitch: f64, half: f64, pieces: usize) -> NetworkLayout {
     let mut layout = NetworkLayout { roads: Vec::new(), junctions: Vec::new() };
     for i in 0..nx {
         for j in 0..ny {
@@ -343,4 +343,23 @@ proptest! {
         }
         prop_assert_eq!(walls.len(), net.walls().count());
     }
+}
+
+#[test]
+fn walls_meeting_at_less_than_90_degrees_are_refused() {
+    // A triangular junction with one road: its far corner is 60° between two walls.
+    let (a, b, c) = ([2.0, -2.0], [2.0, 2.0], [2.0 + 12f64.sqrt(), 0.0]);
+    let west = straight("west", -6.0, 2.0, 0.0, 2, 4.0);
+    let layout = NetworkLayout {
+        roads: vec![west],
+        junctions: vec![Junction { name: "tip".into(), polygon: vec![a, c, b] }],
+    };
+    let (rule, field) = rule(layout);
+    assert_eq!((rule, field.as_str()), (RoadRule::SharpCorner, "junctions[0].polygon"));
+    // A square junction's dead-end corners are 90°: accepted.
+    let square_end = NetworkLayout {
+        roads: vec![straight("west", -6.0, -2.0, 0.0, 2, 4.0)],
+        junctions: vec![square("end", 0.0, 0.0, 2.0)],
+    };
+    assert!(Network::new(square_end, 0.5).is_ok());
 }
