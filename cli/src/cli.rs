@@ -272,9 +272,13 @@ pub struct StressArgs {
     pub seed: u64,
     /// Which random scenarios: `mixed` (bends, widths, hairpins, crowds), `bends` (one-way along
     /// tight bends), `bottleneck` (two-way through a narrow section), `headon` (two groups swapping
-    /// ends through a part 0.5–5 m wide), `hairpin` (two-way through a U-turn) or `crowd` (two
-    /// dense blocks flying through each other).
-    #[arg(long, default_value = "mixed", value_parser = ["mixed", "bends", "bottleneck", "headon", "hairpin", "crowd"])]
+    /// ends through a part 0.5–5 m wide), `hairpin` (two-way through a U-turn), `crowd` (two
+    /// dense blocks flying through each other), or a road network: `tee`, `wye`, `crossing`,
+    /// `merge`, `roundabout`, `grid` (a street grid) or `ring` (a ring with spokes).
+    #[arg(long, default_value = "mixed", value_parser = [
+        "mixed", "bends", "bottleneck", "headon", "hairpin", "crowd",
+        "tee", "wye", "crossing", "merge", "roundabout", "grid", "ring",
+    ])]
     pub family: String,
     /// Save the scenario file of every violating case (stress-SEED.json) and of every case in which
     /// not every UAV arrived (stress-SEED-unfinished.json) into this directory.

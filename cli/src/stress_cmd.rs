@@ -71,7 +71,10 @@ fn run_case(args: &StressArgs, seed: u64) -> CaseResult {
     // The value parser only lets known families through.
     let family: fleet::families::Family = args.family.parse().unwrap_or_default();
     let scenario = family.scenario(seed);
-    let (uavs, segments) = (scenario.uavs.len(), scenario.segments.len());
+    // A network's cells: its roads' segments and its junctions.
+    let network_cells = scenario.roads.iter().flatten().map(|r| r.segments.len()).sum::<usize>()
+        + scenario.junctions.as_ref().map_or(0, Vec::len);
+    let (uavs, segments) = (scenario.uavs.len(), scenario.segments.len() + network_cells);
     // The generators only return validated scenarios.
     let valid = scenario.validate().expect("stress scenarios are valid by construction");
     // Checked in `main` before any case runs.

@@ -2,9 +2,11 @@
 //! of [`crate::runs::stress`]), `bends` (one-way traffic along winding roads with tight bends: the
 //! inner-vertex stall), `bottleneck` (two-way traffic through one narrow section), `headon` (two
 //! groups swapping ends through a long part 0.5–5 m wide), `hairpin` (opposite traffic through a
-//! U-turn) and `crowd` (two dense blocks flying through each other). Case i of a run with seed S
-//! uses seed S + i in every family.
+//! U-turn) and `crowd` (two dense blocks flying through each other); and on road networks
+//! ([`crate::runs::networks`]) `tee`, `wye`, `crossing`, `merge`, `roundabout`, `grid` and `ring`.
+//! Case i of a run with seed S uses seed S + i in every family.
 
+use crate::runs::networks::{self, Shape};
 use crate::runs::stress::{STRESS_T_MAX_S, random_scenario};
 use crate::scenario::{Scenario, ScenarioUav};
 use rand::rngs::StdRng;
@@ -32,11 +34,38 @@ pub enum Family {
     /// A straight road 4–10 m wide; two blocks of 10–30 UAVs each, packed D_c + 0.3 m apart, fly
     /// through each other to the far side.
     Crowd,
+    /// A network: a rectangular junction with three roads (a T); 2–16 UAVs between their ends.
+    Tee,
+    /// A network: a triangular junction with three roads (a Y); 2–16 UAVs between their ends.
+    Wye,
+    /// A network: a 4-way crossing; 2–16 UAVs between the ends of its roads.
+    Crossing,
+    /// A network: two one-way roads merging into one; 2–12 UAVs from both into the one.
+    Merge,
+    /// A network: a one-way ring of 3–5 entries, each with a spoke; 3–16 UAVs between the spokes.
+    Roundabout,
+    /// A network: a street grid of 2–4 × 2–4 junctions; 4–24 UAVs between random points.
+    Grid,
+    /// A network: a two-way ring of 5–8 entries with spokes; 3–24 UAVs between the spokes.
+    Ring,
 }
 
 /// Every family, in the order of the CLI's list.
-pub const FAMILIES: [Family; 6] =
-    [Family::Mixed, Family::Bends, Family::Bottleneck, Family::HeadOn, Family::Hairpin, Family::Crowd];
+pub const FAMILIES: [Family; 13] = [
+    Family::Mixed,
+    Family::Bends,
+    Family::Bottleneck,
+    Family::HeadOn,
+    Family::Hairpin,
+    Family::Crowd,
+    Family::Tee,
+    Family::Wye,
+    Family::Crossing,
+    Family::Merge,
+    Family::Roundabout,
+    Family::Grid,
+    Family::Ring,
+];
 
 impl Family {
     /// The CLI name.
@@ -48,6 +77,13 @@ impl Family {
             Family::HeadOn => "headon",
             Family::Hairpin => "hairpin",
             Family::Crowd => "crowd",
+            Family::Tee => "tee",
+            Family::Wye => "wye",
+            Family::Crossing => "crossing",
+            Family::Merge => "merge",
+            Family::Roundabout => "roundabout",
+            Family::Grid => "grid",
+            Family::Ring => "ring",
         }
     }
 
@@ -60,6 +96,13 @@ impl Family {
             Family::HeadOn => head_on(seed),
             Family::Hairpin => hairpin(seed),
             Family::Crowd => crowd(seed),
+            Family::Tee => networks::scenario(Shape::Tee, seed),
+            Family::Wye => networks::scenario(Shape::Wye, seed),
+            Family::Crossing => networks::scenario(Shape::Crossing, seed),
+            Family::Merge => networks::scenario(Shape::Merge, seed),
+            Family::Roundabout => networks::scenario(Shape::Roundabout, seed),
+            Family::Grid => networks::scenario(Shape::Grid, seed),
+            Family::Ring => networks::scenario(Shape::Ring, seed),
         }
     }
 }

@@ -7,6 +7,7 @@ pub mod families;
 pub(crate) mod histogram;
 pub(crate) mod margins;
 pub(crate) mod metrics;
+pub(crate) mod networks;
 pub mod paths;
 pub(crate) mod run;
 pub mod stress;
