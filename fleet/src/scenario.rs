@@ -122,6 +122,16 @@ pub fn min_passage_m(params: &Params) -> f64 {
 }
 
 impl Scenario {
+    /// A scenario on one road of `segments` (no regions).
+    pub fn on_road(
+        name: String,
+        params: Params,
+        segments: Vec<[[f64; 2]; 4]>,
+        uavs: Vec<ScenarioUav>,
+    ) -> Self {
+        Self { name, params, segments, regions: None, roads: None, junctions: None, uavs }
+    }
+
     /// The road (`segments`, `regions`) or the network (`roads`, `junctions`), validated.
     fn airspace(&self) -> Result<Airspace, ScenarioError> {
         let refused = |e: roads::RoadError| invalid(e.field, format!("{} ({})", e.message, e.rule.name()));

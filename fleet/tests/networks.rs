@@ -4,7 +4,7 @@
 //! shipped `rl` policy, each case judged on the network's walls and the UAVs' separations.
 //! BENCHMARKS.md "Road networks" has the figures and the commands.
 
-use fleet::families::Family;
+use fleet::families::{Family, NETWORK_FAMILIES};
 use fleet::{FleetConfig, RunMetrics, RunOptions, run_scenario};
 use policies::PolicyRegistry;
 use std::sync::Mutex;
@@ -15,16 +15,6 @@ const CASES: u64 = 300;
 
 /// Cases of each family in which every UAV must arrive (issue 34's bar; all 300 did when measured).
 const ARRIVED: usize = 299;
-
-const NETWORK_FAMILIES: [Family; 7] = [
-    Family::Tee,
-    Family::Wye,
-    Family::Crossing,
-    Family::Merge,
-    Family::Roundabout,
-    Family::Grid,
-    Family::Ring,
-];
 
 /// Flies cases 1..=[`CASES`] of `family` with `policy` on every core; returns each case's seed and
 /// metrics.

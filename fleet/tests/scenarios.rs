@@ -74,20 +74,14 @@ fn hairpin() -> Scenario {
         goal,
         link: None,
     };
-    Scenario {
-        name: "hairpin".into(),
-        params: Params { t_max: 60.0, ..Params::default() },
-        segments: layout.segments,
-        regions: None,
-        roads: None,
-        junctions: None,
-        uavs: vec![
-            uav(0, [1.0, -0.8], [11.0, 6.9]),
-            uav(1, [1.0, 0.8], [10.0, 7.6]),
-            uav(2, [2.5, 0.0], [10.0, 6.2]),
-            uav(3, [4.0, -0.8], [9.0, 6.9]),
-        ],
-    }
+    let params = Params { t_max: 60.0, ..Params::default() };
+    let uavs = vec![
+        uav(0, [1.0, -0.8], [11.0, 6.9]),
+        uav(1, [1.0, 0.8], [10.0, 7.6]),
+        uav(2, [2.5, 0.0], [10.0, 6.2]),
+        uav(3, [4.0, -0.8], [9.0, 6.9]),
+    ];
+    Scenario::on_road("hairpin".into(), params, layout.segments, uavs)
 }
 
 #[test]

@@ -29,15 +29,12 @@ fn stall_time_counts_a_uav_that_hovers_with_a_goal_and_nothing_else() {
     // from about its first seconds to t_max.
     let layout = RoadLayout::from_centerline(&[[0.0, 0.0], [12.0, 0.0], [12.0, 8.0], [0.0, 8.0]], &[3.0; 4]);
     let params = Params { t_max: 30.0, ..Params::default() };
-    let stuck = Scenario {
-        name: "u-turn".into(),
+    let stuck = Scenario::on_road(
+        "u-turn".into(),
         params,
-        segments: layout.segments.clone(),
-        regions: None,
-        roads: None,
-        junctions: None,
-        uavs: vec![uav("a", [1.0, -0.5], [1.0, 8.5])],
-    };
+        layout.segments.clone(),
+        vec![uav("a", [1.0, -0.5], [1.0, 8.5])],
+    );
     let m = fly(&stuck.validate().unwrap(), NavMode::Alg1, "pd");
     assert!(!m.all_arrived);
     assert!(m.max_stall_s > 20.0 && m.max_stall_s <= 30.0, "{m:#?}");
@@ -73,17 +70,7 @@ fn a_single_file_section_passes_both_directions_in_turn() {
         uavs.push(uav(&format!("e{i}"), [10.5, y], [-10.0, y]));
     }
     let params = Params { t_max: 120.0, ..Params::default() };
-    let s = Scenario {
-        name: "single-file".into(),
-        params,
-        segments: layout.segments,
-        regions: None,
-        roads: None,
-        junctions: None,
-        uavs,
-    }
-    .validate()
-    .unwrap();
+    let s = Scenario::on_road("single-file".into(), params, layout.segments, uavs).validate().unwrap();
     let road = s.road.road().expect("one road");
     let nav = roads::Navigator::new(road, NavMode::Traffic, &s.params);
     let sections = fleet::sections::sections(road, &nav);
@@ -194,9 +181,7 @@ fn sharp_left_bend_road() -> Vec<[[f64; 2]; 4]> {
 
 fn on_road(name: &str, segments: Vec<[[f64; 2]; 4]>, uavs: Vec<ScenarioUav>) -> ValidScenario {
     let params = Params { t_max: 30.0, ..Params::default() };
-    Scenario { name: name.into(), params, segments, regions: None, roads: None, junctions: None, uavs }
-        .validate()
-        .unwrap()
+    Scenario::on_road(name.into(), params, segments, uavs).validate().unwrap()
 }
 
 #[test]

@@ -25,15 +25,7 @@ fn uav(id: &str, start: [f64; 2]) -> ScenarioUav {
 }
 
 fn scenario(uavs: Vec<ScenarioUav>) -> Scenario {
-    Scenario {
-        name: "t".into(),
-        params: Default::default(),
-        segments: RoadLayout::straight(0.0, 30.0, 4.0, 3).segments,
-        regions: None,
-        roads: None,
-        junctions: None,
-        uavs,
-    }
+    Scenario::on_road("t".into(), Default::default(), RoadLayout::straight(0.0, 30.0, 4.0, 3).segments, uavs)
 }
 
 fn invalid(s: &Scenario) -> (String, String) {

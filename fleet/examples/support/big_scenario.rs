@@ -55,15 +55,7 @@ pub fn scenario(count: usize) -> Scenario {
             link: None,
         })
         .collect();
-    Scenario {
-        name: "big".into(),
-        params: Params::default(),
-        segments: road().segments,
-        regions: None,
-        roads: None,
-        junctions: None,
-        uavs,
-    }
+    Scenario::on_road("big".into(), Params::default(), road().segments, uavs)
 }
 
 /// The same scenario with its last UAV starting 0.1 m from the first one (closer than D_c).

@@ -50,6 +50,17 @@ pub enum Family {
     Ring,
 }
 
+/// The families on road networks ([`crate::runs::networks`]).
+pub const NETWORK_FAMILIES: [Family; 7] = [
+    Family::Tee,
+    Family::Wye,
+    Family::Crossing,
+    Family::Merge,
+    Family::Roundabout,
+    Family::Grid,
+    Family::Ring,
+];
+
 /// Every family, in the order of the CLI's list.
 pub const FAMILIES: [Family; 13] = [
     Family::Mixed,
@@ -182,15 +193,7 @@ fn bends(seed: u64) -> Scenario {
             continue;
         }
         let uavs = starts.iter().zip(&goals).enumerate().map(|(i, (s, g))| uav(i, "u", *s, *g)).collect();
-        let scenario = Scenario {
-            name: format!("bends-{seed}"),
-            params: p,
-            segments: layout.segments,
-            regions: None,
-            roads: None,
-            junctions: None,
-            uavs,
-        };
+        let scenario = Scenario::on_road(format!("bends-{seed}"), p, layout.segments, uavs);
         if scenario.validate().is_ok() {
             return scenario;
         }
@@ -246,15 +249,7 @@ fn swap_ends(road: &Road, west: usize, east: usize, p: &Params) -> Option<Vec<Sc
 
 /// The scenario if it validates with at least two UAVs.
 fn valid(name: String, params: Params, layout: RoadLayout, uavs: Vec<ScenarioUav>) -> Option<Scenario> {
-    let scenario = Scenario {
-        name,
-        params,
-        segments: layout.segments,
-        regions: None,
-        roads: None,
-        junctions: None,
-        uavs,
-    };
+    let scenario = Scenario::on_road(name, params, layout.segments, uavs);
     (scenario.uavs.len() >= 2 && scenario.validate().is_ok()).then_some(scenario)
 }
 

@@ -20,15 +20,7 @@ pub fn random_scenario(seed: u64) -> Scenario {
         let wanted = rng.random_range(2..=30usize);
         let uavs = random_fleet(&mut rng, &road, &params, wanted);
         if uavs.len() >= 2 {
-            return Scenario {
-                name: format!("stress-{seed}"),
-                params,
-                segments: layout.segments,
-                regions: None,
-                roads: None,
-                junctions: None,
-                uavs,
-            };
+            return Scenario::on_road(format!("stress-{seed}"), params, layout.segments, uavs);
         }
     }
 }
@@ -137,15 +129,7 @@ pub fn crowd_scenario(n: usize) -> Scenario {
         })
         .collect();
     let params = Params { t_max: 120.0, ..Params::default() };
-    Scenario {
-        name: format!("crowd{n}"),
-        params,
-        segments,
-        regions: None,
-        roads: None,
-        junctions: None,
-        uavs,
-    }
+    Scenario::on_road(format!("crowd{n}"), params, segments, uavs)
 }
 
 #[cfg(test)]

@@ -54,15 +54,7 @@ pub fn trunk_scenario(n: usize, seed: u64) -> Result<Scenario, RoadError> {
         })
         .collect();
     let params = Params { t_max: 300.0, ..Params::default() };
-    Ok(Scenario {
-        name: format!("trunk{n}"),
-        params,
-        segments: layout.segments,
-        regions: None,
-        roads: None,
-        junctions: None,
-        uavs,
-    })
+    Ok(Scenario::on_road(format!("trunk{n}"), params, layout.segments, uavs))
 }
 
 #[cfg(test)]
