@@ -11,24 +11,26 @@ use uav::{Params, Vec2};
 /// A scenario as written in JSON.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
+#[schemars(transform = one_road_schema)]
 pub struct Scenario {
     /// Scenario name (reported in the metrics).
     pub name: String,
     /// Parameters; missing keys take their defaults, unknown keys are an error.
     #[serde(default)]
     pub params: Params,
-    /// Road segments, as in a road layout (one road; or give `roads` for a network).
+    /// Road segments, as in a road layout (one road; a scenario file may give `roads` instead).
+    // Required in the REST schema (`one_road_schema`): the server flies one road, and refuses `roads`.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     #[schemars(with = "roads::schema::Segments")]
-    #[schemars(
-        description = "one road's segments, as in a road layout; a scenario gives these or `roads`, not both"
-    )]
     pub segments: Vec<[[f64; 2]; 4]>,
-    /// A network's roads (instead of `segments`): named chains of segments.
+    /// A network's roads (instead of `segments`): named chains of segments. Not in the REST schema:
+    /// the server does not fly networks yet.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(skip)]
     pub roads: Option<Vec<NetworkRoad>>,
-    /// A network's junctions (with `roads`).
+    /// A network's junctions (with `roads`); not in the REST schema, as `roads`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(skip)]
     pub junctions: Option<Vec<Junction>>,
     /// The road's regions, as in a road layout (`airroads serve --region`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -41,6 +43,18 @@ pub struct Scenario {
         description = "the fleet, at least one UAV with unique ids; beyond the schema each start and goal must be inside this scenario's road at least D_s from its walls and the starts D_c apart, and the fleet must not exceed `--max-uavs`"
     )]
     pub uavs: Vec<ScenarioUav>,
+}
+
+/// The REST schema of a scenario requires `segments`: the server flies one road (a file may give a
+/// network's `roads` instead, which the REST schema leaves out and the server refuses).
+fn one_road_schema(schema: &mut schemars::Schema) {
+    let object = schema.ensure_object();
+    let required = object.entry("required").or_insert_with(|| serde_json::Value::Array(Vec::new()));
+    if let Some(list) = required.as_array_mut()
+        && !list.iter().any(|v| v == "segments")
+    {
+        list.push("segments".into());
+    }
 }
 
 /// One UAV of a scenario as written in JSON.
