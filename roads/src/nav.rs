@@ -165,14 +165,6 @@ impl NavState {
             self.target = p;
         }
     }
-
-    /// Re-locates the goal after the road changed (a way through a network is planned afresh).
-    pub fn road_changed(&mut self, airspace: &Airspace) {
-        self.tracker = SegmentTracker::default();
-        self.position = None;
-        self.way = None;
-        self.goal = self.goal.map(|g| Goal::on(airspace, g.p));
-    }
 }
 
 /// What the fleet's traffic rules ask of one UAV's next target (`traffic` navigation).

@@ -55,8 +55,6 @@ pub struct Way {
     at: usize,
     /// The goal.
     goal: Vec2,
-    /// The travel time of the route when planned (s).
-    cost: f64,
 }
 
 impl Network {
@@ -72,11 +70,11 @@ impl Network {
         extra: impl Fn(usize, usize) -> f64,
     ) -> Option<Way> {
         let (start, goal) = (self.locate(&from)?, self.locate(&to)?);
-        let Route { cells, cost, .. } = self
+        let Route { cells, .. } = self
             .route((start, from), (goal, to), &extra)
             .or_else(|| self.route_back((start, from), (goal, to), &extra))?;
         let (gates, openings) = cells.windows(2).map(|pair| self.gate(pair[0], pair[1], rule)).unzip();
-        Some(Way { cells, gates, openings, at: 0, goal: to, cost })
+        Some(Way { cells, gates, openings, at: 0, goal: to })
     }
 
     /// The gate from cell `from` into its neighbour `into`, and its opening.
@@ -133,11 +131,6 @@ impl Way {
     /// The goal.
     pub fn goal(&self) -> Vec2 {
         self.goal
-    }
-
-    /// The route's travel time when it was planned (s).
-    pub fn cost(&self) -> f64 {
-        self.cost
     }
 
     /// Follows a UAV now at `p`: finds it in its cell, the next ones or the previous one. False when
