@@ -6,7 +6,7 @@
 //! ([`crate::runs::networks`]) `tee`, `wye`, `crossing`, `merge`, `roundabout`, `grid` and `ring`.
 //! Case i of a run with seed S uses seed S + i in every family.
 
-use crate::runs::networks::{self, Shape};
+use crate::runs::networks;
 use crate::runs::stress::{STRESS_T_MAX_S, random_scenario};
 use crate::scenario::{Scenario, ScenarioUav};
 use rand::rngs::StdRng;
@@ -107,13 +107,8 @@ impl Family {
             Family::HeadOn => head_on(seed),
             Family::Hairpin => hairpin(seed),
             Family::Crowd => crowd(seed),
-            Family::Tee => networks::scenario(Shape::Tee, seed),
-            Family::Wye => networks::scenario(Shape::Wye, seed),
-            Family::Crossing => networks::scenario(Shape::Crossing, seed),
-            Family::Merge => networks::scenario(Shape::Merge, seed),
-            Family::Roundabout => networks::scenario(Shape::Roundabout, seed),
-            Family::Grid => networks::scenario(Shape::Grid, seed),
-            Family::Ring => networks::scenario(Shape::Ring, seed),
+            // The families not matched above are the network families.
+            network => networks::scenario(*network, seed).expect("a network family"),
         }
     }
 }

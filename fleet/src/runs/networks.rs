@@ -4,6 +4,7 @@
 //! far ends of its roads (in the grid, between random points). Each generator retries until the
 //! scenario validates.
 
+use crate::runs::families::Family;
 use crate::scenario::{Scenario, ScenarioUav};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -14,40 +15,36 @@ use uav::{Params, Vec2};
 /// Simulated time limit (s) of a network case: routes through a grid or round a ring are long.
 pub const NETWORK_T_MAX_S: f64 = 120.0;
 
-/// The shapes of [`crate::families::Family`]'s network families.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum Shape {
-    Tee,
-    Wye,
-    Crossing,
-    Merge,
-    Roundabout,
-    Grid,
-    Ring,
-}
-
-/// The scenario of case `seed` of `shape`.
-pub(crate) fn scenario(shape: Shape, seed: u64) -> Scenario {
+/// The scenario of case `seed` of the network family `family` (None for a family on one road).
+pub(crate) fn scenario(family: Family, seed: u64) -> Option<Scenario> {
     let mut rng = StdRng::seed_from_u64(seed);
     let params = Params { t_max: NETWORK_T_MAX_S, ..Params::default() };
     loop {
-        let (layout, ends) = match shape {
-            Shape::Tee => {
+        let (layout, ends) = match family {
+            Family::Tee => {
                 let v = rectangle(&mut rng);
                 star(&mut rng, &v, &[0, 1, 3])
             }
-            Shape::Wye => {
+            Family::Wye => {
                 let v = on_circle(&mut rng, 3, 15.0);
                 star(&mut rng, &v, &[0, 1, 2])
             }
-            Shape::Crossing => {
+            Family::Crossing => {
                 let v = on_circle(&mut rng, 4, 10.0);
                 star(&mut rng, &v, &[0, 1, 2, 3])
             }
-            Shape::Merge => merge(&mut rng),
-            Shape::Roundabout => ring(&mut rng, 3..=5, true),
-            Shape::Grid => grid(&mut rng),
-            Shape::Ring => ring(&mut rng, 5..=8, false),
+            Family::Merge => merge(&mut rng),
+            Family::Roundabout => ring(&mut rng, 3..=5, true),
+            Family::Grid => grid(&mut rng),
+            Family::Ring => ring(&mut rng, 5..=8, false),
+            Family::Mixed
+            | Family::Bends
+            | Family::Bottleneck
+            | Family::HeadOn
+            | Family::Hairpin
+            | Family::Crowd => {
+                return None;
+            }
         };
         let turn = rng.random_range(0.0..TAU);
         let layout = turned(layout, turn);
@@ -56,24 +53,12 @@ pub(crate) fn scenario(shape: Shape, seed: u64) -> Scenario {
         if uavs.len() < 2 {
             continue;
         }
-        let name = format!("{}-{seed}", shape_name(shape));
+        let name = format!("{}-{seed}", family.name());
         let (roads, junctions) = (Some(layout.roads), Some(layout.junctions));
         let scenario = Scenario { name, params, segments: Vec::new(), regions: None, roads, junctions, uavs };
         if scenario.validate().is_ok() {
-            return scenario;
+            return Some(scenario);
         }
-    }
-}
-
-fn shape_name(shape: Shape) -> &'static str {
-    match shape {
-        Shape::Tee => "tee",
-        Shape::Wye => "wye",
-        Shape::Crossing => "crossing",
-        Shape::Merge => "merge",
-        Shape::Roundabout => "roundabout",
-        Shape::Grid => "grid",
-        Shape::Ring => "ring",
     }
 }
 
