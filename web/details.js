@@ -7,6 +7,8 @@ const MAX_CARDS = 4;
 const REASONS = {
   single_file: "waits for its turn at a single-file section",
   deadlock_backoff: "backs off out of a deadlocked neighbour's way",
+  junction: "waits before a junction for a crossing movement to clear it",
+  merge: "waits for its turn at a merge",
 };
 
 const fmt = (v, d = 2) => (v === null || v === undefined ? "–" : v.toFixed(d));

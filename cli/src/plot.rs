@@ -113,6 +113,8 @@ fn draw_path(area: &Area, path: &UavPath, colour: RGBAColor) -> anyhow::Result<(
         let fill = match w.reason {
             WaitReason::SingleFile => RGBColor(230, 198, 25),
             WaitReason::DeadlockBackoff => RGBColor(230, 120, 25),
+            WaitReason::Junction => RGBColor(40, 150, 220),
+            WaitReason::Merge => RGBColor(140, 90, 210),
         };
         // A square where the wait began, labelled with its reason and length.
         let label = format!("{} {:.1} s", w.reason.name(), w.duration_s);

@@ -180,6 +180,8 @@ fn report(args: &StressArgs, results: &[CaseResult]) -> ExitCode {
     let stalls: f64 = results.iter().map(|r| r.metrics.stall_s).sum();
     let longest = results.iter().map(|r| r.metrics.max_stall_s).fold(0.0, f64::max);
     say!("  stalls {stalls:.1} UAV-s in total, longest {longest:.1} s");
+    let wait = results.iter().map(|r| r.metrics.max_wait_s).fold(0.0, f64::max);
+    say!("  longest wait for a turn at a conflict zone {wait:.1} s");
     let unfinished: Vec<&CaseResult> = results.iter().filter(|r| !r.metrics.all_arrived).collect();
     if !unfinished.is_empty() {
         say!("  not all arrived (replay with: airroads stress --family FAMILY --scenarios 1 --seed SEED):");

@@ -107,7 +107,8 @@ pub struct UavSnapshot {
     /// What its firmware reports about itself (Crazyflies only; absent for in-process UAVs).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub firmware: Option<FirmwareSnapshot>,
-    /// Why a traffic rule holds it back (`single_file`, `deadlock_backoff`), null when none does.
+    /// Why a traffic rule holds it back (`single_file`, `deadlock_backoff`, `junction`, `merge`), null
+    /// when none does.
     pub wait_reason: Option<&'static str>,
     /// CBF rows binding at u.
     pub active_rows: usize,

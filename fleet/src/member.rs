@@ -82,14 +82,20 @@ pub enum WaitReason {
     SingleFile,
     /// It backs off out of a deadlocked neighbour's way.
     DeadlockBackoff,
+    /// It waits before a junction of a network for a movement that crosses its own to clear it.
+    Junction,
+    /// It waits before a merge of a network for its turn (the merging arms go in order).
+    Merge,
 }
 
 impl WaitReason {
-    /// The name in the API (`single_file`, `deadlock_backoff`).
+    /// The name in the API (`single_file`, `deadlock_backoff`, `junction`, `merge`).
     pub fn name(&self) -> &'static str {
         match self {
             WaitReason::SingleFile => "single_file",
             WaitReason::DeadlockBackoff => "deadlock_backoff",
+            WaitReason::Junction => "junction",
+            WaitReason::Merge => "merge",
         }
     }
 }
@@ -103,6 +109,11 @@ pub struct UavTraffic {
     pub grant: Option<(usize, usize)>,
     /// Since when (s) it waits for a zone.
     pub waiting_since: Option<f64>,
+    /// On a network: the conflict zone it may cross (or crosses), with its movement through it
+    /// (`crate::traffic::junctions`).
+    pub junction: Option<(usize, roads::network::Movement)>,
+    /// On a network: where its way stops this tick (before a conflict zone it may not enter yet).
+    pub hold: Option<roads::network::Hold>,
     /// The zone (with its entry) it last crossed with a grant: pushed back over that zone's exit
     /// edge, it does not queue for it again (the queue's hold point is on the far side: `mixed`
     /// seed 68 with `rl` flew 12 m back through a section it had crossed).

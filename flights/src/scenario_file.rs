@@ -27,6 +27,7 @@ pub fn print_summary(m: &RunMetrics, policy_fallbacks: u64, stalls: &[fleet::Sta
     say!("scenario {}: {} ticks, {:.2} s simulated", m.scenario, m.ticks, m.sim_time_s);
     say!("  arrived          {arrived}/{}", m.arrival_time_s.len());
     say!("  stalls           {:.1} UAV-s in total, longest {:.1} s", m.stall_s, m.max_stall_s);
+    say!("  longest wait     {:.1} s for a turn at a conflict zone", m.max_wait_s);
     for s in stalls.iter().filter(|s| s.duration_s > 2.0).take(5) {
         say!(
             "                   {} {:.1} s from t = {:.1} s at [{:.2}, {:.2}]",

@@ -4,7 +4,7 @@
 //! path through the gates that it sees through them, the goal once it is that close and seen.
 
 use crate::nav::NavState;
-use crate::network::{GateRule, Network};
+use crate::network::{GateRule, Hold, Network};
 use crate::traffic_nav::{CLEARANCE_MARGIN_M, LANE_GAP_MARGIN_M};
 use uav::{Params, Vec2};
 
@@ -38,24 +38,41 @@ impl<'a> NetworkNavigator<'a> {
     /// when no way can be planned (`p` outside the network, or the goal behind one-way roads) it is
     /// `p`: the UAV holds where it is.
     pub fn target(&self, state: &mut NavState, p: Vec2) -> Vec2 {
+        self.follow(state, p);
+        self.choose(state, p, None)
+    }
+
+    /// The first half of [`NetworkNavigator::target`]: arrival, and the way followed or planned.
+    pub fn follow(&self, state: &mut NavState, p: Vec2) {
         let Some(goal) = state.goal.map(|g| g.p) else {
             state.way = None;
-            return state.target;
+            return;
         };
         if (p - goal).norm() <= self.epsilon {
             state.arrived = true;
         }
         if state.arrived {
-            state.target = goal;
-            return goal;
+            return;
         }
         let on_way = state.way.as_mut().is_some_and(|w| w.follow(self.net, p));
         if !on_way {
             state.way = self.net.way(p, goal, self.gates, |_, _| 0.0);
         }
-        state.target = match &state.way {
-            Some(way) => way.target(self.net, p, self.r_s),
-            None => p,
+    }
+
+    /// The second half of [`NetworkNavigator::target`]: the target of a UAV at `p` after
+    /// [`NetworkNavigator::follow`], its way stopped by `hold` (a conflict zone it may not enter yet).
+    pub fn choose(&self, state: &mut NavState, p: Vec2, hold: Option<Hold>) -> Vec2 {
+        let Some(goal) = state.goal.map(|g| g.p) else {
+            return state.target;
+        };
+        state.target = if state.arrived {
+            goal
+        } else {
+            match &state.way {
+                Some(way) => way.target_held(self.net, p, self.r_s, hold),
+                None => p,
+            }
         };
         state.target
     }

@@ -36,6 +36,11 @@ pub struct Road {
 /// The id of the next road built.
 static NEXT_ROAD_ID: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(1);
 
+/// A new id for a road or network built now.
+pub(crate) fn next_id() -> u64 {
+    NEXT_ROAD_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed)
+}
+
 impl Road {
     /// Validates `layout` (docs/safety.md §5) and derives walls, end caps and the centre line.
     pub fn new(layout: RoadLayout) -> Result<Self, RoadError> {
@@ -57,7 +62,7 @@ impl Road {
         let centerline = CenterLine::new(&quads);
         let index = RoadIndex::new(&quads, &walls);
         let profile = ClearanceProfile::new(&centerline, &walls, quads.len());
-        let id = NEXT_ROAD_ID.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let id = next_id();
         Ok(Self {
             layout,
             quads,

@@ -14,10 +14,11 @@ use std::path::PathBuf;
 use tokio::sync::oneshot;
 
 /// The keys of METRICS.json, sorted: a public contract (docs/runs.md).
-pub const METRICS_KEYS: [&str; 14] = [
+pub const METRICS_KEYS: [&str; 15] = [
     "all_arrived",
     "arrival_time_s",
     "max_stall_s",
+    "max_wait_s",
     "min_collision_margin_m",
     "min_road_margin_m",
     "min_separation_m",

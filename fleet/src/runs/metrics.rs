@@ -46,6 +46,9 @@ pub struct RunMetrics {
     pub stall_s: f64,
     /// The longest single stall (s).
     pub max_stall_s: f64,
+    /// The longest a UAV waited for its turn at a conflict zone (a single-file section, a junction
+    /// or a merge of a network), from asking to being admitted (s).
+    pub max_wait_s: f64,
     /// min over time and pairs of S_kd (eq. 2, corrected sign), over the pairs within each tick's
     /// neighbour radius (every other pair's S_kd is above D_c); null when no two UAVs came that close.
     pub min_collision_margin_m: Option<f64>,
@@ -104,6 +107,7 @@ pub struct MetricsRecorder {
     arrival: Vec<Option<f64>>,
     stall_s: f64,
     max_stall_s: f64,
+    max_wait_s: f64,
     /// Stalls going on, by UAV index (a headless run never removes UAVs), and those that ended, each
     /// with its UAV's index (the id is looked up when they are read: no string copied per stall).
     ongoing: Vec<Option<StallRecord>>,
@@ -199,6 +203,9 @@ impl MetricsRecorder {
             let last = &u.last;
             self.stall_s += stall_time_added(last.stall_s, p.dt);
             self.max_stall_s = self.max_stall_s.max(last.stall_s);
+            if let Some(since) = u.traffic.waiting_since {
+                self.max_wait_s = self.max_wait_s.max(t - since);
+            }
             if self.ongoing.len() <= k {
                 self.ongoing.resize(k + 1, None);
             }
@@ -270,6 +277,7 @@ impl MetricsRecorder {
             arrival_time_s: arrival,
             stall_s: self.stall_s,
             max_stall_s: self.max_stall_s,
+            max_wait_s: self.max_wait_s,
             min_collision_margin_m: self.min_collision,
             min_road_margin_m: self.min_road,
             min_separation_m: self.min_separation,

@@ -165,26 +165,42 @@ impl TickPipeline {
         self.segments = segments;
     }
 
-    /// On a network: follows (or plans) every UAV's way through the cells, tracks its progress and
-    /// chooses its temporary target ([`NetworkNavigator`]; the traffic rules of a road do not apply).
+    /// On a network: follows (or plans) every UAV's way through the cells, tracks its progress,
+    /// applies the junction rules (`traffic` navigation, [`crate::traffic::junctions`]) and chooses
+    /// its temporary target ([`NetworkNavigator`]).
     fn plan_ways(&mut self, net: &Network, fleet: &mut TickState<'_>) {
         let params = fleet.config.params;
         let now = fleet.tick as f64 * params.dt;
         let nav = NetworkNavigator::new(net, &params);
         let paused = fleet.paused;
+        let tracked = |uav: &Uav| !paused && uav.condition.flying() && !uav.nav.arrived;
         // Per UAV and independent of the others (as `plan_targets`).
-        let plan = |uav: &mut Uav| {
-            uav.last.target = nav.target(&mut uav.nav, uav.state.p);
-            let tracked = !paused && uav.condition.flying();
+        let follow = |uav: &mut Uav| {
+            nav.follow(&mut uav.nav, uav.state.p);
             uav.traffic.route = None;
             uav.traffic.waiting = None;
-            uav.traffic.progress.update(nav.remaining(&uav.nav, uav.state.p).filter(|_| tracked), now);
+            let remaining = nav.remaining(&uav.nav, uav.state.p).filter(|_| tracked(uav));
+            uav.traffic.progress.update(remaining, now);
             uav.last.stall_s = uav.traffic.progress.stalled_for(now).unwrap_or(0.0);
         };
         if parallel(fleet.uavs.len()) {
-            fleet.uavs.par_iter_mut().for_each(plan);
+            fleet.uavs.par_iter_mut().for_each(follow);
         } else {
-            fleet.uavs.iter_mut().for_each(plan);
+            fleet.uavs.iter_mut().for_each(follow);
+        }
+        if fleet.config.nav == NavMode::Traffic {
+            let rules = &mut fleet.traffic.junctions;
+            rules.plan(net, nav.gates, &params, now, fleet.uavs, tracked);
+        } else {
+            fleet.uavs.iter_mut().for_each(|u| u.traffic.hold = None);
+        }
+        let choose = |uav: &mut Uav| {
+            uav.last.target = nav.choose(&mut uav.nav, uav.state.p, uav.traffic.hold);
+        };
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter_mut().for_each(choose);
+        } else {
+            fleet.uavs.iter_mut().for_each(choose);
         }
     }
 

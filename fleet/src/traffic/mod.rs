@@ -8,6 +8,7 @@
 //!   right of its lane, or, in a single-file part, back to the nearest place where two fit.
 
 pub mod following;
+pub mod junctions;
 pub mod passing;
 pub mod sections;
 pub mod speed;
@@ -70,6 +71,8 @@ pub struct TrafficRules {
     speeds: SpeedProfile,
     /// Scratch: where the UAVs are along the road by direction (`crate::traffic::following`).
     along: crate::traffic::following::TrafficAlong,
+    /// On a network: the junctions and merges (`crate::traffic::junctions`).
+    pub(crate) junctions: crate::traffic::junctions::JunctionRules,
 }
 
 impl TrafficRules {

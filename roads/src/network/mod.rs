@@ -11,8 +11,10 @@ pub(crate) mod polygon;
 mod route;
 mod space;
 mod way;
+mod zones;
 pub use route::{CRUISE_MPS, Route};
-pub use way::{GateRule, Way};
+pub use way::{GateRule, Hold, Way};
+pub use zones::{Conflict, ConflictZone, Movement};
 #[cfg(test)]
 mod tests;
 
@@ -123,6 +125,8 @@ pub struct Network {
     walls: Vec<(usize, usize)>,
     /// The walls as segments and the trees over walls and cells.
     space: space::Space,
+    /// Unique per built network (clones share it), from the same counter as a road's.
+    id: u64,
 }
 
 impl Network {
@@ -144,7 +148,14 @@ impl Network {
             })
             .collect::<Vec<_>>();
         let space = space::Space::new(&cells, &walls);
-        Ok(Self { layout, cells, passages, walls, space })
+        let id = crate::road::next_id();
+        Ok(Self { layout, cells, passages, walls, space, id })
+    }
+
+    /// A number unique to this network among the roads and networks built by the process (its
+    /// clones share it): lets users cache what they derive from it.
+    pub fn id(&self) -> u64 {
+        self.id
     }
 
     /// The layout it was built from.

@@ -22,6 +22,10 @@ const STEP_M: f64 = 0.25;
 /// its taut path, outside its gate, still sees past the corner.
 const SEEN_SLACK_M: f64 = 0.05;
 
+/// Within this distance (m) of the first corner of its taut path, a UAV turns there: it aims past
+/// the corner through the passages' whole openings ([`Way::target`]).
+const TURN_M: f64 = 1.0;
+
 /// Tolerance (m) of "in the cell" for a target and a UAV.
 const IN_CELL_M: f64 = 1.0e-6;
 
@@ -37,9 +41,19 @@ pub struct GateRule {
 
 /// A passage as crossed: its ends seen in the direction of travel, narrowed by a [`GateRule`].
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Gate {
-    left: Vec2,
-    right: Vec2,
+pub(super) struct Gate {
+    pub(super) left: Vec2,
+    pub(super) right: Vec2,
+}
+
+/// Where a UAV must stop on its way: before the cell at index `cell` of [`Way::cells`] (a conflict
+/// zone it may not enter yet), `back_m` before the gate into it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Hold {
+    /// The index in [`Way::cells`] of the cell not to enter.
+    pub cell: usize,
+    /// How far before the gate into it (m).
+    pub back_m: f64,
 }
 
 /// A UAV's way to its goal through a network: its route and how far along it it is.
@@ -51,6 +65,9 @@ pub struct Way {
     gates: Vec<Gate>,
     /// `openings[k]`: that gate a little wider (what a target is seen through, [`SEEN_SLACK_M`]).
     openings: Vec<Gate>,
+    /// `wide[k]`: the opening of that passage without keeping right (what a UAV turning at a
+    /// corner of its lane sees through, [`TURN_M`]).
+    wide: Vec<Gate>,
     /// The index in `cells` of the cell the UAV is in.
     at: usize,
     /// The goal.
@@ -74,11 +91,13 @@ impl Network {
             .route((start, from), (goal, to), &extra)
             .or_else(|| self.route_back((start, from), (goal, to), &extra))?;
         let (gates, openings) = cells.windows(2).map(|pair| self.gate(pair[0], pair[1], rule)).unzip();
-        Some(Way { cells, gates, openings, at: 0, goal: to })
+        let whole = GateRule { keep_right: None, ..rule };
+        let wide = cells.windows(2).map(|pair| self.gate(pair[0], pair[1], whole).1).collect();
+        Some(Way { cells, gates, openings, wide, at: 0, goal: to })
     }
 
     /// The gate from cell `from` into its neighbour `into`, and its opening.
-    fn gate(&self, from: usize, into: usize, rule: GateRule) -> (Gate, Gate) {
+    pub(super) fn gate(&self, from: usize, into: usize, rule: GateRule) -> (Gate, Gate) {
         let v = &self.cells[from].vertices;
         // A route only steps between cells that share a passage.
         let edge = self.passages[from].iter().find(|p| p.other == into).map_or(0, |p| p.edge);
@@ -164,30 +183,101 @@ impl Way {
     /// `r_s` and seen ([`Way::sees`]), else the farthest point within `r_s` of arc length along
     /// the taut path that is.
     pub fn target(&self, net: &Network, p: Vec2, r_s: f64) -> Vec2 {
-        if (self.goal - p).norm() <= r_s && self.sees(net, p, self.goal) {
-            return self.goal;
+        self.target_towards(net, p, r_s, self.gates.len(), self.goal)
+    }
+
+    /// As [`Way::target`], for a UAV held before the cell at `hold.cell` of its way (an index into
+    /// [`Way::cells`], ahead of it): its way ends `hold.back_m` before the gate into that cell (in
+    /// the middle of the gate, or nearer when the cell before is shorter). Without a hold, or one
+    /// not ahead, the target of [`Way::target`].
+    pub fn target_held(&self, net: &Network, p: Vec2, r_s: f64, hold: Option<Hold>) -> Vec2 {
+        match hold.filter(|h| h.cell > self.at && h.cell < self.cells.len()) {
+            Some(h) => self.target_towards(net, p, r_s, h.cell - 1, self.hold_point(net, h)),
+            None => self.target(net, p, r_s),
         }
-        let path = self.taut_path(p, r_s);
+    }
+
+    /// Where a UAV held by `hold` waits: `back_m` before the middle of the gate into its cell,
+    /// straight back from the gate, in one of the cells of its way before it (halved until it is).
+    pub fn hold_point(&self, net: &Network, hold: Hold) -> Vec2 {
+        let gate = self.gates[hold.cell - 1];
+        let across = gate.right - gate.left;
+        let middle = (gate.left + gate.right) / 2.0;
+        let forward = Vec2::new(-across.y, across.x).try_normalize(0.0).unwrap_or_default();
+        let before = &self.cells[self.at.min(hold.cell - 1)..hold.cell];
+        let mut back = hold.back_m;
+        for _ in 0..8 {
+            let x = middle - forward * back;
+            if before.iter().any(|&c| margin(&net.cells[c].vertices, &x) >= 0.0) {
+                return x;
+            }
+            back /= 2.0;
+        }
+        middle - forward * back
+    }
+
+    /// The target towards `end` through the gates ahead up to (not including) gate `last`.
+    fn target_towards(&self, net: &Network, p: Vec2, r_s: f64, last: usize, end: Vec2) -> Vec2 {
+        if (end - p).norm() <= r_s && self.sees(net, p, end) {
+            return end;
+        }
+        let path = self.taut_path(p, r_s, last, end);
         let length: f64 = path.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
         let reach = length.min(r_s);
         let steps = (reach / STEP_M).ceil() as usize;
-        for k in (1..=steps).rev() {
-            let c = point_along(&path, reach * k as f64 / steps as f64);
-            if self.sees(net, p, c) {
-                return c;
-            }
+        let farthest_seen = |openings: &[Gate]| {
+            (1..=steps)
+                .rev()
+                .map(|k| point_along(&path, reach * k as f64 / steps as f64))
+                .find(|&c| self.sees_through(net, p, c, openings))
+        };
+        // Within TURN_M of the first corner of the taut path, the UAV turns there: it aims past it as
+        // far as it sees through the passages' whole openings (keeping off the walls, not to its
+        // lane), rather than crawl to the corner's very point before it sees on.
+        let corner = path.get(1).copied().unwrap_or(p);
+        let turning = (corner - p).norm() <= TURN_M && path.len() > 2;
+        if let Some(c) = farthest_seen(if turning { &self.wide } else { &self.openings }) {
+            return c;
         }
-        // The first corner of the taut path: seen from p through the gates, hence the openings.
-        path.get(1).copied().unwrap_or(p)
+        // The first corner: seen from p through the gates, hence the openings.
+        corner
+    }
+
+    /// The index in [`Way::cells`] of the cell the UAV is in.
+    pub fn at(&self) -> usize {
+        self.at
+    }
+
+    /// The length (m) from `p` through the middles of the gates ahead to the middle of gate `gate`
+    /// (the passage from cell `gate` to cell `gate + 1` of the way); 0 once that gate is behind.
+    pub fn to_gate(&self, p: Vec2, gate: usize) -> f64 {
+        let mut total = 0.0;
+        let mut from = p;
+        for g in self.gates.get(self.at..=gate).unwrap_or_default() {
+            let middle = (g.left + g.right) / 2.0;
+            total += (middle - from).norm();
+            from = middle;
+        }
+        total
+    }
+
+    /// The distance (m) from `p` to gate `gate`'s interval (0 past the end of the way).
+    pub fn from_gate(&self, p: Vec2, gate: usize) -> f64 {
+        self.gates.get(gate).map_or(0.0, |g| distance_to(p, g))
     }
 
     /// True when the straight path p→x crosses each passage ahead within its opening until x's cell.
     pub fn sees(&self, net: &Network, p: Vec2, x: Vec2) -> bool {
+        self.sees_through(net, p, x, &self.openings)
+    }
+
+    /// [`Way::sees`] through `openings` (one per passage of the way).
+    fn sees_through(&self, net: &Network, p: Vec2, x: Vec2, openings: &[Gate]) -> bool {
         for k in self.at..self.cells.len() {
             if margin(&net.cells[self.cells[k]].vertices, &x) >= -IN_CELL_M {
                 return true;
             }
-            let Some(gate) = self.openings.get(k) else { return false };
+            let Some(gate) = openings.get(k) else { return false };
             if !crosses_within(p, x, gate) {
                 return false;
             }
@@ -195,14 +285,14 @@ impl Way {
         false
     }
 
-    /// The taut path from `p` through the gates ahead (those within `r_s` of it and one more) to
-    /// the goal, or to the middle of the last gate taken when the goal is farther.
-    fn taut_path(&self, p: Vec2, r_s: f64) -> Vec<Vec2> {
-        let ahead = &self.gates[self.at..];
+    /// The taut path from `p` through the gates ahead before gate `last` (those within `r_s` of it
+    /// and one more) to `end`, or to the middle of the last gate taken when `end` is farther.
+    fn taut_path(&self, p: Vec2, r_s: f64, last: usize, end: Vec2) -> Vec<Vec2> {
+        let ahead = self.gates.get(self.at..last.min(self.gates.len())).unwrap_or_default();
         let near = ahead.iter().take_while(|g| distance_to(p, g) <= r_s).count();
         let (taken, end) = match ahead.get(near) {
             Some(g) => (&ahead[..=near], (g.left + g.right) / 2.0),
-            None => (ahead, self.goal),
+            None => (ahead, end),
         };
         let mut portals = Vec::with_capacity(taken.len() + 2);
         portals.push(Gate { left: p, right: p });

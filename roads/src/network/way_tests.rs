@@ -87,7 +87,7 @@ fn the_taut_path_turns_a_corner_of_a_crossing_at_its_clearance() {
     assert!(way.follow(&net, from));
     // From the east road to the north road: the string pulls round the junction's corner (2, 2),
     // held off it by the clearance along both passages.
-    let path = way.taut_path(from, 100.0);
+    let path = way.taut_path(from, 100.0, usize::MAX, way.goal());
     assert_eq!(path.len(), 4, "{path:?}");
     assert!((path[1] - Vec2::new(2.0, 1.8)).norm() < 1e-9, "{path:?}");
     assert!((path[2] - Vec2::new(1.8, 2.0)).norm() < 1e-9, "{path:?}");
@@ -109,7 +109,7 @@ fn keeping_right_crosses_each_passage_in_its_right_half() {
         assert!(gate.left.y >= 0.3 - 1e-9 && gate.right.y >= 0.3 - 1e-9, "{gate:?}");
     }
     // The goal itself lies in the other half: the last leg leaves the lane to reach it.
-    let path = way.taut_path(from, 100.0);
+    let path = way.taut_path(from, 100.0, usize::MAX, way.goal());
     assert_eq!(path.last(), Some(&to));
 }
 

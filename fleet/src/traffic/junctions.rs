@@ -1,0 +1,264 @@
+//! Junctions and merges of a network as conflict zones (docs/traffic.md, "Junctions and merges"):
+//! every cell where three or more passages meet ([`roads::network::ConflictZone`]). A UAV whose way
+//! crosses one asks for its movement through it (in by one arm, out by another) once it is
+//! [`ASK_M`] from the zone's gate (farther if it could not stop [`HOLD_M`] before it: not from far
+//! away, where a grant would keep crossing movements waiting while the UAV is still on its way), and
+//! if it is refused it holds there, in line behind those of its arm refused before it:
+//! - **first come**: requests are decided in the order the UAVs started waiting; a request is
+//!   granted when no UAV holding a grant to the zone has a movement that crosses or merges with it,
+//!   so movements that do not conflict (opposite straights in their lanes, right turns, UAVs from
+//!   the same arm) pass together;
+//! - **a merge zips in order**: two arms into one go one UAV at a time in the order they came;
+//! - **maximum wait**: a request that has waited [`JUNCTION_MAX_WAIT_S`] blocks every later request
+//!   whose movement crosses it, so the zone drains of those and it goes next: no UAV starves, at
+//!   any fleet size, given that granted UAVs leave the zone;
+//! - a UAV already in the zone (pushed in, or starting there) is granted at once: it cannot wait
+//!   inside; one that can no longer stop before the zone (braking at δ) goes when no holder
+//!   conflicts with it; one past its hold point that can still stop goes back to it.
+//!
+//! A grant is held while the UAV is in the zone and until it is [`LEAVE_IN_DC`]·D_c past the gate
+//! out of it. Cost per tick: O(UAVs + requests · holders), holders being those of one zone.
+
+use crate::member::{Uav, WaitReason};
+use crate::traffic::FOLLOW_GAP_IN_DC;
+use roads::network::{Conflict, ConflictZone, GateRule, Hold, Movement, Network, Way};
+use uav::Params;
+
+/// Longest wait (s) before a junction or merge after which no later crossing movement is granted.
+pub const JUNCTION_MAX_WAIT_S: f64 = 15.0;
+
+/// Distance (m) before a zone's gate at which UAVs wait for their turn.
+pub const HOLD_M: f64 = 0.6;
+
+/// Distance (m) from a zone's gate at which a UAV asks for its movement: the same for all, so that
+/// the order they ask in is the order they come in (farther only for a UAV that could not stop in
+/// time, [`ASK_MARGIN_M`]).
+pub const ASK_M: f64 = 2.5;
+
+/// Added to the braking distance (at δ/2) and [`HOLD_M`] to get the distance (m) from a zone's gate
+/// at which a fast UAV asks for its movement.
+pub const ASK_MARGIN_M: f64 = 0.5;
+
+/// Kept (m) between the gate into a zone and where a UAV that asks could stop (braking at δ), for
+/// it to count as able to wait.
+pub const STOP_MARGIN_M: f64 = 0.05;
+
+/// A grant is held until its UAV is this many D_c past the gate out of the zone.
+pub const LEAVE_IN_DC: f64 = 0.0;
+
+/// A request for a movement through a zone this tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Request {
+    zone: usize,
+    movement: Movement,
+    /// When the UAV started waiting (s).
+    since: f64,
+    /// Who asks (index of the UAV, id order: the tie break).
+    who: usize,
+    /// The index in its way's cells of the zone's cell.
+    cell: usize,
+    /// Its distance (m) along its way to the gate into the zone.
+    distance: f64,
+    /// It can still stop before the gate (braking at δ).
+    can_stop: bool,
+}
+
+/// The state of one zone this tick (dashboard, Rerun).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct JunctionUse {
+    /// The zone's cell in the network.
+    pub cell: usize,
+    /// UAVs holding a grant (inside, on their way in, or just out).
+    pub admitted: u32,
+    /// UAVs waiting for their turn.
+    pub waiting: u32,
+}
+
+/// The junction rules' state between ticks.
+#[derive(Debug, Default)]
+pub struct JunctionRules {
+    /// The network the zones were found on (its id).
+    network: u64,
+    zones: Vec<ConflictZone>,
+    /// Per cell of the network, its zone.
+    zone_of_cell: Vec<Option<usize>>,
+    /// Per zone, the movements granted (held) this tick.
+    held: Vec<Vec<Movement>>,
+    /// Per zone, the UAVs waiting this tick.
+    waiting: Vec<u32>,
+    /// Scratch: this tick's requests; one zone's refused requests with their wait.
+    requests: Vec<Request>,
+    refused: Vec<(Movement, f64)>,
+    /// Scratch: one zone's lines of refused UAVs, per arm: the arm, the last place taken and why
+    /// its head waits.
+    lines: Vec<(usize, u32, Conflict)>,
+}
+
+impl JunctionRules {
+    /// The conflict zones of the network of the last [`JunctionRules::plan`].
+    pub fn zones(&self) -> &[ConflictZone] {
+        &self.zones
+    }
+
+    /// Each zone with who holds a grant to it and who waits, as of the last tick.
+    pub fn junction_use(&self) -> impl Iterator<Item = JunctionUse> + '_ {
+        self.zones.iter().zip(&self.held).zip(&self.waiting).map(|((z, held), &waiting)| JunctionUse {
+            cell: z.cell,
+            admitted: held.len() as u32,
+            waiting,
+        })
+    }
+
+    /// Applies the rules at time `now` to the UAVs that `tracked` says fly to a goal: sets each one's
+    /// `traffic.junction` (its grant), `traffic.hold` (where its way stops this tick) and
+    /// `traffic.waiting`. `rule` narrows the passages as the UAVs' ways do; movements closer than
+    /// D_c (as kept) cross; δ gives the braking distance.
+    pub fn plan(
+        &mut self,
+        net: &Network,
+        rule: GateRule,
+        params: &Params,
+        now: f64,
+        uavs: &mut [Uav],
+        tracked: impl Fn(&Uav) -> bool,
+    ) {
+        let (d_c, delta) = (params.kept_d_c(), params.delta);
+        if self.network != net.id() {
+            self.network = net.id();
+            self.zones = net.conflict_zones(rule, d_c);
+            self.zone_of_cell = vec![None; net.cells().len()];
+            for (k, z) in self.zones.iter().enumerate() {
+                self.zone_of_cell[z.cell] = Some(k);
+            }
+            self.held = vec![Vec::new(); self.zones.len()];
+            self.waiting = vec![0; self.zones.len()];
+            uavs.iter_mut().for_each(|u| u.traffic.junction = None);
+        }
+        self.held.iter_mut().for_each(Vec::clear);
+        self.waiting.iter_mut().for_each(|w| *w = 0);
+        self.requests.clear();
+        for (k, u) in uavs.iter_mut().enumerate() {
+            u.traffic.hold = None;
+            let way = u.nav.way().filter(|_| tracked(u));
+            let Some(way) = way else {
+                (u.traffic.junction, u.traffic.waiting_since) = (None, None);
+                continue;
+            };
+            let p = u.state.p;
+            // At ASK_M (or farther when it could not stop in time); once it asked or was granted, it
+            // keeps its place (in a line behind others, say) or its grant within r_s.
+            let ask = ASK_M.max(HOLD_M + ASK_MARGIN_M + u.state.v.norm_squared() / delta);
+            let asked = u.traffic.waiting_since.is_some() || u.traffic.junction.is_some();
+            let ask = if asked { ask.max(params.r_s) } else { ask };
+            let ahead = self.zone_ahead(way, p, ask);
+            if let Some((zone, movement)) = u.traffic.junction {
+                let crossing = ahead.is_some_and(|(z, m, ..)| (z, m) == (zone, movement));
+                if crossing || just_left(way, self.zones[zone].cell, p, LEAVE_IN_DC * d_c) {
+                    self.held[zone].push(movement);
+                    continue;
+                }
+                u.traffic.junction = None;
+            }
+            let Some((zone, movement, cell, distance)) = ahead else {
+                u.traffic.waiting_since = None;
+                continue;
+            };
+            let since = *u.traffic.waiting_since.get_or_insert(now);
+            let can_stop = distance - STOP_MARGIN_M >= u.state.v.norm_squared() / (2.0 * delta);
+            self.requests.push(Request { zone, movement, since, who: k, cell, distance, can_stop });
+        }
+        self.decide(now, d_c, uavs);
+    }
+
+    /// Decides this tick's requests, zone by zone in the order they came (the order the UAVs came
+    /// within [`ASK_M`] of the zone, which is the order they are in along an arm): one behind a
+    /// refused UAV of its arm is refused too and waits in line behind it.
+    fn decide(&mut self, now: f64, d_c: f64, uavs: &mut [Uav]) {
+        let requests = &mut self.requests;
+        requests.sort_by(|a, b| {
+            (a.zone, a.since, a.movement.entry)
+                .partial_cmp(&(b.zone, b.since, b.movement.entry))
+                .unwrap_or(std::cmp::Ordering::Equal)
+                .then(a.distance.total_cmp(&b.distance))
+        });
+        let mut zone = usize::MAX;
+        for r in requests.iter() {
+            if r.zone != zone {
+                zone = r.zone;
+                self.refused.clear();
+                self.lines.clear();
+            }
+            let z = &self.zones[zone];
+            let conflicts = |m: &Movement| z.conflict(*m, r.movement);
+            let by_holder = self.held[zone].iter().map(conflicts).find(|&c| c != Conflict::None);
+            // Earlier refused requests: a merging one always goes first (a zip), a crossing one once
+            // it has waited the maximum.
+            let by_queue = self.refused.iter().find_map(|(m, since)| match conflicts(m) {
+                Conflict::Merge => Some(Conflict::Merge),
+                Conflict::Cross if now - since >= JUNCTION_MAX_WAIT_S => Some(Conflict::Cross),
+                _ => None,
+            });
+            // Behind a refused UAV of its arm: in line after it.
+            let line = self.lines.iter_mut().find(|l| l.0 == r.movement.entry);
+            let by_line = line.as_ref().map(|l| l.2);
+            // In the zone, it cannot wait; unable to stop before it, it goes unless a holder conflicts.
+            let blocked = if r.distance <= 0.0 {
+                None
+            } else if !r.can_stop {
+                by_holder
+            } else {
+                by_line.or(by_holder).or(by_queue)
+            };
+            let u = &mut uavs[r.who];
+            let Some(conflict) = blocked else {
+                u.traffic.junction = Some((zone, r.movement));
+                u.traffic.waiting_since = None;
+                self.held[zone].push(r.movement);
+                continue;
+            };
+            self.refused.push((r.movement, r.since));
+            self.waiting[zone] += 1;
+            // Its place in the line of its arm: FOLLOW_GAP_IN_DC·D_c behind the one ahead of it.
+            let place = match line {
+                Some(l) => {
+                    l.1 += 1;
+                    l.1
+                }
+                None => {
+                    self.lines.push((r.movement.entry, 0, conflict));
+                    0
+                }
+            };
+            let back_m = HOLD_M + f64::from(place) * FOLLOW_GAP_IN_DC * d_c;
+            u.traffic.hold = Some(Hold { cell: r.cell, back_m });
+            let reason = if conflict == Conflict::Merge { WaitReason::Merge } else { WaitReason::Junction };
+            u.traffic.waiting = Some(reason);
+        }
+    }
+
+    /// The first zone on `way` ahead of a UAV at `p` within `approach` (m) of it: the zone, the
+    /// movement through it, the index of its cell in the way and the distance to its gate (0 inside).
+    fn zone_ahead(&self, way: &Way, p: uav::Vec2, approach: f64) -> Option<(usize, Movement, usize, f64)> {
+        let cells = way.cells();
+        for i in way.at()..cells.len() {
+            let distance = if i == way.at() { 0.0 } else { way.to_gate(p, i - 1) };
+            if distance > approach {
+                return None;
+            }
+            if let Some(zone) = self.zone_of_cell[cells[i]] {
+                let z = &self.zones[zone];
+                let entry = z.arm(i.checked_sub(1).map(|b| cells[b]));
+                let exit = z.arm(cells.get(i + 1).copied());
+                return Some((zone, Movement { entry, exit }, i, distance));
+            }
+        }
+        None
+    }
+}
+
+/// True when a UAV at `p` on `way` has just left `cell`: it is in the next cell of its way, within
+/// `leave` (m) of the gate between them.
+fn just_left(way: &Way, cell: usize, p: uav::Vec2, leave: f64) -> bool {
+    let at = way.at();
+    at >= 1 && way.cells()[at - 1] == cell && way.from_gate(p, at - 1) < leave
+}
