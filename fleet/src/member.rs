@@ -109,6 +109,9 @@ pub struct UavTraffic {
     pub grant: Option<(usize, usize)>,
     /// Since when (s) it waits for a zone.
     pub waiting_since: Option<f64>,
+    /// Since when (s) it waits at the head of its line for a zone (the first of its entry or arm
+    /// not admitted): the wait the rules bound, whatever the number of UAVs in line behind it.
+    pub front_since: Option<f64>,
     /// On a network: the conflict zone it may cross (or crosses), with its movement through it
     /// (`crate::traffic::junctions`).
     pub junction: Option<(usize, roads::network::Movement)>,
@@ -131,6 +134,18 @@ pub struct UavTraffic {
     /// into a narrower part: `fleet::following`), which also lowers its speed limit in a dense
     /// crowd ([`crate::traffic::speed::crowd_limit`]).
     pub in_traffic: bool,
+}
+
+/// Sets each UAV's `front_since` from `front` (whether it waits at the head of its line this tick,
+/// by index): kept while it stays there, started now when it gets there, cleared otherwise.
+pub(crate) fn mark_fronts(uavs: &mut [Uav], front: &[bool], now: f64) {
+    for (k, u) in uavs.iter_mut().enumerate() {
+        u.traffic.front_since = if front.get(k).copied().unwrap_or(false) {
+            Some(u.traffic.front_since.unwrap_or(now))
+        } else {
+            None
+        };
+    }
 }
 
 /// A UAV flown by another region, as that region's last message gave it.

@@ -46,8 +46,8 @@ pub struct RunMetrics {
     pub stall_s: f64,
     /// The longest single stall (s).
     pub max_stall_s: f64,
-    /// The longest a UAV waited for its turn at a conflict zone (a single-file section, a junction
-    /// or a merge of a network), from asking to being admitted (s).
+    /// The longest a UAV waited for its turn at the head of its line at a conflict zone (a
+    /// single-file section, a junction or a merge of a network) (s).
     pub max_wait_s: f64,
     /// min over time and pairs of S_kd (eq. 2, corrected sign), over the pairs within each tick's
     /// neighbour radius (every other pair's S_kd is above D_c); null when no two UAVs came that close.
@@ -203,7 +203,7 @@ impl MetricsRecorder {
             let last = &u.last;
             self.stall_s += stall_time_added(last.stall_s, p.dt);
             self.max_stall_s = self.max_stall_s.max(last.stall_s);
-            if let Some(since) = u.traffic.waiting_since {
+            if let Some(since) = u.traffic.front_since {
                 self.max_wait_s = self.max_wait_s.max(t - since);
             }
             if self.ongoing.len() <= k {

@@ -89,6 +89,8 @@ pub struct JunctionRules {
     /// Scratch: this tick's requests; one zone's refused requests with their wait.
     requests: Vec<Request>,
     refused: Vec<(Movement, f64)>,
+    /// Scratch: per UAV, whether it waits at the head of its arm's line this tick.
+    heads: Vec<bool>,
     /// Scratch: one zone's lines of refused UAVs, per arm: the arm, the last place taken and why
     /// its head waits.
     lines: Vec<(usize, u32, Conflict)>,
@@ -167,7 +169,10 @@ impl JunctionRules {
             let can_stop = distance - STOP_MARGIN_M >= u.state.v.norm_squared() / (2.0 * delta);
             self.requests.push(Request { zone, movement, since, who: k, cell, distance, can_stop });
         }
+        self.heads.clear();
+        self.heads.resize(uavs.len(), false);
         self.decide(now, d_c, uavs);
+        crate::member::mark_fronts(uavs, &self.heads, now);
     }
 
     /// Decides this tick's requests, zone by zone in the order they came (the order the UAVs came
@@ -229,6 +234,7 @@ impl JunctionRules {
                     0
                 }
             };
+            self.heads[r.who] = place == 0;
             let back_m = HOLD_M + f64::from(place) * FOLLOW_GAP_IN_DC * d_c;
             u.traffic.hold = Some(Hold { cell: r.cell, back_m });
             let reason = if conflict == Conflict::Merge { WaitReason::Merge } else { WaitReason::Junction };

@@ -67,6 +67,8 @@ pub struct TrafficRules {
     wanted: Vec<Option<(usize, usize)>>,
     /// Scratch: per zone and entry, the queue order of the foremost UAV waiting there.
     front: Vec<f64>,
+    /// Scratch: per UAV, whether it waits at the head of its entry's queue this tick.
+    heads: Vec<bool>,
     /// The speed limit along the road (rebuilt with the sections when the road changes).
     speeds: SpeedProfile,
     /// Scratch: where the UAVs are along the road by direction (`crate::traffic::following`).
@@ -206,6 +208,7 @@ impl TrafficRules {
             uavs[r.who].traffic.waiting_since = None;
         });
         self.queue_up(nav, uavs);
+        crate::member::mark_fronts(uavs, &self.heads, now);
     }
 
     /// UAVs not admitted wait in a column in their lane: the k-th nearest to the section holds
@@ -221,12 +224,16 @@ impl TrafficRules {
                 queue.push((r.zone, r.entry, -along, r.who));
             }
         }
+
         queue.sort_by(|a, b| (a.0, a.1).cmp(&(b.0, b.1)).then(a.2.total_cmp(&b.2)).then(a.3.cmp(&b.3)));
         let gap = FOLLOW_GAP_IN_DC * nav.d_c;
         let mut place = 0;
+        self.heads.clear();
+        self.heads.resize(uavs.len(), false);
         for k in 0..queue.len() {
             let (zone, entry, _, who) = queue[k];
             place = if k > 0 && (queue[k - 1].0, queue[k - 1].1) == (zone, entry) { place + 1 } else { 0 };
+            self.heads[who] = place == 0;
             let z = self.sections[zone];
             let (hold, direction) = if entry == 0 { (z.hold_before, 1.0) } else { (z.hold_after, -1.0) };
             let hold = hold - direction * gap * place as f64;
