@@ -18,7 +18,7 @@ const $ = (id) => document.getElementById(id);
 const HELP = {
   select: "Click a UAV to select it (shift: add/remove, shift-drag: box), then click the road to send it there. Drag to pan, wheel to zoom, Delete removes, Esc clears.",
   add: "Click the road to add a UAV with the chosen policy.",
-  edit: "Drag a vertex (a joint moves both segments), click a segment to select it. Draw: click two points per edge; each new segment starts at the last exit edge. Ctrl-Z / Ctrl-Shift-Z undo/redo, Apply sends the road.",
+  edit: "Drag a vertex (a joint moves both segments), click a segment to select it. Draw: click two points per edge; each new segment starts at the last exit edge. A network: Junction places one, Road from… starts a road at a junction's side or a road's end, and while drawing a click on a side attaches the road's end there. Ctrl-Z / Ctrl-Shift-Z undo/redo, Apply sends the road.",
 };
 
 export class App {
@@ -38,6 +38,7 @@ export class App {
     this.rerunActive = false;
     this.mode = "select";
     this.drawing = false;
+    this.editTool = null;
     this.snapshot = null;
     this.geometry = null;
     this.geometryFetch = null;
@@ -210,7 +211,10 @@ export class App {
   fit() {
     const pts = [];
     if (this.geometry) for (const s of this.geometry.layout.segments) pts.push(...s);
-    if (this.mode === "edit") for (const e of this.editor.edges) pts.push(...e);
+    if (this.mode === "edit") {
+      for (const r of this.editor.roads) for (const e of r.edges) pts.push(...e);
+      for (const j of this.editor.junctions) pts.push(...j.polygon);
+    }
     if (!pts.length) return;
     this.camera.fit(bounds(pts));
     this.fitted = true;
@@ -223,7 +227,10 @@ export class App {
       this.editorLoaded = true;
     }
     this.mode = mode;
-    if (mode !== "edit") this.setDrawing(false);
+    if (mode !== "edit") {
+      this.setDrawing(false);
+      this.setEditTool(null);
+    }
     for (const b of document.querySelectorAll("[data-mode]")) b.setAttribute("aria-pressed", String(b.dataset.mode === mode));
     $("edit-toolbar").hidden = mode !== "edit";
     $("help").textContent = HELP[mode];
@@ -235,6 +242,15 @@ export class App {
     this.drawing = on;
     if (!on) this.editor.cancelPending();
     $("draw").setAttribute("aria-pressed", String(on));
+    this.dirty = true;
+  }
+
+  /** The editor's one-click tool: "junction" (place one), "branch" (start a road at a side) or null. */
+  setEditTool(tool) {
+    this.editTool = tool;
+    $("add-junction").setAttribute("aria-pressed", String(tool === "junction"));
+    $("branch-road").setAttribute("aria-pressed", String(tool === "branch"));
+    if (tool) this.setDrawing(false);
     this.dirty = true;
   }
 
@@ -283,7 +299,10 @@ window.__airroads = {
   app,
   get snapshot() { return app.snapshot; },
   get geometry() { return app.geometry; },
-  get editor() { return { segments: app.editor.segments(), error: app.editor.error, selected: app.editor.selected, pending: app.editor.pending }; },
+  get editor() {
+    const e = app.editor;
+    return { segments: e.segments(), error: e.error, selected: e.selected, pending: e.pending, active: e.active, layout: e.layout() };
+  },
   get selection() { return [...app.selection]; },
   get mode() { return app.mode; },
   get perf() { return app.perf; },

@@ -93,10 +93,23 @@ async function applyRoad(app) {
   } catch (e) {
     const details = e.details || {};
     let segment = details.segment ?? null;
-    const m = /^segments\[(\d+)\]/.exec(e.field || "");
+    const field = e.field || "";
+    const m = /^segments\[(\d+)\]/.exec(field);
     if (segment === null && m) segment = Number(m[1]);
     editor.error = { segment, message: e.message, code: e.code, status: e.status };
-    const where = /^regions/.test(e.field || "") ? `${e.field}: ` : segment !== null ? `segment ${segment}: ` : "";
+    // A network's errors name a road of the layout (roads without a segment are left out of it) and
+    // its segment, or a junction.
+    const road = /^roads\[(\d+)\](?:\.segments\[(\d+)\])?/.exec(field);
+    const junction = /^junctions\[(\d+)\]/.exec(field);
+    if (road) {
+      const drawn = editor.roads.map((r, i) => (r.edges.length >= 2 ? i : -1)).filter((i) => i >= 0);
+      editor.error.road = drawn[Number(road[1])] ?? null;
+      editor.error.segment = road[2] !== undefined ? Number(road[2]) : null;
+    } else if (junction) {
+      editor.error.junction = Number(junction[1]);
+      editor.error.segment = null;
+    }
+    const where = /^(regions|roads|junctions)/.test(field) ? `${field}: ` : segment !== null ? `segment ${segment}: ` : "";
     const status = e.status ? `${e.status} ${e.code}` : "network error";
     showMessage(`road not applied (${status}): ${where}${e.message}`, true);
   }
@@ -154,8 +167,11 @@ export function bindControls(app) {
   on("draw", () => app.setDrawing(!app.drawing));
   on("new-road", () => {
     ed.clear();
+    app.setEditTool(null);
     app.setDrawing(true);
   });
+  on("add-junction", () => app.setEditTool(app.editTool === "junction" ? null : "junction"));
+  on("branch-road", () => app.setEditTool(app.editTool === "branch" ? null : "branch"));
   on("insert", () => ed.insert(ed.selected) || showMessage("select a segment first", true));
   on("delete-seg", () => ed.remove(ed.selected) || showMessage("select a segment first", true));
   on("undo", () => ed.undo());
@@ -172,9 +188,10 @@ export function bindControls(app) {
     if (!f) return;
     try {
       const json = JSON.parse(f.text);
-      if (!Array.isArray(json.segments)) throw new Error("no `segments` array");
+      if (!Array.isArray(json.segments) && !Array.isArray(json.roads)) throw new Error("no `segments` or `roads` array");
       const broken = ed.load(json);
-      showMessage(`imported ${json.segments.length} segments from ${f.name}${broken ? `; ${broken} join(s) snapped to the previous exit edge` : ""}`);
+      const what = json.roads ? `${json.roads.length} roads and ${(json.junctions || []).length} junctions` : `${json.segments.length} segments`;
+      showMessage(`imported ${what} from ${f.name}${broken ? `; ${broken} join(s) snapped to the previous exit edge` : ""}`);
       app.fit();
     } catch (e) {
       showMessage(`import ${f.name}: ${e.message}`, true);

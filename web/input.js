@@ -33,9 +33,25 @@ function click(app, sx, sy, shift) {
   const p = app.camera.toWorld(sx, sy);
   if (app.mode === "add") return addUav(app, p);
   if (app.mode === "edit") {
-    if (app.drawing) app.editor.addPoint(p);
-    else app.editor.selected = segmentAt(app.editor.segments(), p);
-    app.editor.version++;
+    const editor = app.editor;
+    const tol = HIT_PX / app.camera.scale;
+    if (app.editTool === "junction") {
+      editor.addJunction(p);
+      app.setEditTool(null);
+    } else if (app.editTool === "branch") {
+      // A road starts at the junction side or road end clicked.
+      if (editor.startRoad(p, tol)) {
+        app.setEditTool(null);
+        app.setDrawing(true);
+      }
+    } else if (app.drawing) {
+      // Between two edges, a click on a junction's side or another road's end attaches this road's
+      // end to it.
+      if (editor.pending || !editor.edges.length || !editor.attachEnd(p, tol)) editor.addPoint(p);
+    } else if (editor.activateAt(p, segmentAt) < 0) {
+      editor.selected = -1;
+    }
+    editor.version++;
     return;
   }
   const id = uavAt(app, sx, sy);

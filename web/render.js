@@ -102,10 +102,61 @@ function drawRegions(ctx, cam, segs, regions) {
   }
 }
 
-/** The editor's draft road with handles, segment numbers and the server's error. */
-export function drawEditor(ctx, cam, editor, mouse) {
-  const segs = editor.segments();
+/** A network draft's junctions and its roads other than the active one, with their names and the
+ * server's error on a junction or another road. */
+function drawNetworkDraft(ctx, cam, editor) {
   const err = editor.error;
+  ctx.font = "bold 12px system-ui, sans-serif";
+  ctx.textAlign = "center";
+  ctx.textBaseline = "middle";
+  editor.junctions.forEach((j, i) => {
+    const bad = err && err.junction === i;
+    ctx.beginPath();
+    polygon(ctx, cam, j.polygon);
+    ctx.fillStyle = bad ? "rgba(214,49,49,0.35)" : "rgba(120,90,200,0.18)";
+    ctx.fill();
+    ctx.strokeStyle = "#6b4fc0";
+    ctx.lineWidth = 2;
+    ctx.stroke();
+    for (const v of j.polygon) {
+      const [x, y] = cam.toScreen(v[0], v[1]);
+      ctx.fillStyle = "#fff";
+      ctx.fillRect(x - 3, y - 3, 6, 6);
+      ctx.strokeRect(x - 3, y - 3, 6, 6);
+    }
+    const [cx, cy] = cam.toScreen(...centroid(j.polygon));
+    ctx.fillStyle = bad ? "#a11" : "#4b3590";
+    ctx.fillText(j.name, cx, cy);
+    if (bad) drawCallout(ctx, cx, cy + 18, `${j.name}: ${err.message}`);
+  });
+  editor.allSegments().forEach(({ road, name, segments }) => {
+    if (road === editor.active) return;
+    const bad = err && err.road === road;
+    segments.forEach((s, i) => {
+      ctx.beginPath();
+      polygon(ctx, cam, quadPolygon(s));
+      ctx.fillStyle = bad && (err.segment === null || err.segment === i) ? "rgba(214,49,49,0.35)" : "rgba(255,196,0,0.10)";
+      ctx.fill();
+      ctx.strokeStyle = "#b86e00";
+      ctx.lineWidth = 1;
+      ctx.stroke();
+    });
+    const middle = segments[Math.floor(segments.length / 2)];
+    if (!middle) return;
+    const [cx, cy] = cam.toScreen(...centroid(quadPolygon(middle)));
+    ctx.fillStyle = bad ? "#a11" : "#7a5a00";
+    ctx.fillText(name, cx, cy);
+    if (bad) drawCallout(ctx, cx, cy + 18, `${name}${err.segment !== null ? ` segment ${err.segment}` : ""}: ${err.message}`);
+  });
+}
+
+/** The editor's draft road (the active one, of a network's) with handles, segment numbers and the
+ * server's error; a network's junctions and other roads under it. */
+export function drawEditor(ctx, cam, editor, mouse) {
+  if (editor.isNetwork()) drawNetworkDraft(ctx, cam, editor);
+  const segs = editor.segments();
+  // The server's error on the active road (a chain's errors name no road).
+  const err = editor.error && (editor.error.road === undefined || editor.error.road === editor.active) && editor.error.junction === undefined ? editor.error : null;
   segs.forEach((s, i) => {
     ctx.beginPath();
     polygon(ctx, cam, quadPolygon(s));
