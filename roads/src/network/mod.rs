@@ -13,6 +13,7 @@ mod space;
 mod way;
 mod zones;
 pub use route::{CRUISE_MPS, Route};
+pub use space::{CELL_NEAR_M, NetworkWalls};
 pub use way::{GateRule, Hold, Way};
 pub use zones::{Conflict, ConflictZone, Movement};
 #[cfg(test)]
