@@ -79,6 +79,20 @@ pub(super) fn margin(v: &[Vec2], x: &Vec2) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
+/// True when `margin(v, x) >= -tol` for a tolerance `tol >= 0` (the same answer), without the
+/// square roots for a point inside or on every edge line.
+pub(super) fn within(v: &[Vec2], x: &Vec2, tol: f64) -> bool {
+    let n = v.len();
+    let sigma = cross(&(v[1] - v[0]), &(v[2] - v[1])).signum();
+    // Each term of the margin is this cross product over a positive edge length: none negative, so
+    // the margin is at least 0 ≥ −tol.
+    let inside = (0..n).all(|k| {
+        let (a, b) = (v[k], v[(k + 1) % n]);
+        sigma * cross(&(b - a), &(x - a)) >= 0.0
+    });
+    inside || margin(v, x) >= -tol
+}
+
 impl Space {
     /// The walls `(cell, edge)` of `cells` and the trees.
     pub(super) fn new(cells: &[Cell], walls: &[(usize, usize)]) -> Self {
@@ -148,7 +162,7 @@ impl Network {
         }
         let at = AABB::from_point([x.x, x.y]);
         let inside = self.space.cell_tree.locate_in_envelope_intersecting(&at).map(|b| b.data);
-        inside.filter(|&c| margin(&self.cells[c].vertices, x) >= -CONTAINS_TOL_M).min()
+        inside.filter(|&c| within(&self.cells[c].vertices, x, CONTAINS_TOL_M)).min()
     }
 
     /// True when `x` is in the network.
@@ -186,7 +200,7 @@ impl Network {
     /// [`Network::contains`] for a point believed to be in cell `hint` (any number): that cell is
     /// asked first.
     pub fn contains_in(&self, hint: usize, x: &Vec2) -> bool {
-        let in_hint = self.cells.get(hint).is_some_and(|c| margin(&c.vertices, x) >= -CONTAINS_TOL_M);
+        let in_hint = self.cells.get(hint).is_some_and(|c| within(&c.vertices, x, CONTAINS_TOL_M));
         in_hint || self.contains(x)
     }
 

@@ -331,6 +331,11 @@ proptest! {
         let p = Vec2::new(x, y);
         let inside = net.cells().iter().any(|c| space::margin(&c.vertices, &p) >= -1e-9);
         prop_assert_eq!(net.contains(&p), inside);
+        for c in net.cells() {
+            for tol in [0.0, 1e-9, 1e-6, 0.5] {
+                prop_assert_eq!(space::within(&c.vertices, &p, tol), space::margin(&c.vertices, &p) >= -tol);
+            }
+        }
         let walls = net.wall_list();
         let scan: Vec<usize> = (0..walls.len()).filter(|&k| walls[k].nearest(&p).0.metric_distance(&p) <= radius).collect();
         prop_assert_eq!(net.walls_near(&p, radius), scan);

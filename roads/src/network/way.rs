@@ -10,7 +10,7 @@
 //! route's convex cells and passes every wall corner at half the clearance at least, so the target
 //! keeps the UAV off the corners of junctions as the chain's corner clearance does.
 
-use super::space::margin;
+use super::space::within;
 use super::{CellKind, Network, Route};
 use std::cell::RefCell;
 use uav::{Vec2, cross};
@@ -156,7 +156,7 @@ impl Way {
     /// Follows a UAV now at `p`: finds it in its cell, the next ones or the previous one. False when
     /// it is in none of them (pushed off its route: plan a new way).
     pub fn follow(&mut self, net: &Network, p: Vec2) -> bool {
-        let inside = |k: usize| margin(&net.cells[self.cells[k]].vertices, &p) >= -IN_CELL_M;
+        let inside = |k: usize| within(&net.cells[self.cells[k]].vertices, &p, IN_CELL_M);
         if inside(self.at) {
             return true;
         }
@@ -209,7 +209,7 @@ impl Way {
         let mut back = hold.back_m;
         for _ in 0..8 {
             let x = middle - forward * back;
-            if before.iter().any(|&c| margin(&net.cells[c].vertices, &x) >= 0.0) {
+            if before.iter().any(|&c| within(&net.cells[c].vertices, &x, 0.0)) {
                 return x;
             }
             back /= 2.0;
@@ -282,7 +282,7 @@ impl Way {
     /// [`Way::sees`] through `openings` (one per passage of the way).
     fn sees_through(&self, net: &Network, p: Vec2, x: Vec2, openings: &[Gate]) -> bool {
         for k in self.at..self.cells.len() {
-            if margin(&net.cells[self.cells[k]].vertices, &x) >= -IN_CELL_M {
+            if within(&net.cells[self.cells[k]].vertices, &x, IN_CELL_M) {
                 return true;
             }
             let Some(gate) = openings.get(k) else { return false };
