@@ -40,10 +40,14 @@ pub struct BenchArgs {
     /// Worker threads of the tick's parallel stages (`scale`; default: all cores).
     #[arg(long, value_parser = clap::value_parser!(u64).range(1..=256))]
     pub threads: Option<u64>,
-    /// Also write each fleet size's scenario as DIR/trunkN.json (`scale`), for `airroads run` and
-    /// for other simulators (scripts/rvo2-bench).
+    /// Also write each fleet size's scenario as DIR/trunkN.json (`scale`; DIR/cityN.json with `--road
+    /// city`), for `airroads run` and for other simulators (scripts/rvo2-bench).
     #[arg(long, value_name = "DIR")]
     pub write_scenarios: Option<PathBuf>,
+    /// What `scale` flies: `trunk`, the winding two-way trunk road, or `city`, a street grid of
+    /// square junctions and two-way streets sized from the fleet (`fleet::city`).
+    #[arg(long, default_value = "trunk", value_parser = ["trunk", "city"])]
+    pub road: String,
     /// QP solver of the filter (`filter`, `fleet`, `scale`): `exact` or `clarabel`.
     #[arg(long, default_value = "exact", value_parser = ["exact", "clarabel"])]
     pub solver: String,
@@ -89,7 +93,8 @@ pub enum BenchTarget {
     /// UAVs in real time: how the firmware kept up, arrivals, true margins.
     Firmware,
     /// Tick p50/p99 and each stage's time for UAVs flying both ways along a long winding trunk road
-    /// (1.2 km per 1,000 UAVs), for each `--uavs` size, and how the per-UAV cost grows.
+    /// (1.2 km per 1,000 UAVs; `--road city`: across a street grid), for each `--uavs` size, and how
+    /// the per-UAV cost grows.
     Scale,
 }
 

@@ -3,13 +3,16 @@
 //! (`fleet::trunk::trunk_scenario`: 12 m wide, 1.2 km per 1,000 UAVs, goals 60–150 m away) on
 //! in-process simulated links; after two warm-up ticks, `--ticks` ticks are timed, each with the
 //! metrics a headless run records. Prints tick p50/p99 and the mean time of each stage per tick and
-//! per UAV, then how the per-UAV cost of the largest fleet compares with the smallest's.
+//! per UAV, then how the per-UAV cost of the largest fleet compares with the smallest's. With `--road
+//! city` the UAVs fly across a street grid instead (`fleet::city::city_scenario`: B × B blocks,
+//! square junctions, two-way streets 6 m wide, about 17 UAVs per block, goals 1.5–4 blocks away).
 
 use flights::say;
 
 use crate::BenchArgs;
 use crate::bench_fleet::sim_fleet;
 use engine::stats::percentiles;
+use fleet::city::city_scenario;
 use fleet::trunk::trunk_scenario;
 use fleet::{MetricsRecorder, StageTimes};
 use std::process::ExitCode;
@@ -60,8 +63,14 @@ pub fn main(args: &BenchArgs) -> ExitCode {
 fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
     let sizes = args.uavs_or(&[1000, 3000, 10000]);
     let ticks = args.ticks.max(1);
+    let city = args.road == "city";
+    let road = if city {
+        "city grid (two-way streets, about 17 UAVs per block)"
+    } else {
+        "two-way trunk road (1.2 km per 1,000 UAVs)"
+    };
     say!(
-        "airroads bench scale: two-way trunk road (1.2 km per 1,000 UAVs), policy {}, solver {}, {ticks} ticks each, {threads} thread(s)",
+        "airroads bench scale: {road}, policy {}, solver {}, {ticks} ticks each, {threads} thread(s)",
         args.policy,
         args.solver
     );
@@ -73,10 +82,15 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
     say!("{header}");
     let mut per_uav = Vec::new();
     for &n in &sizes {
-        let scenario = match trunk_scenario(n, 1) {
+        let scenario = if city {
+            city_scenario(n, 1).map_err(|e| format!("city grid for {n} UAVs: {e}"))
+        } else {
+            trunk_scenario(n, 1).map_err(|e| format!("trunk road for {n} UAVs: {e}"))
+        };
+        let scenario = match scenario {
             Ok(s) => s,
             Err(e) => {
-                eprintln!("error: trunk road for {n} UAVs: {e}");
+                eprintln!("error: {e}");
                 return ExitCode::FAILURE;
             }
         };
@@ -89,7 +103,7 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
         let mut fleet = match sim_fleet(&scenario, &args.policy, &args.solver) {
             Ok(f) => f,
             Err((message, code)) => {
-                eprintln!("error: trunk road of {n} UAVs: {message}");
+                eprintln!("error: {} of {n} UAVs: {message}", if city { "city grid" } else { "trunk road" });
                 return code;
             }
         };

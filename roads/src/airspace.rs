@@ -89,6 +89,13 @@ impl Boundary for Airspace {
         self.contains(x)
     }
 
+    fn inside_in(&self, hint: usize, x: &Vec2) -> bool {
+        match self {
+            Airspace::Road(road) => road.contains(x),
+            Airspace::Network(net) => net.contains_in(hint, x),
+        }
+    }
+
     fn nearest_wall_to(&self, x: &Vec2) -> usize {
         match self {
             Airspace::Road(road) => road.nearest_wall(x),
@@ -99,7 +106,7 @@ impl Boundary for Airspace {
     fn walls_within(&self, hint: usize, x: &Vec2, radius: f64) -> impl Iterator<Item = usize> + '_ {
         match self {
             Airspace::Road(road) => Near::Road(road.walls_near_in(hint, x, radius)),
-            Airspace::Network(net) => Near::Network(net.walls_near(x, radius).into_iter()),
+            Airspace::Network(net) => Near::Network(net.walls_near_in(hint, x, radius)),
         }
     }
 

@@ -10,6 +10,10 @@ pub trait Boundary {
     fn wall_list(&self) -> &[Wall];
     /// True when `x` is in the road.
     fn inside(&self, x: &Vec2) -> bool;
+    /// [`Boundary::inside`] for a point believed to be in segment or cell `hint` (the same answer).
+    fn inside_in(&self, _hint: usize, x: &Vec2) -> bool {
+        self.inside(x)
+    }
     /// The index of a wall nearest to `x`.
     fn nearest_wall_to(&self, x: &Vec2) -> usize;
     /// Every wall within `radius` of `x` (and perhaps a few more), in index order; `hint` is the
@@ -51,16 +55,20 @@ impl Boundary for crate::network::Network {
         self.contains(x)
     }
 
+    fn inside_in(&self, hint: usize, x: &Vec2) -> bool {
+        self.contains_in(hint, x)
+    }
+
     fn nearest_wall_to(&self, x: &Vec2) -> usize {
         self.nearest_wall(x)
     }
 
-    fn walls_within(&self, _hint: usize, x: &Vec2, radius: f64) -> impl Iterator<Item = usize> + '_ {
-        self.walls_near(x, radius).into_iter()
+    fn walls_within(&self, hint: usize, x: &Vec2, radius: f64) -> impl Iterator<Item = usize> + '_ {
+        self.walls_near_in(hint, x, radius)
     }
 
-    fn signed_distance_in(&self, _hint: usize, x: &Vec2) -> f64 {
-        let d = self.boundary_distance(x);
-        if self.contains(x) { d } else { -d }
+    fn signed_distance_in(&self, hint: usize, x: &Vec2) -> f64 {
+        let d = self.boundary_distance_in(hint, x);
+        if self.contains_in(hint, x) { d } else { -d }
     }
 }

@@ -125,7 +125,7 @@ fn walls_rows<B: Boundary>(
     out: &mut Vec<Row>,
 ) {
     let walls = road.wall_list();
-    if !road.inside(&p) {
+    if !road.inside_in(segment, &p) {
         let nearest = (walls[road.nearest_wall_to(&p)].nearest(&p).0 - p).norm();
         for (k, w) in walls.iter().enumerate() {
             if (w.nearest(&p).0 - p).norm() <= nearest + 0.5 {

@@ -37,7 +37,7 @@ pub fn road_margin_at(
     boundary: f64,
 ) -> f64 {
     // A positive distance is only ever returned inside; at 0 the sign does not tell.
-    let inside = boundary > 0.0 || (boundary == 0.0 && road.inside(&s.p));
+    let inside = boundary > 0.0 || (boundary == 0.0 && road.inside_in(hint.unwrap_or(0), &s.p));
     if !inside {
         return boundary;
     }

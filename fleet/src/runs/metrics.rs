@@ -160,7 +160,10 @@ impl MetricsRecorder {
         match truth.filter(|truth| truth.len() == uavs.len()) {
             // No segment hint: the estimate's segment need not hold the true position.
             Some(truth) => self.states.extend(truth.iter().map(|s| (*s, None))),
-            None => self.states.extend(uavs.iter().map(|u| (Some(u.state), u.nav.tracker.current))),
+            // On a network, the cell of the UAV's way (a hint only: any gives the same margins).
+            None => self.states.extend(
+                uavs.iter().map(|u| (Some(u.state), u.nav.way().map(|w| w.cell()).or(u.nav.tracker.current))),
+            ),
         }
         let states = &self.states;
         // Each UAV's margins on its own (in parallel for large fleets; a minimum does not depend on

@@ -1,8 +1,9 @@
 //! Headless runs and what they measure: a scenario flown to its end ([`run`]), the random stress
-//! scenarios ([`stress`], [`families`]), the trunk road of `bench scale` ([`trunk`]), the paths
-//! `run --plot` draws ([`paths`]), and the metrics and margins of a run ([`metrics`], [`margins`],
-//! [`histogram`]).
+//! scenarios ([`stress`], [`families`]), the trunk road and the city grid of `bench scale` ([`trunk`],
+//! [`city`]), the paths `run --plot` draws ([`paths`]), and the metrics and margins of a run
+//! ([`metrics`], [`margins`], [`histogram`]).
 
+pub mod city;
 pub mod families;
 pub(crate) mod histogram;
 pub(crate) mod margins;

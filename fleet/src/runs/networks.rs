@@ -73,13 +73,13 @@ struct Ends {
     uavs: std::ops::RangeInclusive<usize>,
 }
 
-fn xy(p: Vec2) -> [f64; 2] {
+pub(super) fn xy(p: Vec2) -> [f64; 2] {
     [p.x, p.y]
 }
 
 /// A road through `edges` (each `(a, b)`: the a ends along one wall, the b ends along the other),
 /// one segment between consecutive edges; the first and last edges are exactly as given.
-fn road_through(name: String, edges: &[(Vec2, Vec2)], one_way: bool) -> NetworkRoad {
+pub(super) fn road_through(name: String, edges: &[(Vec2, Vec2)], one_way: bool) -> NetworkRoad {
     let segments = edges
         .windows(2)
         .map(|w| {
@@ -139,7 +139,7 @@ fn on_circle(rng: &mut StdRng, n: usize, jitter_deg: f64) -> Vec<Vec2> {
         .collect()
 }
 
-fn polygon(name: &str, v: &[Vec2]) -> Junction {
+pub(super) fn polygon(name: &str, v: &[Vec2]) -> Junction {
     Junction { name: name.into(), polygon: v.iter().map(|&p| xy(p)).collect() }
 }
 

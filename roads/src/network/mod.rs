@@ -13,6 +13,7 @@ mod space;
 mod way;
 mod zones;
 pub use route::{CRUISE_MPS, Route};
+pub use space::{CELL_NEAR_M, NetworkWalls};
 pub use way::{GateRule, Hold, Way};
 pub use zones::{Conflict, ConflictZone, Movement};
 #[cfg(test)]
@@ -125,6 +126,8 @@ pub struct Network {
     walls: Vec<(usize, usize)>,
     /// The walls as segments and the trees over walls and cells.
     space: space::Space,
+    /// The passages numbered for the route search.
+    passage_index: route::PassageIndex,
     /// Unique per built network (clones share it), from the same counter as a road's.
     id: u64,
 }
@@ -148,8 +151,9 @@ impl Network {
             })
             .collect::<Vec<_>>();
         let space = space::Space::new(&cells, &walls);
+        let passage_index = route::PassageIndex::new(&passages);
         let id = crate::road::next_id();
-        Ok(Self { layout, cells, passages, walls, space, id })
+        Ok(Self { layout, cells, passages, walls, space, passage_index, id })
     }
 
     /// A number unique to this network among the roads and networks built by the process (its

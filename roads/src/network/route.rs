@@ -50,6 +50,32 @@ impl PartialOrd for Queued {
     }
 }
 
+/// The directed passages numbered as the nodes of the route search, built once with the network.
+#[derive(Debug, Clone, Default)]
+pub(super) struct PassageIndex {
+    /// Node n: crossing passage `nodes[n] = (cell, k)`, the k-th passage of that cell, out of it.
+    nodes: Vec<(usize, usize)>,
+    /// The node of a cell's first passage (the others follow it).
+    offsets: Vec<usize>,
+}
+
+impl PassageIndex {
+    /// The index of every cell's `passages`.
+    pub(super) fn new(passages: &[Vec<super::Passage>]) -> Self {
+        let nodes =
+            passages.iter().enumerate().flat_map(|(c, list)| (0..list.len()).map(move |k| (c, k))).collect();
+        let offsets = passages
+            .iter()
+            .scan(0, |total, list| {
+                let at = *total;
+                *total += list.len();
+                Some(at)
+            })
+            .collect();
+        Self { nodes, offsets }
+    }
+}
+
 impl Network {
     /// The middle of edge `edge` of cell `cell`.
     fn edge_middle(&self, cell: usize, edge: usize) -> Vec2 {
@@ -127,22 +153,7 @@ impl Network {
             let cost = self.time_in(start, (to - from).norm());
             return Some(Route { cells: vec![start], waypoints: vec![from, to], cost });
         }
-        // Node n: crossing passage nodes[n] = (cell, k), the k-th passage of that cell, out of it.
-        let nodes: Vec<(usize, usize)> = self
-            .passages
-            .iter()
-            .enumerate()
-            .flat_map(|(c, list)| (0..list.len()).map(move |k| (c, k)))
-            .collect();
-        let offsets: Vec<usize> = self
-            .passages
-            .iter()
-            .scan(0, |total, list| {
-                let at = *total;
-                *total += list.len();
-                Some(at)
-            })
-            .collect();
+        let PassageIndex { nodes, offsets } = &self.passage_index;
         let passage = |n: usize| self.passages[nodes[n].0][nodes[n].1];
         let node_of = |cell: usize, edge: usize| {
             self.passages[cell].iter().position(|p| p.edge == edge).map(|k| offsets[cell] + k)

@@ -6,7 +6,7 @@ use super::polygon::bounds;
 use super::{Cell, Network};
 use crate::geometry::{Wall, WallKind};
 use rstar::primitives::{GeomWithData, Line, Rectangle};
-use rstar::{AABB, PointDistance, RTree};
+use rstar::{AABB, Envelope, PointDistance, RTree};
 use uav::{Vec2, cross};
 
 type WallLine = GeomWithData<Line<[f64; 2]>, usize>;
@@ -15,6 +15,13 @@ type CellBox = GeomWithData<Rectangle<[f64; 2]>, usize>;
 /// Tolerance (m) of the point-in-cell test, as for a chain's segments.
 const CONTAINS_TOL_M: f64 = crate::road::CONTAINS_TOL_M;
 
+/// Radius (m) of each cell's list of nearby walls: the walls within this distance of a point in the
+/// cell's box are in the list, so queries from there read it instead of the tree.
+pub const CELL_NEAR_M: f64 = 8.0;
+
+/// Cells with more walls than this near them keep no list (the tree answers).
+const CELL_NEAR_CAPACITY: usize = 96;
+
 /// The spatial side of a [`Network`], built once with it.
 #[derive(Debug, Clone)]
 pub(super) struct Space {
@@ -22,6 +29,42 @@ pub(super) struct Space {
     pub(super) walls: Vec<Wall>,
     wall_tree: RTree<WallLine>,
     cell_tree: RTree<CellBox>,
+    /// Per cell, its box grown by the point-in-cell tolerance (as in `cell_tree`).
+    boxes: Vec<AABB<[f64; 2]>>,
+    /// Per cell, the walls within [`CELL_NEAR_M`] of its box, ascending (a superset: those whose
+    /// boxes touch the box grown by that much), or None when there are more than
+    /// [`CELL_NEAR_CAPACITY`].
+    near: Vec<Option<Box<[u32]>>>,
+}
+
+/// The walls within a distance of a point, ascending: a cell's list filtered by the tree's own
+/// distance test, or the tree's answer where no list serves.
+#[derive(Debug, Clone)]
+pub struct NetworkWalls<'a>(Near<'a>);
+
+#[derive(Debug, Clone)]
+enum Near<'a> {
+    /// A cell's list, the walls in it and the query (point, squared radius).
+    List { ids: std::slice::Iter<'a, u32>, lines: &'a [Wall], x: [f64; 2], r2: f64 },
+    /// The tree's answer, sorted.
+    Tree(std::vec::IntoIter<usize>),
+}
+
+impl Iterator for NetworkWalls<'_> {
+    type Item = usize;
+    fn next(&mut self) -> Option<usize> {
+        match &mut self.0 {
+            Near::List { ids, lines, x, r2 } => {
+                ids.by_ref().map(|&k| k as usize).find(|&k| wall_line(&lines[k]).distance_2(x) <= *r2)
+            }
+            Near::Tree(ids) => ids.next(),
+        }
+    }
+}
+
+/// Wall `w` as the tree holds it (the same arithmetic for its distances).
+fn wall_line(w: &Wall) -> Line<[f64; 2]> {
+    Line::new([w.a.x, w.a.y], [w.b.x, w.b.y])
 }
 
 /// The signed distance from `x` to the nearest edge line of the convex cell `v`, positive inside.
@@ -34,6 +77,20 @@ pub(super) fn margin(v: &[Vec2], x: &Vec2) -> f64 {
             sigma * cross(&(b - a), &(x - a)) / (b - a).norm()
         })
         .fold(f64::INFINITY, f64::min)
+}
+
+/// True when `margin(v, x) >= -tol` for a tolerance `tol >= 0` (the same answer), without the
+/// square roots for a point inside or on every edge line.
+pub(super) fn within(v: &[Vec2], x: &Vec2, tol: f64) -> bool {
+    let n = v.len();
+    let sigma = cross(&(v[1] - v[0]), &(v[2] - v[1])).signum();
+    // Each term of the margin is this cross product over a positive edge length: none negative, so
+    // the margin is at least 0 ≥ −tol.
+    let inside = (0..n).all(|k| {
+        let (a, b) = (v[k], v[(k + 1) % n]);
+        sigma * cross(&(b - a), &(x - a)) >= 0.0
+    });
+    inside || margin(v, x) >= -tol
 }
 
 impl Space {
@@ -53,17 +110,41 @@ impl Space {
                 Wall { a, b, n_in, segment: c, kind: WallKind::Edge(e) }
             })
             .collect();
-        let lines: Vec<WallLine> = walls
+        let lines: Vec<WallLine> =
+            walls.iter().enumerate().map(|(k, w)| GeomWithData::new(wall_line(w), k)).collect();
+        let boxes: Vec<AABB<[f64; 2]>> = cells
             .iter()
-            .enumerate()
-            .map(|(k, w)| GeomWithData::new(Line::new([w.a.x, w.a.y], [w.b.x, w.b.y]), k))
+            .map(|cell| {
+                let (lo, hi) = bounds(&cell.vertices);
+                let pad = CONTAINS_TOL_M * 2.0;
+                AABB::from_corners([lo.x - pad, lo.y - pad], [hi.x + pad, hi.y + pad])
+            })
             .collect();
-        let boxes = cells.iter().enumerate().map(|(c, cell)| {
-            let (lo, hi) = bounds(&cell.vertices);
-            let pad = CONTAINS_TOL_M * 2.0;
-            GeomWithData::new(Rectangle::from_corners([lo.x - pad, lo.y - pad], [hi.x + pad, hi.y + pad]), c)
-        });
-        Self { walls, wall_tree: RTree::bulk_load(lines), cell_tree: RTree::bulk_load(boxes.collect()) }
+        let wall_tree = RTree::bulk_load(lines);
+        let near = boxes
+            .iter()
+            .map(|b| {
+                // Grown a little beyond CELL_NEAR_M: a wall that close is in the list whatever the rounding.
+                let (lo, hi) = (b.lower(), b.upper());
+                let scale = lo.iter().chain(&hi).fold(1.0f64, |m, c| m.max(c.abs()));
+                let r = CELL_NEAR_M + 1e-9 * scale;
+                let grown = AABB::from_corners([lo[0] - r, lo[1] - r], [hi[0] + r, hi[1] + r]);
+                // Wall indices fit in u32: a network has at most MAX_CELLS cells of at most 8 edges.
+                let mut ids: Vec<u32> =
+                    wall_tree.locate_in_envelope_intersecting(&grown).map(|l| l.data as u32).collect();
+                ids.sort_unstable();
+                (ids.len() <= CELL_NEAR_CAPACITY).then(|| ids.into_boxed_slice())
+            })
+            .collect();
+        let cell_boxes =
+            boxes.iter().enumerate().map(|(c, b)| GeomWithData::new(Rectangle::from_aabb(*b), c));
+        Self { walls, wall_tree, cell_tree: RTree::bulk_load(cell_boxes.collect()), boxes, near }
+    }
+
+    /// The list of walls near cell `cell` when `x` is in its box and the list exists.
+    fn list_at(&self, cell: usize, x: &Vec2) -> Option<&[u32]> {
+        let inside = self.boxes.get(cell).is_some_and(|b| b.contains_point(&[x.x, x.y]));
+        self.near.get(cell).filter(|_| inside)?.as_deref()
     }
 }
 
@@ -81,7 +162,7 @@ impl Network {
         }
         let at = AABB::from_point([x.x, x.y]);
         let inside = self.space.cell_tree.locate_in_envelope_intersecting(&at).map(|b| b.data);
-        inside.filter(|&c| margin(&self.cells[c].vertices, x) >= -CONTAINS_TOL_M).min()
+        inside.filter(|&c| within(&self.cells[c].vertices, x, CONTAINS_TOL_M)).min()
     }
 
     /// True when `x` is in the network.
@@ -99,6 +180,47 @@ impl Network {
         let mut list: Vec<usize> = near.map(|w| w.data).collect();
         list.sort_unstable();
         list
+    }
+
+    /// [`Network::walls_near`] for a point believed to be in cell `hint` (a UAV's tracked cell, any
+    /// number): the same walls in the same order, read from the list of the cell `x` is in (the
+    /// hint's when `x` is in its box) instead of the tree, without allocating, for a radius up to
+    /// [`CELL_NEAR_M`].
+    pub fn walls_near_in(&self, hint: usize, x: &Vec2, radius: f64) -> NetworkWalls<'_> {
+        if x.x.is_finite() && x.y.is_finite() && radius <= CELL_NEAR_M {
+            let list = self.space.list_at(hint, x).or_else(|| self.space.list_at(self.locate(x)?, x));
+            if let Some(ids) = list {
+                let (lines, r2) = (&self.space.walls[..], radius * radius);
+                return NetworkWalls(Near::List { ids: ids.iter(), lines, x: [x.x, x.y], r2 });
+            }
+        }
+        NetworkWalls(Near::Tree(self.walls_near(x, radius).into_iter()))
+    }
+
+    /// [`Network::contains`] for a point believed to be in cell `hint` (any number): that cell is
+    /// asked first.
+    pub fn contains_in(&self, hint: usize, x: &Vec2) -> bool {
+        let in_hint = self.cells.get(hint).is_some_and(|c| within(&c.vertices, x, CONTAINS_TOL_M));
+        in_hint || self.contains(x)
+    }
+
+    /// [`Network::boundary_distance`] for a point believed to be in cell `hint` (any number): the
+    /// same value, from the list of the cell `x` is in when the nearest wall is within
+    /// [`CELL_NEAR_M`], else from the tree.
+    pub fn boundary_distance_in(&self, hint: usize, x: &Vec2) -> f64 {
+        if x.x.is_finite() && x.y.is_finite() {
+            let list = self.space.list_at(hint, x).or_else(|| self.space.list_at(self.locate(x)?, x));
+            if let Some(ids) = list {
+                let at = [x.x, x.y];
+                let d2 = ids.iter().map(|&k| wall_line(&self.space.walls[k as usize]).distance_2(&at));
+                let d2 = d2.fold(f64::INFINITY, f64::min);
+                // Every wall within CELL_NEAR_M of x is in the list: the nearest one is, when that close.
+                if d2 <= CELL_NEAR_M * CELL_NEAR_M {
+                    return d2.sqrt();
+                }
+            }
+        }
+        self.boundary_distance(x)
     }
 
     /// The index of a wall nearest to `x` (0 for a point that is not finite).

@@ -331,6 +331,11 @@ proptest! {
         let p = Vec2::new(x, y);
         let inside = net.cells().iter().any(|c| space::margin(&c.vertices, &p) >= -1e-9);
         prop_assert_eq!(net.contains(&p), inside);
+        for c in net.cells() {
+            for tol in [0.0, 1e-9, 1e-6, 0.5] {
+                prop_assert_eq!(space::within(&c.vertices, &p, tol), space::margin(&c.vertices, &p) >= -tol);
+            }
+        }
         let walls = net.wall_list();
         let scan: Vec<usize> = (0..walls.len()).filter(|&k| walls[k].nearest(&p).0.metric_distance(&p) <= radius).collect();
         prop_assert_eq!(net.walls_near(&p, radius), scan);
@@ -342,6 +347,15 @@ proptest! {
             }
         }
         prop_assert_eq!(walls.len(), net.walls().count());
+        // With any cell as the hint (right, wrong or none), the cells' lists answer as the trees.
+        let cells = net.cells().len();
+        for hint in [0, cells / 2, net.locate(&p).unwrap_or(0), cells] {
+            prop_assert_eq!(net.walls_near_in(hint, &p, radius).collect::<Vec<_>>(), net.walls_near(&p, radius));
+            let wide = radius + 3.0;
+            prop_assert_eq!(net.walls_near_in(hint, &p, wide).collect::<Vec<_>>(), net.walls_near(&p, wide));
+            prop_assert_eq!(net.boundary_distance_in(hint, &p).to_bits(), net.boundary_distance(&p).to_bits());
+            prop_assert_eq!(net.contains_in(hint, &p), net.contains(&p));
+        }
     }
 }
 

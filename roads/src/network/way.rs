@@ -10,8 +10,9 @@
 //! route's convex cells and passes every wall corner at half the clearance at least, so the target
 //! keeps the UAV off the corners of junctions as the chain's corner clearance does.
 
-use super::space::margin;
+use super::space::within;
 use super::{CellKind, Network, Route};
+use std::cell::RefCell;
 use uav::{Vec2, cross};
 
 /// Arc-length spacing (m) of the candidates on the taut path a target is chosen from.
@@ -155,7 +156,7 @@ impl Way {
     /// Follows a UAV now at `p`: finds it in its cell, the next ones or the previous one. False when
     /// it is in none of them (pushed off its route: plan a new way).
     pub fn follow(&mut self, net: &Network, p: Vec2) -> bool {
-        let inside = |k: usize| margin(&net.cells[self.cells[k]].vertices, &p) >= -IN_CELL_M;
+        let inside = |k: usize| within(&net.cells[self.cells[k]].vertices, &p, IN_CELL_M);
         if inside(self.at) {
             return true;
         }
@@ -208,7 +209,7 @@ impl Way {
         let mut back = hold.back_m;
         for _ in 0..8 {
             let x = middle - forward * back;
-            if before.iter().any(|&c| margin(&net.cells[c].vertices, &x) >= 0.0) {
+            if before.iter().any(|&c| within(&net.cells[c].vertices, &x, 0.0)) {
                 return x;
             }
             back /= 2.0;
@@ -221,14 +222,21 @@ impl Way {
         if (end - p).norm() <= r_s && self.sees(net, p, end) {
             return end;
         }
-        let path = self.taut_path(p, r_s, last, end);
+        SCRATCH.with_borrow_mut(|(portals, path)| {
+            self.taut_path_into(p, r_s, last, end, portals, path);
+            self.target_on(net, p, r_s, path)
+        })
+    }
+
+    /// The target of a UAV at `p` on its taut path `path` (see [`Way::target_towards`]).
+    fn target_on(&self, net: &Network, p: Vec2, r_s: f64, path: &[Vec2]) -> Vec2 {
         let length: f64 = path.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
         let reach = length.min(r_s);
         let steps = (reach / STEP_M).ceil() as usize;
         let farthest_seen = |openings: &[Gate]| {
             (1..=steps)
                 .rev()
-                .map(|k| point_along(&path, reach * k as f64 / steps as f64))
+                .map(|k| point_along(path, reach * k as f64 / steps as f64))
                 .find(|&c| self.sees_through(net, p, c, openings))
         };
         // Within TURN_M of the first corner of the taut path, the UAV turns there: it aims past it as
@@ -274,7 +282,7 @@ impl Way {
     /// [`Way::sees`] through `openings` (one per passage of the way).
     fn sees_through(&self, net: &Network, p: Vec2, x: Vec2, openings: &[Gate]) -> bool {
         for k in self.at..self.cells.len() {
-            if margin(&net.cells[self.cells[k]].vertices, &x) >= -IN_CELL_M {
+            if within(&net.cells[self.cells[k]].vertices, &x, IN_CELL_M) {
                 return true;
             }
             let Some(gate) = openings.get(k) else { return false };
@@ -287,19 +295,41 @@ impl Way {
 
     /// The taut path from `p` through the gates ahead before gate `last` (those within `r_s` of it
     /// and one more) to `end`, or to the middle of the last gate taken when `end` is farther.
+    #[cfg(test)]
     fn taut_path(&self, p: Vec2, r_s: f64, last: usize, end: Vec2) -> Vec<Vec2> {
+        let (mut portals, mut path) = (Vec::new(), Vec::new());
+        self.taut_path_into(p, r_s, last, end, &mut portals, &mut path);
+        path
+    }
+
+    /// [`Way::taut_path`] into `path`, through the buffer `portals` (both cleared first).
+    fn taut_path_into(
+        &self,
+        p: Vec2,
+        r_s: f64,
+        last: usize,
+        end: Vec2,
+        portals: &mut Vec<Gate>,
+        path: &mut Vec<Vec2>,
+    ) {
         let ahead = self.gates.get(self.at..last.min(self.gates.len())).unwrap_or_default();
         let near = ahead.iter().take_while(|g| distance_to(p, g) <= r_s).count();
         let (taken, end) = match ahead.get(near) {
             Some(g) => (&ahead[..=near], (g.left + g.right) / 2.0),
             None => (ahead, end),
         };
-        let mut portals = Vec::with_capacity(taken.len() + 2);
+        portals.clear();
         portals.push(Gate { left: p, right: p });
         portals.extend_from_slice(taken);
         portals.push(Gate { left: end, right: end });
-        funnel(&portals)
+        funnel(portals, path);
     }
+}
+
+thread_local! {
+    /// Each thread's buffers for [`Way::taut_path_into`] (the portals and the path): a target costs
+    /// no allocation once they have grown to the longest path.
+    static SCRATCH: RefCell<(Vec<Gate>, Vec<Vec2>)> = const { RefCell::new((Vec::new(), Vec::new())) };
 }
 
 /// The distance from `p` to the gate's interval.
@@ -341,13 +371,14 @@ fn point_along(path: &[Vec2], s: f64) -> Vec2 {
     path.last().copied().unwrap_or_default()
 }
 
-/// The shortest path through `portals` (the first and last of one point each): the funnel
-/// algorithm. The funnel's sides are the rays from its apex to its left and right points; a portal
+/// The shortest path through `portals` (the first and last of one point each) into `path`: the
+/// funnel algorithm. The funnel's sides are the rays from its apex to its left and right points; a portal
 /// end that narrows the funnel moves that side, one that crosses the other side makes that side's
 /// point a corner of the path and the new apex.
-fn funnel(portals: &[Gate]) -> Vec<Vec2> {
+fn funnel(portals: &[Gate], path: &mut Vec<Vec2>) {
     let start = portals[0].left;
-    let mut path = vec![start];
+    path.clear();
+    path.push(start);
     let (mut apex, mut left, mut right) = (start, start, start);
     let (mut left_at, mut right_at) = (0, 0);
     let mut i = 1;
@@ -382,7 +413,6 @@ fn funnel(portals: &[Gate]) -> Vec<Vec2> {
     if path.last() != Some(&end) {
         path.push(end);
     }
-    path
 }
 
 #[cfg(test)]
