@@ -25,14 +25,14 @@ pub struct Scenario {
     pub segments: Vec<[[f64; 2]; 4]>,
     /// A network's roads (instead of `segments`): named chains of segments.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schemars(with = "Option<Vec<NetworkRoad>>", length(min = 1, max = roads::network::MAX_CELLS))]
+    #[schemars(with = "Option<Vec<NetworkRoad>>", length(min = 1))]
     #[schemars(
         description = "a road network's roads (instead of `segments`), as in a network layout of `PUT /api/road`, which states the rules beyond the schema"
     )]
     pub roads: Option<Vec<NetworkRoad>>,
     /// A network's junctions (with `roads`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schemars(with = "Option<Vec<Junction>>", length(max = roads::network::MAX_CELLS))]
+    #[schemars(with = "Option<Vec<Junction>>")]
     #[schemars(description = "a road network's junctions (with `roads`); null or absent: none")]
     pub junctions: Option<Vec<Junction>>,
     /// The road's regions, as in a road layout (`airroads serve --region`).
@@ -60,7 +60,7 @@ fn road_or_network_schema(schema: &mut schemars::Schema) {
     let network = serde_json::json!({
         "required": ["roads"],
         "not": {"required": ["segments"]},
-        "properties": {"regions": {"type": "null"}}
+        "properties": {"roads": {"type": "array"}, "regions": {"type": "null"}}
     });
     object.insert("anyOf".into(), serde_json::json!([road, network]));
 }

@@ -26,15 +26,16 @@ use uav::Vec2;
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NetworkLayout {
-    /// The roads.
-    #[schemars(length(min = 1, max = MAX_CELLS))]
+    /// The roads. Their count is bounded by the cells' (at most [`MAX_CELLS`] with the junctions),
+    /// stated in the description: a list of that many roads as a schema's bound would be the
+    /// bound of no body the server reads (4 MiB).
+    #[schemars(length(min = 1))]
     #[schemars(
         description = "the network's roads, at least one, names unique. Beyond the schema a network is refused with 422 (`rule` naming the rule, `field` the road, segment or junction) when a cell breaks a road's rule (not_convex, degenerate_edge, seamless_join, folds_back), roads and junctions together have more than 20000 cells (too_many_segments), a name is used twice (duplicate_name), cells overlap (overlap), an edge is shared by three cells (shared_by_three) or only in part (partial_edge), the network is not connected (disconnected), a passage is narrower than a UAV needs with the fleet's parameters (narrow_passage), or two walls meet at less than 90° (sharp_corner)"
     )]
     pub roads: Vec<NetworkRoad>,
     /// The junctions (none: the roads join end to end or side to end).
     #[serde(default)]
-    #[schemars(length(max = MAX_CELLS))]
     pub junctions: Vec<Junction>,
 }
 
