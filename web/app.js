@@ -9,7 +9,7 @@ import { Trails } from "./trails.js";
 import { MarginPlot } from "./plot.js";
 import { STATUS_COLOURS, drawBox, drawEditor, drawFleet, drawReservations, drawRoad } from "./render.js";
 import { showDetails } from "./details.js";
-import { segmentAt } from "./geometry.js";
+import { insideAny, roadPolygons } from "./geometry.js";
 import { attachInput } from "./input.js";
 import { bindControls, showMessage } from "./controls.js";
 
@@ -209,7 +209,7 @@ export class App {
 
   fit() {
     const pts = [];
-    if (this.geometry) for (const s of this.geometry.layout.segments) pts.push(...s);
+    for (const poly of roadPolygons(this.geometry)) pts.push(...poly);
     if (this.mode === "edit") for (const e of this.editor.edges) pts.push(...e);
     if (!pts.length) return;
     this.camera.fit(bounds(pts));
@@ -219,7 +219,10 @@ export class App {
 
   setMode(mode) {
     if (mode === "edit" && this.mode !== "edit" && !this.editorLoaded && this.geometry) {
-      this.editor.load(this.geometry.layout, false);
+      // The editor draws one road: a live network is not loaded into it (it starts empty).
+      const network = !this.geometry.layout.segments;
+      this.editor.load(network ? { segments: [] } : this.geometry.layout, false);
+      if (network) showMessage("the live road is a network: the editor draws one road, and applying it replaces the network", false);
       this.editorLoaded = true;
     }
     this.mode = mode;
@@ -240,7 +243,7 @@ export class App {
 
   /** True when world point p is on the live road. */
   onRoad(p) {
-    return !!this.geometry && segmentAt(this.geometry.layout.segments, p) >= 0;
+    return insideAny(roadPolygons(this.geometry), p);
   }
 
   draw() {

@@ -13,6 +13,7 @@ import { ARTIFACTS, BIN, api, clickWorld, launchBrowser, openDashboard, pagePoin
 
 const STRAIGHT = join(import.meta.dirname, "fixtures", "straight.json");
 const NARROW = join(import.meta.dirname, "..", "..", "scenarios", "narrow16.json");
+const DEPOT = join(import.meta.dirname, "..", "..", "scenarios", "depot.json");
 let browser;
 
 before(async () => {
@@ -304,6 +305,40 @@ test("with Rerun logging a batched fleet, the dashboard's selection becomes Reru
     assert.deepEqual(sent.ids, ["uav2"]);
     await page.keyboard.press("Escape");
     await until("an empty selection sent to Rerun", async () => (await api(url, "GET", "/api/rerun/selection")).ids.length === 0);
+  });
+});
+
+test("a road network is drawn cell by cell; a click on a junction adds a UAV there", async () => {
+  await withDashboard("network", ["--scenario", DEPOT], async (page, { url }) => {
+    // Held, so that no UAV flies into the junction before the click.
+    await api(url, "POST", "/api/fleet/pause");
+    const geometry = await until("the network's geometry in the page", async () => {
+      const g = await page.evaluate(() => window.__airroads.geometry);
+      return g && Array.isArray(g.cells) && g.cells.length === 31 && g;
+    });
+    const fork = geometry.cells.find((c) => c.kind === "junction" && c.name === "fork");
+    const centre = [fork.polygon.reduce((a, p) => a + p[0], 0) / 4, fork.polygon.reduce((a, p) => a + p[1], 0) / 4];
+    // The junction is painted: its centre is not the page's background.
+    const [px, py] = await pagePoint(page, centre[0], centre[1]);
+    const painted = await page.evaluate(([x, y]) => {
+      const canvas = document.getElementById("view");
+      const rect = canvas.getBoundingClientRect();
+      const dpr = window.devicePixelRatio || 1;
+      const d = canvas.getContext("2d").getImageData((x - rect.left) * dpr, (y - rect.top) * dpr, 1, 1).data;
+      return [d[0], d[1], d[2], d[3]];
+    }, [px, py]);
+    assert.ok(painted[3] > 0, `nothing drawn at the fork's centre: ${painted}`);
+    await screenshot(page, "network");
+    await page.click("#mode-add");
+    await clickWorld(page, centre[0], centre[1]);
+    const added = await until("a seventeenth UAV (GET /api/uavs)", async () => {
+      const uavs = await api(url, "GET", "/api/uavs");
+      return uavs.length === 17 && uavs[16];
+    });
+    assert.ok(near(added.p, centre, 0.3), `added at ${added.p}, clicked ${centre}`);
+    // The editor draws one road: it starts empty on a network.
+    await page.click("#mode-edit");
+    assert.equal(await page.evaluate(() => window.__airroads.editor.segments.length), 0);
   });
 });
 
