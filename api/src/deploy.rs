@@ -345,6 +345,18 @@ mod tests {
     }
 
     #[test]
+    fn a_network_is_refused_naming_regions_and_a_chain_reads_as_before() {
+        let chain = RoadLayout::straight(0.0, 30.0, 4.0, 6);
+        let network = serde_json::to_string(&roads::network::NetworkLayout::from(&chain)).unwrap();
+        let e = layout_of(Kind::Road, &network).unwrap_err();
+        assert_eq!((e.status, e.field.as_deref()), (StatusCode::UNPROCESSABLE_ENTITY, Some("regions")));
+        let depot =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/depot.json")).unwrap();
+        assert_eq!(layout_of(Kind::Scenario, &depot).unwrap_err().field.as_deref(), Some("regions"));
+        assert_eq!(layout_of(Kind::Road, &serde_json::to_string(&chain).unwrap()).unwrap(), chain);
+    }
+
+    #[test]
     fn a_deployed_road_keeps_the_regions_and_their_neighbours() {
         let old = road(&[("a", 0, 1), ("b", 2, 3), ("c", 4, 5)]);
         // Other ranges, the same neighbours: fine.
