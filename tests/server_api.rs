@@ -262,11 +262,11 @@ async fn scenario_over_rest_is_validated() {
     bad["params"]["delta"] = json!(-1.0);
     let (status, body) = server.call("POST", "/api/scenario", Some(&bad.to_string())).await;
     assert_eq!((status, error_field(&body)), (422, "params.delta"), "{body}");
-    // A road network is valid, but the server flies one road so far: refused, naming `roads`.
+    assert_eq!(uav_ids(&server).await, ["a", "b"]);
+    // A road network loads as well (tests/server_network.rs flies one).
     let network = support::shipped("depot.json");
     let (status, body) = server.call("POST", "/api/scenario", Some(&network.to_string())).await;
-    assert_eq!((status, error_field(&body)), (422, "roads"), "{body}");
-    assert_eq!(uav_ids(&server).await, ["a", "b"]);
+    assert_eq!((status, body["uavs"].as_u64()), (200, Some(16)), "{body}");
     let (status, body) =
         server.call("POST", "/api/scenario", Some(&support::shipped("lab3.json").to_string())).await;
     assert_eq!(status, 200, "{body}");

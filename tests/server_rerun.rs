@@ -344,3 +344,45 @@ async fn a_fleet_above_the_threshold_is_one_batch_and_only_selected_uavs_have_th
     assert!(rec.points("world/uavs/b").len() >= 5 && rec.scalars("slack/b").len() >= 5);
     assert!(rec.chunks("world/uavs/a").is_empty() && rec.chunks("slack/a").is_empty());
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_network_is_logged_with_its_cells_and_walls_and_no_centre_line() {
+    let rrd = temp_rrd();
+    let server = start(&format!("save={}", rrd.display())).await;
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    let depot = support::shipped("depot.json");
+    let network = serde_json::json!({"roads": depot["roads"], "junctions": depot["junctions"]});
+    let (status, body) = support::raw(server.addr, "PUT", "/api/road", Some(&network.to_string()), &[]).await;
+    assert_eq!(status, 200, "{body}");
+    let view = server.state.engine.road.borrow().clone();
+    tokio::time::sleep(Duration::from_millis(600)).await;
+    let stats = server.stop().await;
+    assert_eq!(stats.errors, 0);
+
+    let rec = read_rrd(&rrd);
+    std::fs::remove_file(&rrd).unwrap();
+    let walls = rec.strips("world/road/walls");
+    assert_eq!(walls.last().map(|w| &w.1), Some(&walls_as_strips(&view)), "the network's walls");
+    // Each cell as its closed outline, exactly as the server drew it.
+    let cells = rec.strips("world/road/cells");
+    let outlines: Vec<Vec<[f32; 2]>> = view
+        .cells
+        .iter()
+        .map(|c| c.polygon.iter().chain(c.polygon.first()).map(|p| [p[0] as f32, p[1] as f32]).collect())
+        .collect();
+    assert_eq!(outlines.len(), 31);
+    assert_eq!(cells.last().map(|c| &c.1), Some(&outlines));
+    let component = LineStrips2D::descriptor_labels().component;
+    let labels = rec.rows("world/road/cells", component, |c| {
+        c.iter_slices::<String>(component)
+            .map(|s| s.iter().map(|l| l.to_string()).collect::<Vec<_>>())
+            .collect::<Vec<_>>()
+    });
+    let last = &labels.last().expect("labelled cells").1;
+    assert!(last.contains(&"trunk[0]".to_string()) && last.contains(&"fork".to_string()), "{last:?}");
+    // The chain road's centre line is cleared: the network has none.
+    let clear = Clear::descriptor_is_recursive().component;
+    let cleared = rec
+        .rows("world/road/centerline", clear, |c| c.iter_slices::<bool>(clear).map(|s| s.value(0)).collect());
+    assert_eq!(cleared.len(), 1, "the centre line is cleared once: {cleared:?}");
+}

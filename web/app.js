@@ -9,7 +9,7 @@ import { Trails } from "./trails.js";
 import { MarginPlot } from "./plot.js";
 import { STATUS_COLOURS, drawBox, drawEditor, drawFleet, drawReservations, drawRoad } from "./render.js";
 import { showDetails } from "./details.js";
-import { segmentAt } from "./geometry.js";
+import { insideAny, roadPolygons } from "./geometry.js";
 import { attachInput } from "./input.js";
 import { bindControls, showMessage } from "./controls.js";
 
@@ -210,7 +210,7 @@ export class App {
 
   fit() {
     const pts = [];
-    if (this.geometry) for (const s of this.geometry.layout.segments) pts.push(...s);
+    for (const poly of roadPolygons(this.geometry)) pts.push(...poly);
     if (this.mode === "edit") {
       for (const r of this.editor.roads) for (const e of r.edges) pts.push(...e);
       for (const j of this.editor.junctions) pts.push(...j.polygon);
@@ -223,6 +223,7 @@ export class App {
 
   setMode(mode) {
     if (mode === "edit" && this.mode !== "edit" && !this.editorLoaded && this.geometry) {
+      // The editor takes a chain or a network as the server has it.
       this.editor.load(this.geometry.layout, false);
       this.editorLoaded = true;
     }
@@ -256,7 +257,7 @@ export class App {
 
   /** True when world point p is on the live road. */
   onRoad(p) {
-    return !!this.geometry && segmentAt(this.geometry.layout.segments, p) >= 0;
+    return insideAny(roadPolygons(this.geometry), p);
   }
 
   draw() {

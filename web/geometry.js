@@ -38,3 +38,13 @@ export function segmentAt(segments, p) {
   for (let i = 0; i < segments.length; i++) if (inPolygon(p, quadPolygon(segments[i]))) return i;
   return -1;
 }
+
+/** The live road's cells as polygons: a network's cells, or a chain road's segments. */
+export function roadPolygons(geometry) {
+  if (!geometry) return [];
+  if (Array.isArray(geometry.cells) && geometry.cells.length) return geometry.cells.map((c) => c.polygon);
+  return (geometry.layout.segments || []).map(quadPolygon);
+}
+
+/** True when p is inside one of `polygons`. */
+export const insideAny = (polygons, p) => polygons.some((poly) => inPolygon(p, poly));

@@ -42,9 +42,45 @@ function line(ctx, cam, a, b) {
   ctx.lineTo(x1, y1);
 }
 
-/** The live road: surface, passable joint edges, walls and centre line. */
+/** A road network: its cells (junctions a shade darker, with their names), their shared edges
+ * dashed, and its walls. */
+function drawNetwork(ctx, cam, geometry, dim) {
+  const cells = geometry.cells;
+  ctx.globalAlpha = dim ? 0.35 : 1;
+  for (const [kind, colour] of [["segment", "#e9edf2"], ["junction", "#dde3ea"]]) {
+    ctx.fillStyle = colour;
+    ctx.beginPath();
+    for (const c of cells) if (c.kind === kind) polygon(ctx, cam, c.polygon);
+    ctx.fill();
+  }
+  ctx.setLineDash([6, 5]);
+  ctx.strokeStyle = "#9aa7b5";
+  ctx.lineWidth = 1;
+  ctx.beginPath();
+  for (const c of cells) polygon(ctx, cam, c.polygon);
+  ctx.stroke();
+  ctx.setLineDash([]);
+  ctx.strokeStyle = "#26303b";
+  ctx.lineWidth = 3;
+  ctx.beginPath();
+  for (const [a, b] of geometry.walls) line(ctx, cam, a, b);
+  ctx.stroke();
+  ctx.font = "11px system-ui, sans-serif";
+  ctx.textAlign = "center";
+  ctx.textBaseline = "middle";
+  ctx.fillStyle = "#5b6570";
+  for (const c of cells) {
+    if (c.kind !== "junction") continue;
+    const [x, y] = cam.toScreen(...centroid(c.polygon));
+    ctx.fillText(c.name, x, y);
+  }
+  ctx.globalAlpha = 1;
+}
+
+/** The live road: surface, passable joint edges, walls and centre line; or a network's cells. */
 export function drawRoad(ctx, cam, geometry, dim) {
   if (!geometry) return;
+  if (Array.isArray(geometry.cells) && geometry.cells.length) return drawNetwork(ctx, cam, geometry, dim);
   const segs = geometry.layout.segments;
   ctx.globalAlpha = dim ? 0.35 : 1;
   ctx.fillStyle = "#e9edf2";

@@ -23,11 +23,11 @@ use super::state::AppState;
 use axum::Json;
 use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
-use engine::command::{Command, Outcome};
+use engine::command::{Command, NewRoad, Outcome};
 use engine::fleet_loop::now_ms;
 use fleet::{Scenario, ValidScenario};
 use regions::federation::{Answer, ApiQuery, ApiReply, Federation, Kind, Step};
-use roads::{Road, RoadLayout};
+use roads::{AirspaceLayout, Road, RoadLayout};
 
 use serde_json::{Map, Value, json};
 use std::collections::BTreeMap;
@@ -43,12 +43,26 @@ fn names(layout: &RoadLayout) -> Vec<String> {
     layout.regions.iter().flatten().map(|r| r.name.clone()).collect()
 }
 
-/// The layout of a step's body (a road, or a scenario's road).
+/// 422 naming `regions`: a deployment of regions divides one road, never a network.
+fn no_network() -> ApiError {
+    ApiError::invalid(
+        "regions",
+        "this deployment divides one road into regions; a road network cannot be divided into regions yet",
+    )
+}
+
+/// The layout of a step's body (a road, or a scenario's road); a network is refused.
 fn layout_of(kind: Kind, body: &str) -> Result<RoadLayout, ApiError> {
     match kind {
-        Kind::Road => super::error::parse::<RoadLayout>(body.as_bytes()),
+        Kind::Road => match super::road::parse_layout(body.as_bytes())? {
+            AirspaceLayout::Road(layout) => Ok(layout),
+            AirspaceLayout::Network(_) => Err(no_network()),
+        },
         Kind::Scenario => {
             let scenario = super::error::parse::<Scenario>(body.as_bytes())?;
+            if scenario.roads.is_some() {
+                return Err(no_network());
+            }
             Ok(RoadLayout { regions: scenario.regions.clone(), ..RoadLayout::new(scenario.segments.clone()) })
         }
     }
@@ -90,7 +104,6 @@ fn scenario_for(rules: &links::LinkRules, body: &str, own: &str) -> Result<Valid
         fleet::ScenarioError::Invalid { field, reason } => ApiError::invalid(field, reason),
         other => ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", other.to_string()),
     })?;
-    engine::changes::check_flies_a_road(&valid).map_err(ApiError::from)?;
     let road = &valid.road;
     valid.uavs.retain(|u| road.region_at(&u.start).is_some_and(|r| r.name == own));
     Ok(valid)
@@ -132,7 +145,7 @@ enum StepDone {
 }
 
 async fn run_step(app: &AppState, own: &str, step: Step) -> Result<StepDone, ApiError> {
-    let current = app.engine.road.borrow().layout.clone();
+    let current = app.engine.road.borrow().layout.road().cloned().ok_or_else(no_network)?;
     let (kind, body) = (step.kind, step.body.clone());
     let own_name = own.to_string();
     let rules = app.link_rules.clone();
@@ -140,7 +153,7 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<StepDone, Api
     let (road, scenario) = app
         .validate(move || {
             let layout = layout_of(kind, &body)?;
-            let road = super::handlers::road_of(layout)?;
+            let road = super::road::road_of(layout)?;
             let old = Road::new(current).map_err(|e| ApiError::invalid("road", e.message))?;
             check_same_regions(&old, &road)?;
             let scenario =
@@ -168,7 +181,7 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<StepDone, Api
     tokio::time::sleep(Duration::from_millis(wait)).await;
     let done = match scenario {
         None => {
-            let cleared_goals = match app.apply(Command::SetRoad(Box::new(road))).await? {
+            let cleared_goals = match app.apply(Command::SetRoad(Box::new(NewRoad::road(road)))).await? {
                 Outcome::RoadReplaced { cleared_goals } => cleared_goals,
                 _ => Vec::new(),
             };
@@ -253,7 +266,9 @@ pub async fn coordinate(
     body: String,
     authorization: Option<String>,
 ) -> Response {
-    let old_layout = app.engine.road.borrow().layout.clone();
+    let Some(old_layout) = app.engine.road.borrow().layout.road().cloned() else {
+        return no_network().into_response();
+    };
     let regions = names(&old_layout);
     let prepare = Step { commit: false, kind, body: body.clone(), at_ms: 0 };
     for (region, answer) in
@@ -327,6 +342,18 @@ mod tests {
         };
         layout.regions = Some(regions.iter().map(region).collect());
         Road::new(layout).unwrap() // the tests give ranges covering the six segments once
+    }
+
+    #[test]
+    fn a_network_is_refused_naming_regions_and_a_chain_reads_as_before() {
+        let chain = RoadLayout::straight(0.0, 30.0, 4.0, 6);
+        let network = serde_json::to_string(&roads::network::NetworkLayout::from(&chain)).unwrap();
+        let e = layout_of(Kind::Road, &network).unwrap_err();
+        assert_eq!((e.status, e.field.as_deref()), (StatusCode::UNPROCESSABLE_ENTITY, Some("regions")));
+        let depot =
+            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/depot.json")).unwrap();
+        assert_eq!(layout_of(Kind::Scenario, &depot).unwrap_err().field.as_deref(), Some("regions"));
+        assert_eq!(layout_of(Kind::Road, &serde_json::to_string(&chain).unwrap()).unwrap(), chain);
     }
 
     #[test]

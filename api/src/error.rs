@@ -205,23 +205,31 @@ impl<S: Send + Sync, T: DeserializeOwned + Send + 'static> FromRequest<S> for Ap
     type Rejection = ApiError;
 
     async fn from_request(req: Request, state: &S) -> Result<Self, ApiError> {
-        if !is_json(req.headers()) {
-            return Err(ApiError::new(
-                StatusCode::UNSUPPORTED_MEDIA_TYPE,
-                "unsupported_media_type",
-                "the body must be JSON with `Content-Type: application/json`",
-            ));
-        }
-        let bytes = read_body(req, state).await?;
-        if bytes.len() <= PARSE_INLINE_BYTES {
-            return parse(&bytes).map(ApiJson);
-        }
-        match tokio::task::spawn_blocking(move || parse(&bytes)).await {
-            Ok(parsed) => parsed.map(ApiJson),
-            Err(_) => {
-                Err(ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal_error", "parsing failed"))
-            }
-        }
+        read_json(req, state, parse::<T>).await.map(ApiJson)
+    }
+}
+
+/// Reads a JSON body as [`ApiJson`] does (content type, size, time) and parses it with
+/// `parse_with`, on the blocking pool when it is large.
+pub async fn read_json<S: Send + Sync, T: Send + 'static>(
+    req: Request,
+    state: &S,
+    parse_with: fn(&[u8]) -> Result<T, ApiError>,
+) -> Result<T, ApiError> {
+    if !is_json(req.headers()) {
+        return Err(ApiError::new(
+            StatusCode::UNSUPPORTED_MEDIA_TYPE,
+            "unsupported_media_type",
+            "the body must be JSON with `Content-Type: application/json`",
+        ));
+    }
+    let bytes = read_body(req, state).await?;
+    if bytes.len() <= PARSE_INLINE_BYTES {
+        return parse_with(&bytes);
+    }
+    match tokio::task::spawn_blocking(move || parse_with(&bytes)).await {
+        Ok(parsed) => parsed,
+        Err(_) => Err(ApiError::new(StatusCode::INTERNAL_SERVER_ERROR, "internal_error", "parsing failed")),
     }
 }
 

@@ -263,7 +263,7 @@ async fn ask_owner(
 /// The road's regions, in its order.
 fn region_names(app: &AppState) -> Vec<String> {
     let road = app.engine.road.borrow();
-    road.layout.regions.iter().flatten().map(|r| r.name.clone()).collect()
+    road.layout.regions().into_iter().flatten().map(|r| r.name.clone()).collect()
 }
 
 /// This region flies UAV `id` now (by the latest snapshot).
@@ -337,7 +337,7 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
     let region = app.region.as_ref()?;
     let asker = region.federation.get()?.asker(query.key_expr().as_str())?;
     let known =
-        app.engine.road.borrow().layout.regions.as_ref().is_some_and(|rs| rs.iter().any(|r| r.name == asker));
+        app.engine.road.borrow().layout.regions().is_some_and(|rs| rs.iter().any(|r| r.name == asker));
     if !known {
         return None;
     }

@@ -3,7 +3,7 @@
 
 use super::answers::{
     GoalSet, Health, HealthStatus, Landing, Metrics, Ownership, Paused, Policies, PolicySet, Reached,
-    RerunSelection, RoadReplaced, ScenarioLoaded, Stopped, StreamReport, UavAdded,
+    RerunSelection, ScenarioLoaded, Stopped, StreamReport, UavAdded,
 };
 use super::error::{ApiError, ApiJson, NoBody};
 use super::state::{AppState, json_of};
@@ -15,9 +15,7 @@ use engine::command::{Command, Outcome};
 use engine::snapshot::{Snapshot, UavSnapshot};
 use engine::stats::LoopMetrics;
 use fleet::Scenario;
-use roads::{Road, RoadLayout};
 use serde::{Deserialize, Serialize};
-use serde_json::json;
 use uav::Vec2;
 
 /// A loop that has not finished a tick for this long is reported stalled.
@@ -49,43 +47,6 @@ pub(crate) async fn healthz(State(app): State<AppState>) -> Response {
 
 pub(crate) async fn openapi() -> Response {
     ([(header::CONTENT_TYPE, "application/json")], super::openapi::text()).into_response()
-}
-
-pub(crate) async fn get_road(State(app): State<AppState>) -> Json<RoadLayout> {
-    Json(app.engine.road.borrow().layout.clone())
-}
-
-pub(crate) async fn get_road_geometry(State(app): State<AppState>) -> Response {
-    Json(app.engine.road.borrow().clone()).into_response()
-}
-
-pub(crate) async fn put_road(
-    State(app): State<AppState>,
-    ApiJson(layout): ApiJson<RoadLayout>,
-) -> Result<Response, ApiError> {
-    let road = app.validate(move || road_of(layout)).await?;
-    match app.apply(Command::SetRoad(Box::new(road))).await {
-        Ok(Outcome::RoadReplaced { cleared_goals }) => {
-            let version = app.engine.road.borrow().version;
-            Ok(Json(RoadReplaced { version, cleared_goals }).into_response())
-        }
-        Ok(_) => Ok(StatusCode::OK.into_response()),
-        // A UAV that would be outside or too close to a wall is a 409 (EditError::RoadConflict).
-        Err(e) => Err(e),
-    }
-}
-
-/// A validated road, or the 422 naming the field (`segments[i]`, `regions[i].segments`, ...) and the rule.
-pub(crate) fn road_of(layout: RoadLayout) -> Result<Road, ApiError> {
-    Road::new(layout).map_err(|e| {
-        let mut err = ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_road", e.message.clone())
-            .field(e.field.clone());
-        let mut extra = serde_json::Map::new();
-        extra.insert("segment".into(), json!(e.segment));
-        extra.insert("rule".into(), json!(e.rule.name()));
-        err.extra = Some(extra);
-        err
-    })
 }
 
 /// Most UAVs one page of `GET /api/uavs` holds (and its default size once any parameter is given).

@@ -1,4 +1,5 @@
-//! The HTTP side of `airroads serve`: the REST API ([`routes`]: one table; [`handlers`]; typed
+//! The HTTP side of `airroads serve`: the REST API ([`routes`]: one table; [`handlers`], the road's
+//! in [`road`]; typed
 //! [`answers`]), the WebSocket stream ([`ws`], [`binary`]), the request guard, the token check and
 //! the audit log ([`guard`], [`auth`], [`audit`]), the error bodies ([`error`]), the accept loop
 //! ([`listener`]), the dashboard's files ([`web`]) and the HTTP side of the regions (forwarding,
@@ -19,6 +20,7 @@ mod handlers;
 pub mod listener;
 pub mod openapi;
 mod request;
+pub mod road;
 pub mod road_follow;
 pub mod routes;
 pub mod state;

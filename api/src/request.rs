@@ -145,7 +145,7 @@ impl ApiRequest {
             Self::StopFleet => handlers::stop_fleet(app, NoBody).await.into_response(),
             Self::GetState => handlers::get_state(app).await,
             Self::ListUavs => handlers::list_uavs(app, Ok(Query(ListQuery::default()))).await.into_response(),
-            Self::GetRoad => handlers::get_road(app).await.into_response(),
+            Self::GetRoad => super::road::get_road(app).await.into_response(),
         }
     }
 }

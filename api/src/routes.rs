@@ -3,9 +3,9 @@
 //! operator's stop and land ([`Access::Urgent`]) and which reads need the token, the request guard
 //! which changes exist, and a test holds the OpenAPI document's paths to it.
 
-use super::handlers;
 use super::openapi::{Doc, docs};
 use super::state::AppState;
+use super::{handlers, road};
 use axum::Router;
 use axum::http::Method;
 use axum::routing::{MethodFilter, MethodRouter, on};
@@ -133,10 +133,10 @@ use Verb::{Delete, Get, Post, Put};
 pub static ROUTES: &[Route] = &[
     route(Get, "/healthz", Read, Here, &docs::HEALTHZ, |m| on(m, handlers::healthz)),
     route(Get, "/api/openapi.json", Read, Here, &docs::OPENAPI, |m| on(m, handlers::openapi)),
-    route(Get, "/api/road", Read, Here, &docs::GET_ROAD, |m| on(m, handlers::get_road)),
-    route(Put, "/api/road", Change, Deploy(Kind::Road), &docs::PUT_ROAD, |m| on(m, handlers::put_road)),
+    route(Get, "/api/road", Read, Here, &docs::GET_ROAD, |m| on(m, road::get_road)),
+    route(Put, "/api/road", Change, Deploy(Kind::Road), &docs::PUT_ROAD, |m| on(m, road::put_road)),
     route(Get, "/api/road/geometry", Read, Here, &docs::GET_ROAD_GEOMETRY, |m| {
-        on(m, handlers::get_road_geometry)
+        on(m, road::get_road_geometry)
     }),
     route(Get, "/api/uavs", Read, List, &docs::LIST_UAVS, |m| on(m, handlers::list_uavs)),
     route(Post, "/api/uavs", Change, Add, &docs::ADD_UAV, |m| on(m, handlers::add_uav)),

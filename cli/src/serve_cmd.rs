@@ -96,9 +96,6 @@ fn config(args: &ServeArgs) -> Result<ServeConfig, String> {
         Some(path) => load_scenario_with(path, &link_rules)?,
         None => serve::demo_scenario().map_err(|e| format!("{e:#}"))?,
     };
-    if let (Some(path), Err(e)) = (&args.scenario, engine::changes::check_flies_a_road(&initial)) {
-        return Err(format!("{}: {e}", path.display()));
-    }
     let region = match (&args.region, &args.standby_for) {
         (Some(name), _) => Some(keep_region(&mut initial, name, &args.zenoh_prefix)?),
         (None, Some(name)) => {
@@ -330,7 +327,8 @@ async fn start_region(
     shared: &regions::RegionShared,
     app: &api::state::AppState,
 ) -> anyhow::Result<(regions::RegionLink, zenoh::query::Queryable<()>)> {
-    let road = app.engine.road.borrow().layout.clone();
+    let road =
+        app.engine.road.borrow().layout.road().cloned().context("a region flies a road, not a network")?;
     let options = zenoh_options(args, &road)?;
     let road = roads::Road::new(road).context("the served road")?;
     let neighbours = regions::neighbours_of(&road, &shared.name).map_err(anyhow::Error::msg)?;

@@ -3,7 +3,7 @@
 //! the tick's snapshot is published; the writer answers the clients once the batch is on disk, or
 //! sends it back, and the loop takes it (and every later batch) back, newest first, and answers 503.
 
-use super::command::{ChangeError, Command, Outcome, Reply, Request};
+use super::command::{ChangeError, Command, NewRoad, Outcome, Reply, Request};
 use super::durable::{Batch, FromWriter, ToWriter};
 use super::fleet_loop::{Engine, PendingBatch, STORAGE_STALL};
 use super::hook::{Arrival, Ownership};
@@ -86,17 +86,8 @@ impl Engine {
     pub fn apply(&mut self, command: Command) -> Result<AppliedChange, ChangeError> {
         let dt = self.fleet.config.params.dt;
         Ok(match command {
-            Command::SetRoad(road) | Command::FollowRoad(road) => {
-                let layout = road.layout().clone();
-                let fleet::Applied { undo, cleared_goals } =
-                    self.fleet.apply(Edit::ReplaceRoad((*road).into()))?;
-                self.road_changed();
-                let mut writes = vec![Write::Road(layout)];
-                for id in &cleared_goals {
-                    writes.extend(uav_record(&self.fleet, id));
-                }
-                AppliedChange::new(Outcome::RoadReplaced { cleared_goals }, undo, writes)
-            }
+            Command::SetRoad(new) => self.replace_road(*new)?,
+            Command::FollowRoad(road) => self.replace_road(NewRoad::road(*road))?,
             Command::CheckRoad(road) => {
                 self.fleet.check_road(&*road)?;
                 AppliedChange::urgent()
@@ -167,6 +158,28 @@ impl Engine {
                 AppliedChange::urgent()
             }
         })
+    }
+
+    /// Replaces the road or network if every UAV in the air is safe on it; goals it no longer
+    /// holds are cleared. A network validated for parameters that needed narrower passages than the
+    /// fleet's now (a scenario changed them meanwhile) is refused.
+    fn replace_road(&mut self, new: NewRoad) -> Result<AppliedChange, ChangeError> {
+        let needed = fleet::min_passage_m(&self.fleet.config.params);
+        if new.road.network().is_some() && new.checked_passage_m < needed {
+            let reason = format!(
+                "the network was checked for passages {:.3} m wide, the fleet's parameters now need {needed:.3} m: put it again",
+                new.checked_passage_m
+            );
+            return Err(EditError::Unsafe { field: "roads".into(), reason }.into());
+        }
+        let layout = new.road.layout();
+        let fleet::Applied { undo, cleared_goals } = self.fleet.apply(Edit::ReplaceRoad(new.road))?;
+        self.road_changed();
+        let mut writes = vec![Write::Road(layout)];
+        for id in &cleared_goals {
+            writes.extend(uav_record(&self.fleet, id));
+        }
+        Ok(AppliedChange::new(Outcome::RoadReplaced { cleared_goals }, undo, writes))
     }
 
     /// Adds a UAV another server gave this one, where it is (its last owner flew it safely there);
@@ -283,7 +296,6 @@ pub fn load_scenario(
     if !fleet.policy_names().any(|n| n == policy) {
         return Err(EditError::UnknownPolicy(format!("policy `{policy}` is not loaded")));
     }
-    check_flies_a_road(scenario)?;
     let undo = fleet.apply(Edit::Reset(scenario.params, scenario.road.clone()))?.undo;
     for u in &scenario.uavs {
         let state = UavState::at_rest(u.start);
@@ -291,18 +303,6 @@ pub fn load_scenario(
         fleet.add(u.id.clone(), policy.to_string(), link, state, Some(u.goal));
     }
     Ok(undo)
-}
-
-/// The server flies one road so far: a scenario on a network is refused (`airroads run` flies it).
-pub fn check_flies_a_road(scenario: &ValidScenario) -> Result<(), EditError> {
-    match scenario.road.road() {
-        Some(_) => Ok(()),
-        None => Err(EditError::Unsafe {
-            field: "roads".into(),
-            reason: "the server flies one road (`segments`) so far; `airroads run` flies road networks"
-                .into(),
-        }),
-    }
 }
 
 #[cfg(test)]

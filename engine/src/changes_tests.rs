@@ -40,12 +40,7 @@ fn rig(max_uavs: usize) -> Rig {
         urgent: urgent_requests,
         snapshots: watch::channel(Arc::new(Snapshot::of(&fleet, 0, 0.0, 0))).0,
         metrics: watch::channel(Arc::new(LoopMetrics::default())).0,
-        road: watch::channel(Arc::new(RoadView::of(
-            fleet.road().expect("the test fleet flies a road"),
-            0,
-            0,
-        )))
-        .0,
+        road: watch::channel(Arc::new(RoadView::of(fleet.airspace(), &fleet.config.params, 0, 0))).0,
         writer: writer_tx,
         written: written_rx,
         storage: storage.clone(),
@@ -215,4 +210,38 @@ fn a_uav_from_another_server_gets_only_a_link_this_server_may_open() {
     // Adopted, it is neither undone nor written (a region server never resumes saved state).
     rig.engine.send_gap();
     assert!(rig.writer.try_recv().is_err(), "an adoption is not saved");
+}
+
+#[test]
+fn a_network_is_flown_stored_and_published_unless_checked_for_narrower_passages() {
+    use crate::command::NewRoad;
+    use roads::network::{Network, NetworkLayout};
+    let mut rig = rig(1000);
+    let chain = rig.engine.fleet.road().expect("the demo flies a road").layout().clone();
+    let needed = fleet::min_passage_m(&rig.engine.fleet.config.params);
+    // The demo road's own geometry as a network of one road: every UAV is safe on it.
+    let network = Network::new(NetworkLayout::from(&chain), needed).unwrap();
+    let cells = network.cells().len();
+    let version = rig.engine.road_version;
+    // Checked for narrower passages than the fleet's parameters need now: refused, nothing changed.
+    let stale = NewRoad { road: network.clone().into(), checked_passage_m: needed / 2.0 };
+    let refused = rig.engine.apply(Command::SetRoad(Box::new(stale))).err().expect("refused");
+    assert!(
+        matches!(&refused, ChangeError::Edit(fleet::EditError::Unsafe { field, .. }) if field == "roads"),
+        "{refused}"
+    );
+    assert!(rig.engine.fleet.road().is_some());
+    assert_eq!(rig.engine.road_version, version);
+    let new = NewRoad { road: network.into(), checked_passage_m: needed };
+    let applied = rig.engine.apply(Command::SetRoad(Box::new(new))).unwrap();
+    assert!(rig.engine.fleet.airspace().network().is_some());
+    assert!(
+        matches!(&applied.writes[0], Write::Road(roads::AirspaceLayout::Network(n)) if n.roads[0].segments == chain.segments)
+    );
+    let view = rig.engine.channels.road.borrow().clone();
+    assert_eq!((view.version, view.cells.len()), (version + 1, cells));
+    assert!(view.centerline.is_empty() && !view.walls.is_empty());
+    // Its undo record puts the chain road back.
+    rig.engine.fleet.undo(applied.undo.unwrap());
+    assert_eq!(rig.engine.fleet.road().map(|r| r.layout().clone()), Some(chain));
 }

@@ -3,7 +3,7 @@
 
 use super::store::AuditRecord;
 use fleet::{EditError, ValidScenario};
-use roads::Road;
+use roads::{Airspace, Road};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
 use tokio::sync::oneshot;
@@ -12,8 +12,8 @@ use uav::Vec2;
 /// A change to the fleet.
 #[derive(Debug)]
 pub enum Command {
-    /// Replace the road (already validated).
-    SetRoad(Box<Road>),
+    /// Replace the road or network (already validated).
+    SetRoad(Box<NewRoad>),
     /// A standby takes its owner's road (`region::road_follow`); refused by an owner's loop
     /// like nothing else, applied as [`Command::SetRoad`].
     FollowRoad(Box<Road>),
@@ -64,7 +64,15 @@ impl Command {
     /// One line saying what it changes (the audit entry's detail).
     pub fn describe(&self) -> String {
         match self {
-            Command::SetRoad(road) => format!("road of {} segments", road.quads().len()),
+            Command::SetRoad(new) => match &new.road {
+                Airspace::Road(road) => format!("road of {} segments", road.quads().len()),
+                Airspace::Network(net) => format!(
+                    "network of {} roads and {} junctions ({} cells)",
+                    net.layout().roads.len(),
+                    net.layout().junctions.len(),
+                    net.cells().len()
+                ),
+            },
             Command::FollowRoad(road) => format!("the owner's road of {} segments", road.quads().len()),
             Command::CheckRoad(road) => format!("check of a road of {} segments", road.quads().len()),
             Command::AddUav { id, position, .. } => {
@@ -82,6 +90,23 @@ impl Command {
             Command::EmergencyStop => "emergency stop".into(),
             Command::Adopt(a) => format!("adopted `{}` at [{}, {}]", a.id, a.state.p.x, a.state.p.y),
         }
+    }
+}
+
+/// A road or network a handler validated, for [`Command::SetRoad`].
+#[derive(Debug)]
+pub struct NewRoad {
+    /// The road or network.
+    pub road: Airspace,
+    /// The narrowest passage a network was validated with (m; `fleet::min_passage_m` of the
+    /// parameters then): the loop refuses it if the fleet's parameters need more by now.
+    pub checked_passage_m: f64,
+}
+
+impl NewRoad {
+    /// A chain road (no passage rule).
+    pub fn road(road: Road) -> Self {
+        Self { road: Airspace::Road(road), checked_passage_m: 0.0 }
     }
 }
 

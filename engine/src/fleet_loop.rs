@@ -11,11 +11,10 @@ use super::command::{ChangeError, Outcome, Reply, Request};
 use super::durable::{FromWriter, StorageStatus, ToWriter};
 use super::hook::{Arrival, LoopEdits, LoopHook, NoHook, Ownership};
 use super::linking::LinkFactory;
+pub use super::road_view::RoadView;
 use super::snapshot::Snapshot;
 use super::stats::{LoopMetrics, TickStats};
 use fleet::{Fleet, Undo};
-use roads::{Road, RoadLayout};
-use serde::Serialize;
 use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -30,36 +29,6 @@ const POSITIONS_EVERY_TICKS: u64 = 20;
 
 /// A change not on disk after this long marks the storage degraded (new changes are refused).
 pub const STORAGE_STALL: Duration = Duration::from_secs(5);
-
-/// The road as published to readers: the layout plus its drawable geometry.
-#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
-#[schemars(rename = "RoadGeometry")]
-pub struct RoadView {
-    /// Increases with every change.
-    pub version: u64,
-    /// The layout (`PUT /api/road` format).
-    pub layout: RoadLayout,
-    /// Every finite wall (barrier lines and end caps) as `[[x1, y1], [x2, y2]]`.
-    pub walls: Vec<[[f64; 2]; 2]>,
-    /// The centre line as a polyline.
-    pub centerline: Vec<[f64; 2]>,
-    /// The tick boundary at which this version was put in place (the instant the loop had
-    /// scheduled for that gap, ms since the Unix epoch).
-    pub since_ms: u64,
-}
-
-impl RoadView {
-    /// The view of `road` at `version`, put in place at `since_ms`.
-    pub fn of(road: &Road, version: u64, since_ms: u64) -> Self {
-        Self {
-            version,
-            layout: road.layout().clone(),
-            walls: road.walls().iter().map(|w| [[w.a.x, w.a.y], [w.b.x, w.b.y]]).collect(),
-            centerline: road.centerline().points().iter().map(|p| [p.x, p.y]).collect(),
-            since_ms,
-        }
-    }
-}
 
 /// The wall clock now (s since the Unix epoch; 0 on a clock set before 1970).
 pub fn wall_now() -> f64 {
@@ -342,11 +311,13 @@ impl Engine {
 
     pub(crate) fn publish_road(&mut self) {
         let since_ms = if self.boundary_ms > 0 { self.boundary_ms } else { now_ms() };
-        // The engine's fleet flies a road (`changes::check_flies_a_road`).
-        let Some(road) = self.fleet.road() else { return };
-        let view = RoadView::of(road, self.road_version, since_ms);
+        let view =
+            RoadView::of(self.fleet.airspace(), &self.fleet.config.params, self.road_version, since_ms);
         self.channels.road.send_replace(Arc::new(view));
-        self.hook.road_changed(road);
+        // Only a chain road is divided into regions (a region server never flies a network).
+        if let Some(road) = self.fleet.road() {
+            self.hook.road_changed(road);
+        }
     }
 }
 

@@ -230,8 +230,8 @@ pub fn start(mut config: EngineConfig) -> anyhow::Result<RunningEngine> {
     let (urgent, urgent_requests) = mpsc::unbounded_channel();
     let (snapshots_tx, snapshots) = watch::channel(Arc::new(Snapshot::of(&fleet, 0, 0.0, 0)));
     let (metrics_tx, metrics) = watch::channel(Arc::new(LoopMetrics::default()));
-    let first_road = fleet.road().context("the server flies one road (`segments`) so far")?;
-    let (road_tx, road) = watch::channel(Arc::new(RoadView::of(first_road, 0, now_ms())));
+    let (road_tx, road) =
+        watch::channel(Arc::new(RoadView::of(fleet.airspace(), &fleet.config.params, 0, now_ms())));
     let clock = Arc::new(LoopClock::default());
     let channels = LoopChannels {
         requests,
@@ -289,7 +289,6 @@ fn first_fleet(
     let mut fleet_config = config.fleet;
     let Some(saved) = saved else {
         fleet_config.params = config.initial.params;
-        crate::changes::check_flies_a_road(&config.initial)?;
         let mut fleet = Fleet::new(fleet_config, config.initial.road.clone(), config.policies);
         crate::changes::load_scenario(&mut fleet, &config.initial, &config.default_policy, factory)?;
         return Ok((fleet, format!("scenario `{}`", config.initial.name)));

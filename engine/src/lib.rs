@@ -1,7 +1,7 @@
 //! The engine of `airroads serve`: the fleet loop on its own thread ([`fleet_loop`]), the changes it
 //! applies between ticks with their undo records ([`changes`], [`command`]), their durability
-//! ([`durable`], [`store`], [`persist`]), the snapshots and statistics it publishes ([`snapshot`],
-//! [`stats`]), and the links it opens ([`linking`], [`mocap`]); [`start`] runs it and
+//! ([`durable`], [`store`], [`persist`]), the snapshots, road and statistics it publishes
+//! ([`snapshot`], [`road_view`], [`stats`]), and the links it opens ([`linking`], [`mocap`]); [`start`] runs it and
 //! [`EngineHandle`] is all a client of the loop holds. It knows no HTTP, no Zenoh and no
 //! Rerun: readers watch its channels, and regions plug in through one hook ([`hook`]).
 
@@ -14,12 +14,14 @@ pub mod hook;
 pub mod linking;
 pub mod mocap;
 pub mod persist;
+pub mod road_view;
 pub mod snapshot;
 pub mod stats;
 pub mod store;
 
-pub use fleet_loop::{Engine, LoopChannels, LoopClock, RoadView};
+pub use fleet_loop::{Engine, LoopChannels, LoopClock};
 pub use handle::{ApplyError, EngineConfig, EngineHandle, RunningEngine, start};
+pub use road_view::RoadView;
 
 /// The scenario `airroads serve` flies when it has no saved state and no `--scenario`.
 pub const DEMO_SCENARIO: &str = include_str!("../../scenarios/demo.json");

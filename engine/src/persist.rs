@@ -1,10 +1,11 @@
-//! What is persisted of the fleet ([`SavedState`]: parameters, road, hold, and per UAV its policy,
+//! What is persisted of the fleet ([`SavedState`]: parameters, road or network, hold, and per UAV its policy,
 //! goal, link and last position), the default data directory, and the reader of the JSON state file
 //! of earlier versions (`state.json`), which [`super::store`] imports once into its database.
 
 use anyhow::Context as _;
 use fleet::Fleet;
-use roads::{Region, Road, RoadLayout};
+use roads::network::NetworkLayout;
+use roads::{Airspace, AirspaceLayout, Region, RoadLayout};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 use uav::Params;
@@ -20,11 +21,14 @@ pub struct SavedState {
     pub format: String,
     /// Parameters.
     pub params: Params,
-    /// The road layout.
+    /// The road layout (empty when the fleet flies a network).
     pub segments: Vec<[[f64; 2]; 4]>,
     /// The layout's regions; absent when it has none.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub regions: Option<Vec<Region>>,
+    /// The network the fleet flies instead of `segments`; absent for a chain road.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub network: Option<NetworkLayout>,
     /// True while the fleet is paused.
     pub paused: bool,
     /// The UAVs.
@@ -67,21 +71,44 @@ pub const FORMAT: &str = "airroads-state/1";
 impl SavedState {
     /// What `fleet` would resume as.
     pub fn of(fleet: &Fleet) -> Self {
+        let (segments, regions, network) = parts_of(fleet.airspace().layout());
         Self {
             format: FORMAT.to_string(),
             params: fleet.config.params,
-            // The engine's fleet flies a road (`changes::check_flies_a_road`).
-            segments: fleet.road().map(|r| r.layout().segments.clone()).unwrap_or_default(),
-            regions: fleet.road().and_then(|r| r.layout().regions.clone()),
+            segments,
+            regions,
+            network,
             paused: fleet.paused(),
             uavs: fleet.uavs().iter().map(SavedUav::of).collect(),
         }
     }
 
-    /// The road of this state (validated again: the file may have been edited by hand).
-    pub fn road(&self) -> anyhow::Result<Road> {
-        let layout = RoadLayout { segments: self.segments.clone(), regions: self.regions.clone() };
-        Ok(Road::new(layout)?)
+    /// The layout of this state: its network, else its road.
+    pub fn layout(&self) -> AirspaceLayout {
+        match &self.network {
+            Some(network) => AirspaceLayout::Network(network.clone()),
+            None => AirspaceLayout::Road(RoadLayout {
+                segments: self.segments.clone(),
+                regions: self.regions.clone(),
+            }),
+        }
+    }
+
+    /// The road or network of this state (validated again, a network for this state's parameters:
+    /// the file may have been edited by hand).
+    pub fn road(&self) -> anyhow::Result<Airspace> {
+        Ok(self.layout().build(fleet::min_passage_m(&self.params))?)
+    }
+}
+
+/// A layout as the saved state's keys: `segments`, `regions` and `network`.
+type LayoutParts = (Vec<[[f64; 2]; 4]>, Option<Vec<Region>>, Option<NetworkLayout>);
+
+/// The saved state's keys of `layout`: a chain's segments and regions, or a network.
+pub fn parts_of(layout: AirspaceLayout) -> LayoutParts {
+    match layout {
+        AirspaceLayout::Road(road) => (road.segments, road.regions, None),
+        AirspaceLayout::Network(network) => (Vec::new(), None, Some(network)),
     }
 }
 
@@ -125,6 +152,7 @@ mod tests {
             params: Params::default(),
             segments: RoadLayout::straight(0.0, 10.0, 4.0, 2).segments,
             regions: None,
+            network: None,
             paused: true,
             uavs: vec![SavedUav {
                 id: "cf1".into(),

@@ -9,7 +9,7 @@ mod audit_log;
 pub use audit_log::{AUDIT_RETENTION, AuditEntry, AuditRecord, REFUSED_AUDIT_RETENTION, now_ms, rfc3339_ms};
 
 use super::persist::{self, SavedState, SavedUav};
-use roads::RoadLayout;
+use roads::AirspaceLayout;
 use rusqlite::{Connection, OptionalExtension, params};
 use serde::Serialize;
 use std::path::{Path, PathBuf};
@@ -58,8 +58,8 @@ pub enum StoreError {
 pub enum Write {
     /// Everything at once (a scenario load, the first state of a new database).
     Replace(SavedState),
-    /// A new road (its segments and regions).
-    Road(RoadLayout),
+    /// A new road (its segments and regions) or network.
+    Road(AirspaceLayout),
     /// Hold on or off.
     Paused(bool),
     /// A UAV added or changed (policy, goal).
@@ -147,6 +147,10 @@ impl Store {
             Some(r) => Some(serde_json::from_str(&r).map_err(|e| corrupt("regions", e))?),
             None => None,
         };
+        let network = match meta("network")? {
+            Some(n) => Some(serde_json::from_str(&n).map_err(|e| corrupt("network", e))?),
+            None => None,
+        };
         let paused = meta("paused")?.as_deref() == Some("1");
         let mut statement =
             self.conn.prepare("SELECT id, policy, x, y, goal_x, goal_y, link FROM uavs ORDER BY ord")?;
@@ -165,7 +169,15 @@ impl Store {
                 })
             })?
             .collect::<Result<Vec<_>, _>>()?;
-        Ok(Some(SavedState { format: persist::FORMAT.into(), params, segments, regions, paused, uavs }))
+        Ok(Some(SavedState {
+            format: persist::FORMAT.into(),
+            params,
+            segments,
+            regions,
+            network,
+            paused,
+            uavs,
+        }))
     }
 
     /// Writes `writes` in one transaction; Ok only once it is on disk. On an error nothing of it is
@@ -201,16 +213,22 @@ fn put_meta(tx: &rusqlite::Transaction<'_>, key: &str, value: &str) -> rusqlite:
     Ok(())
 }
 
-/// The road's keys: `segments`, and `regions` (deleted when the layout has none).
-fn put_road(
-    tx: &rusqlite::Transaction<'_>,
-    segments: &[[[f64; 2]; 4]],
-    regions: Option<&[roads::Region]>,
-) -> rusqlite::Result<()> {
-    put_meta(tx, "segments", &json(&segments)?)?;
+/// The road's keys: `segments`, `regions` and `network`, each deleted when the layout has none
+/// (a network's `segments` are the empty list).
+fn put_road(tx: &rusqlite::Transaction<'_>, layout: &AirspaceLayout) -> rusqlite::Result<()> {
+    let empty = Vec::new();
+    let (segments, regions, network) = match layout {
+        AirspaceLayout::Road(road) => (&road.segments, road.regions.as_ref(), None),
+        AirspaceLayout::Network(network) => (&empty, None, Some(network)),
+    };
+    put_meta(tx, "segments", &json(segments)?)?;
     match regions {
-        Some(regions) => put_meta(tx, "regions", &json(&regions)?),
-        None => tx.execute("DELETE FROM meta WHERE key = 'regions'", []).map(|_| ()),
+        Some(regions) => put_meta(tx, "regions", &json(regions)?)?,
+        None => drop(tx.execute("DELETE FROM meta WHERE key = 'regions'", [])?),
+    }
+    match network {
+        Some(network) => put_meta(tx, "network", &json(network)?),
+        None => tx.execute("DELETE FROM meta WHERE key = 'network'", []).map(|_| ()),
     }
 }
 
@@ -234,14 +252,14 @@ fn apply(tx: &rusqlite::Transaction<'_>, write: &Write) -> rusqlite::Result<()> 
     match write {
         Write::Replace(state) => {
             put_meta(tx, "params", &json(&state.params)?)?;
-            put_road(tx, &state.segments, state.regions.as_deref())?;
+            put_road(tx, &state.layout())?;
             put_meta(tx, "paused", if state.paused { "1" } else { "0" })?;
             tx.execute("DELETE FROM uavs", [])?;
             for u in &state.uavs {
                 put_uav(tx, u)?;
             }
         }
-        Write::Road(layout) => put_road(tx, &layout.segments, layout.regions.as_deref())?,
+        Write::Road(layout) => put_road(tx, layout)?,
         Write::Paused(paused) => put_meta(tx, "paused", if *paused { "1" } else { "0" })?,
         Write::Uav(u) => put_uav(tx, u)?,
         Write::RemoveUav(id) => {
@@ -261,6 +279,7 @@ fn apply(tx: &rusqlite::Transaction<'_>, write: &Write) -> rusqlite::Result<()> 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use roads::RoadLayout;
 
     fn uav(id: &str, x: f64) -> SavedUav {
         SavedUav { id: id.into(), policy: "pd".into(), position: [x, 0.5], goal: None, link: None }
@@ -272,6 +291,7 @@ mod tests {
             params: Params::default(),
             segments: roads::RoadLayout::straight(0.0, 10.0, 4.0, 2).segments,
             regions: None,
+            network: None,
             paused: false,
             uavs: vec![uav("a", 1.0), uav("b", 2.0)],
         }
@@ -314,14 +334,17 @@ mod tests {
             roads::Region { name: "west".into(), segments: [0, 0] },
         ];
         let layout = RoadLayout { regions: Some(regions.clone()), ..RoadLayout::straight(0.0, 30.0, 4.0, 3) };
-        store.commit([&Write::Road(layout.clone())]).unwrap();
+        store.commit([&Write::Road(layout.clone().into())]).unwrap();
         drop(store);
         let mut store = Store::open(&dir).unwrap();
         let loaded = store.load().unwrap().unwrap();
         assert_eq!((&loaded.segments, &loaded.regions), (&layout.segments, &Some(regions)));
-        assert_eq!(loaded.road().unwrap().region_of(2).map(|r| r.name.as_str()), Some("east"));
+        assert_eq!(
+            loaded.road().unwrap().region_at(&uav::Vec2::new(25.0, 0.0)).map(|r| r.name.as_str()),
+            Some("east")
+        );
         // A road without regions (or a scenario) removes them.
-        store.commit([&Write::Road(RoadLayout::straight(0.0, 20.0, 4.0, 2))]).unwrap();
+        store.commit([&Write::Road(RoadLayout::straight(0.0, 20.0, 4.0, 2).into())]).unwrap();
         assert_eq!(store.load().unwrap().unwrap().regions, None);
         let mut with = state();
         with.regions = Some(vec![roads::Region { name: "all".into(), segments: [0, 1] }]);
@@ -329,6 +352,33 @@ mod tests {
         assert_eq!(store.load().unwrap(), Some(with));
         store.commit([&Write::Replace(state())]).unwrap();
         assert_eq!(store.load().unwrap(), Some(state()));
+        drop(store);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_network_survives_reopening_and_a_chain_road_replaces_it() {
+        let dir = std::env::temp_dir().join(format!("airroads-store-network-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut store = Store::open(&dir).unwrap();
+        store.commit([&Write::Replace(state())]).unwrap();
+        let mut network = roads::network::NetworkLayout::from(&RoadLayout::straight(0.0, 30.0, 4.0, 3));
+        network.roads[0].name = "main".into();
+        store.commit([&Write::Road(network.clone().into())]).unwrap();
+        drop(store);
+        let mut store = Store::open(&dir).unwrap();
+        let loaded = store.load().unwrap().unwrap();
+        assert_eq!(loaded.layout(), AirspaceLayout::Network(network.clone()));
+        assert!(loaded.segments.is_empty());
+        assert_eq!(loaded.road().unwrap().network().map(|n| n.cells().len()), Some(3));
+        // A whole state flying the network keeps it too; a chain road removes it.
+        let mut flying = state();
+        (flying.segments, flying.network) = (Vec::new(), Some(network));
+        store.commit([&Write::Replace(flying.clone())]).unwrap();
+        assert_eq!(store.load().unwrap(), Some(flying));
+        store.commit([&Write::Road(RoadLayout::straight(0.0, 20.0, 4.0, 2).into())]).unwrap();
+        let loaded = store.load().unwrap().unwrap();
+        assert_eq!((loaded.network, loaded.segments.len()), (None, 2));
         drop(store);
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -11,26 +11,29 @@ use uav::{Params, Vec2};
 /// A scenario as written in JSON.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
-#[schemars(transform = one_road_schema)]
+#[schemars(transform = road_or_network_schema)]
 pub struct Scenario {
     /// Scenario name (reported in the metrics).
     pub name: String,
     /// Parameters; missing keys take their defaults, unknown keys are an error.
     #[serde(default)]
     pub params: Params,
-    /// Road segments, as in a road layout (one road; a scenario file may give `roads` instead).
-    // Required in the REST schema (`one_road_schema`): the server flies one road, and refuses `roads`.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    /// Road segments, as in a road layout (one road; or `roads` instead, a network). When given, at
+    /// least one (the empty list is refused, also beside `roads`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty", deserialize_with = "some_segments")]
     #[schemars(with = "roads::schema::Segments")]
     pub segments: Vec<[[f64; 2]; 4]>,
-    /// A network's roads (instead of `segments`): named chains of segments. Not in the REST schema:
-    /// the server does not fly networks yet.
+    /// A network's roads (instead of `segments`): named chains of segments.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schemars(skip)]
+    #[schemars(with = "Option<Vec<NetworkRoad>>", length(min = 1))]
+    #[schemars(
+        description = "a road network's roads (instead of `segments`), as in a network layout of `PUT /api/road`, which states the rules beyond the schema"
+    )]
     pub roads: Option<Vec<NetworkRoad>>,
-    /// A network's junctions (with `roads`); not in the REST schema, as `roads`.
+    /// A network's junctions (with `roads`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schemars(skip)]
+    #[schemars(with = "Option<Vec<Junction>>")]
+    #[schemars(description = "a road network's junctions (with `roads`); null or absent: none")]
     pub junctions: Option<Vec<Junction>>,
     /// The road's regions, as in a road layout (`airroads serve --region`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -45,16 +48,30 @@ pub struct Scenario {
     pub uavs: Vec<ScenarioUav>,
 }
 
-/// The REST schema of a scenario requires `segments`: the server flies one road (a file may give a
-/// network's `roads` instead, which the REST schema leaves out and the server refuses).
-fn one_road_schema(schema: &mut schemars::Schema) {
+/// The REST schema of a scenario flies one road or a network: `segments` (with `regions`, without
+/// `roads` and `junctions`) or `roads` (with `junctions`, without `segments` and `regions`).
+fn road_or_network_schema(schema: &mut schemars::Schema) {
     let object = schema.ensure_object();
-    let required = object.entry("required").or_insert_with(|| serde_json::Value::Array(Vec::new()));
-    if let Some(list) = required.as_array_mut()
-        && !list.iter().any(|v| v == "segments")
-    {
-        list.push("segments".into());
+    // Null is what an absent optional member may also be written as.
+    let road = serde_json::json!({
+        "required": ["segments"],
+        "properties": {"roads": {"type": "null"}, "junctions": {"type": "null"}}
+    });
+    let network = serde_json::json!({
+        "required": ["roads"],
+        "not": {"required": ["segments"]},
+        "properties": {"roads": {"type": "array"}, "regions": {"type": "null"}}
+    });
+    object.insert("anyOf".into(), serde_json::json!([road, network]));
+}
+
+/// `segments` when the key is there: a non-empty list (a scenario without a road has no key).
+fn some_segments<'de, D: serde::Deserializer<'de>>(d: D) -> Result<Vec<[[f64; 2]; 4]>, D::Error> {
+    let segments = Vec::<[[f64; 2]; 4]>::deserialize(d)?;
+    if segments.is_empty() {
+        return Err(serde::de::Error::invalid_length(0, &"at least one segment"));
     }
+    Ok(segments)
 }
 
 /// One UAV of a scenario as written in JSON.

@@ -151,7 +151,7 @@ impl Federation {
         {
             return Some(road.clone());
         }
-        let road = Arc::new(Road::new(view.layout.clone()).ok()?);
+        let road = Arc::new(Road::new(view.layout.road()?.clone()).ok()?);
         *cached = Some((view.version, road.clone()));
         Some(road)
     }

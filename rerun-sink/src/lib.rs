@@ -3,7 +3,8 @@
 //! A dedicated thread reads the snapshot, road and metrics watch channels at its own pace: when it
 //! falls behind it takes the latest snapshot and counts the ones it skipped, so the fleet loop never
 //! waits for it. Everything is logged on the `tick` sequence timeline (and `time`, in seconds):
-//! - `world/road/walls`, `world/road/centerline`: line strips, logged again when the road changes;
+//! - `world/road/walls`, `world/road/centerline`: line strips, logged again when the road changes
+//!   (a network has no centre line; its cells are the closed outlines of `world/road/cells`);
 //! - `world/road/reservations`: the single-file sections, coloured by the end they admit from and
 //!   labelled with who is in and who waits, every tick while the road has any;
 //! - `world/uavs/{id}`: the position (labelled with the id, coloured by status, radius D_c/2), with

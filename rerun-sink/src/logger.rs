@@ -163,12 +163,7 @@ impl Logger {
         if self.road_version != Some(road.version) {
             // Rerun's 2D view draws y downwards; flipping `world` shows the road as on a map.
             rec.log_static("world", &Transform3D::from_scale([1.0, -1.0, 1.0]))?;
-            let walls = road.walls.iter().map(|[a, b]| LineStrip2D::from_iter([xy(*a), xy(*b)]));
-            let walls = LineStrips2D::new(walls).with_colors([Color::from_rgb(220, 220, 220)]);
-            rec.log("world/road/walls", &walls.with_radii([Radius::new_ui_points(1.5)]))?;
-            let centre = LineStrip2D::from_iter(road.centerline.iter().map(|p| xy(*p)));
-            let centre = LineStrips2D::new([centre]).with_colors([Color::from_rgb(200, 180, 60)]);
-            rec.log("world/road/centerline", &centre.with_radii([Radius::new_ui_points(0.5)]))?;
+            log_road(rec, road)?;
             self.road_version = Some(road.version);
         }
         let radius = (snapshot.d_c / 2.0) as f32;
@@ -264,4 +259,36 @@ fn log_uav(
         rec.log(log.barrier.clone(), &Scalars::single(b))?;
     }
     rec.log(log.slack.clone(), &Scalars::single(u.slack))
+}
+
+/// Logs the road: its walls, a chain road's centre line, a network's cells as closed outlines
+/// (`world/road/cells`; cleared on a chain road, which has no centre line on a network).
+fn log_road(rec: &RecordingStream, road: &RoadView) -> RecordingStreamResult<()> {
+    let walls = road.walls.iter().map(|[a, b]| LineStrip2D::from_iter([xy(*a), xy(*b)]));
+    let walls = LineStrips2D::new(walls).with_colors([Color::from_rgb(220, 220, 220)]);
+    rec.log("world/road/walls", &walls.with_radii([Radius::new_ui_points(1.5)]))?;
+    if road.centerline.is_empty() {
+        rec.log("world/road/centerline", &Clear::flat())?;
+    } else {
+        let centre = LineStrip2D::from_iter(road.centerline.iter().map(|p| xy(*p)));
+        let centre = LineStrips2D::new([centre]).with_colors([Color::from_rgb(200, 180, 60)]);
+        rec.log("world/road/centerline", &centre.with_radii([Radius::new_ui_points(0.5)]))?;
+    }
+    if road.cells.is_empty() {
+        return rec.log("world/road/cells", &Clear::flat());
+    }
+    let outlines = road.cells.iter().map(|c| {
+        let closed = c.polygon.iter().chain(c.polygon.first()).map(|p| xy(*p));
+        LineStrip2D::from_iter(closed)
+    });
+    let labels = road.cells.iter().map(|c| match c.segment {
+        Some(k) => format!("{}[{k}]", c.name),
+        None => c.name.clone(),
+    });
+    let cells = LineStrips2D::new(outlines)
+        .with_colors([Color::from_rgb(110, 130, 160)])
+        .with_radii([Radius::new_ui_points(0.5)])
+        .with_labels(labels)
+        .with_show_labels(false);
+    rec.log("world/road/cells", &cells)
 }

@@ -10,6 +10,7 @@
 //! This crate knows nothing of UAV dynamics, barriers or solvers.
 
 mod airspace;
+mod airspace_layout;
 mod boundary;
 mod centerline;
 mod geometry;
@@ -30,6 +31,7 @@ mod traffic_nav;
 mod validate;
 
 pub use airspace::Airspace;
+pub use airspace_layout::AirspaceLayout;
 pub use boundary::Boundary;
 pub use centerline::CenterLine;
 pub use geometry::{Quad, Wall, WallKind, nearest_on_segment, segments_intersect};

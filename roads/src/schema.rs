@@ -86,3 +86,21 @@ impl JsonSchema for Regions {
 pub fn region_name_pattern() -> String {
     format!("^[A-Za-z0-9_-]{{1,{MAX_REGION_NAME}}}$")
 }
+
+/// A network road's speed limit (m/s): more than 0, at most [`crate::network::MAX_SPEED_LIMIT`].
+pub struct SpeedLimit;
+
+impl JsonSchema for SpeedLimit {
+    fn schema_name() -> Cow<'static, str> {
+        "SpeedLimit".into()
+    }
+
+    fn json_schema(_: &mut SchemaGenerator) -> Schema {
+        json_schema!({
+            "type": "number",
+            "exclusiveMinimum": 0,
+            "maximum": crate::network::MAX_SPEED_LIMIT,
+            "description": "the road's speed limit (m/s), more than 0 and at most 100; null or absent: none"
+        })
+    }
+}

@@ -13,6 +13,7 @@ import { ARTIFACTS, BIN, api, clickWorld, launchBrowser, openDashboard, pagePoin
 
 const STRAIGHT = join(import.meta.dirname, "fixtures", "straight.json");
 const NARROW = join(import.meta.dirname, "..", "..", "scenarios", "narrow16.json");
+const DEPOT = join(import.meta.dirname, "..", "..", "scenarios", "depot.json");
 let browser;
 
 before(async () => {
@@ -307,6 +308,40 @@ test("with Rerun logging a batched fleet, the dashboard's selection becomes Reru
   });
 });
 
+test("a road network is drawn cell by cell; a click on a junction adds a UAV there", async () => {
+  await withDashboard("network", ["--scenario", DEPOT], async (page, { url }) => {
+    // Held, so that no UAV flies into the junction before the click.
+    await api(url, "POST", "/api/fleet/pause");
+    const geometry = await until("the network's geometry in the page", async () => {
+      const g = await page.evaluate(() => window.__airroads.geometry);
+      return g && Array.isArray(g.cells) && g.cells.length === 31 && g;
+    });
+    const fork = geometry.cells.find((c) => c.kind === "junction" && c.name === "fork");
+    const centre = [fork.polygon.reduce((a, p) => a + p[0], 0) / 4, fork.polygon.reduce((a, p) => a + p[1], 0) / 4];
+    // The junction is painted: its centre is not the page's background.
+    const [px, py] = await pagePoint(page, centre[0], centre[1]);
+    const painted = await page.evaluate(([x, y]) => {
+      const canvas = document.getElementById("view");
+      const rect = canvas.getBoundingClientRect();
+      const dpr = window.devicePixelRatio || 1;
+      const d = canvas.getContext("2d").getImageData((x - rect.left) * dpr, (y - rect.top) * dpr, 1, 1).data;
+      return [d[0], d[1], d[2], d[3]];
+    }, [px, py]);
+    assert.ok(painted[3] > 0, `nothing drawn at the fork's centre: ${painted}`);
+    await screenshot(page, "network");
+    await page.click("#mode-add");
+    await clickWorld(page, centre[0], centre[1]);
+    const added = await until("a seventeenth UAV (GET /api/uavs)", async () => {
+      const uavs = await api(url, "GET", "/api/uavs");
+      return uavs.length === 17 && uavs[16];
+    });
+    assert.ok(near(added.p, centre, 0.3), `added at ${added.p}, clicked ${centre}`);
+    // The editor draws one road: it starts empty on a network.
+    await page.click("#mode-edit");
+    assert.equal(await page.evaluate(() => window.__airroads.editor.segments.length), 0);
+  });
+});
+
 test("add a UAV by clicking, give it a policy, remove it", async () => {
   await withDashboard("add", [], async (page, { url }) => {
     await page.click("#mode-add");
@@ -401,6 +436,76 @@ test("an invalid road is refused and the offending segment is shown", async () =
     assert.equal(editor.error.segment, 1, "segment 1 is highlighted");
     assert.deepEqual(await api(url, "GET", "/api/road"), before, "the server's road is unchanged");
     await screenshot(page, "road-invalid");
+  });
+});
+
+test("build a road network: a junction, roads from its sides, a broken one shown, apply, and a UAV flies through the junction", async () => {
+  await withDashboard("network", [], async (page, { url }) => {
+    await straightRoadInEditor(page, url);
+    // A 3 m junction at (10, 0), then a road from its east, west and north sides, drawn two points
+    // per edge from the side clicked.
+    await page.click("#add-junction");
+    await clickWorld(page, 10, 0);
+    const roads = [
+      [[11.5, 0.2], [[19, -1.5], [19, 1.5]]],
+      [[8.5, -0.2], [[1, -1.5], [1, 1.5]]],
+      [[10.2, 1.5], [[8.5, 4.5], [11.5, 4.5]]],
+    ];
+    for (const [side, points] of roads) {
+      await page.click("#branch-road");
+      await clickWorld(page, ...side);
+      await drawPoints(page, points);
+    }
+    let editor = await page.evaluate(() => window.__airroads.editor);
+    assert.equal(editor.layout.junctions.length, 1);
+    assert.equal(editor.layout.roads.length, 3, JSON.stringify(editor.layout));
+    // Each road starts exactly on its junction's side.
+    const square = editor.layout.junctions[0].polygon;
+    for (const road of editor.layout.roads) {
+      const [, p2, , p4] = road.segments[0];
+      assert.ok(square.some((v) => near(v, p2, 1e-9)) && square.some((v) => near(v, p4, 1e-9)), JSON.stringify(road));
+    }
+    await screenshot(page, "network-drawn");
+
+    // A fourth road from the south side whose segment folds in towards the junction (not convex):
+    // refused, and that road shown.
+    const before = await api(url, "GET", "/api/road");
+    await page.click("#branch-road");
+    await clickWorld(page, 9.8, -1.5);
+    await drawPoints(page, [[8.5, -4.5], [10.5, -1.9]]);
+    await page.click("#apply");
+    const message = page.locator("#message.error");
+    await message.waitFor();
+    assert.match(await message.textContent(), /422 invalid_road.*roads\[3\]/);
+    editor = await page.evaluate(() => window.__airroads.editor);
+    assert.equal(editor.error.road, editor.active, "the broken road is the one highlighted");
+    assert.deepEqual(await api(url, "GET", "/api/road"), before, "the server's road is unchanged");
+    await screenshot(page, "network-invalid");
+    await page.keyboard.press("Control+z");
+    await page.keyboard.press("Control+z");
+
+    await page.click("#apply");
+    await page.locator("#message", { hasText: "road applied" }).waitFor();
+    const road = await api(url, "GET", "/api/road");
+    assert.equal(road.roads.length, 3, JSON.stringify(road));
+    assert.equal(road.junctions.length, 1);
+
+    // A UAV on the east road sent to the north one turns through the junction.
+    await api(url, "POST", "/api/uavs", { id: "flyer", position: [17, 0.75], goal: [10.6, 3.5] }, [201]);
+    await page.click("#mode-select");
+    const arrived = await until(
+      "flyer to arrive through the junction (GET /api/state)",
+      async () => {
+        const u = (await api(url, "GET", "/api/state")).uavs.find((u) => u.id === "flyer");
+        return u && u.arrived && u;
+      },
+      120000,
+      250,
+    );
+    assert.ok(near(arrived.p, [10.6, 3.5], 0.15), `flyer at ${arrived.p}`);
+    const metrics = await api(url, "GET", "/api/metrics");
+    assert.ok(metrics.min_collision_margin_m === null || metrics.min_collision_margin_m >= 0.3 - 1e-6);
+    await screenshot(page, "network-flown");
   });
 });
 

@@ -53,8 +53,20 @@ GEOMETRY_RULES = {
     "region_out_of_range",
     "region_overlap",
     "region_gap",
+    # a network's
+    "duplicate_name",
+    "shared_by_three",
+    "partial_edge",
+    "disconnected",
+    "narrow_passage",
+    "sharp_corner",
 }
-SEGMENTS_FIELD = re.compile(r"^(segments(\[\d+\])?|regions(\[\d+\]\.(name|segments))?)$")
+SEGMENTS_FIELD = re.compile(
+    r"^(segments(\[\d+\])?|regions(\[\d+\]\.(name|segments))?"
+    r"|roads(\[\d+\]\.(name|segments(\[\d+\])?))?|junctions\[\d+\]\.(name|polygon))$"
+)
+# More than 20000 cells over all of a network's roads and junctions: no schema states a total.
+NETWORK_CELLS = ("too_many_segments", "roads")
 SCENARIO_UAV_FIELD = re.compile(r"^uavs\[\d+\]\.(start|goal|id|link)$")
 UAV_ID = re.compile(r"[A-Za-z0-9_.-]{1,64}")  # the UavId schema
 
@@ -121,6 +133,8 @@ def _set_policy(case, code, field, message):
 
 
 def _put_road(case, code, field, message, rule=None):
+    if code == "invalid_road" and (rule, field) == NETWORK_CELLS:
+        return True
     return code == "invalid_road" and rule in GEOMETRY_RULES and bool(SEGMENTS_FIELD.match(field))
 
 
@@ -131,7 +145,7 @@ def _load_scenario(case, code, field, message):
         return False
     if SEGMENTS_FIELD.match(field):
         rule = re.search(r"\((\w+)\)$", message)
-        return rule is not None and rule.group(1) in GEOMETRY_RULES
+        return rule is not None and (rule.group(1) in GEOMETRY_RULES or (rule.group(1), field) == NETWORK_CELLS)
     match = SCENARIO_UAV_FIELD.match(field)
     if not match:
         return False

@@ -12,7 +12,7 @@ use crate::handlers::{GoalBody, ListQuery, NewUav, PolicyBody, SelectionBody};
 use engine::RoadView;
 use engine::snapshot::{Snapshot, UavSnapshot};
 use fleet::Scenario;
-use roads::RoadLayout;
+use roads::AirspaceLayout;
 use schemars::{Schema, SchemaGenerator, json_schema};
 
 /// Any JSON object (the document itself).
@@ -49,26 +49,26 @@ pub const OPENAPI: Doc = Doc {
 /// `GET /api/road`.
 pub const GET_ROAD: Doc = Doc {
     id: "getRoad",
-    summary: "The road layout",
-    answers: &[answer(200, "layout", schema_of::<RoadLayout>)],
+    summary: "The road layout, or the network layout, as put",
+    answers: &[answer(200, "layout", schema_of::<AirspaceLayout>)],
     ..READ
 };
 
 /// `PUT /api/road`.
 pub const PUT_ROAD: Doc = Doc {
     id: "putRoad",
-    summary: "Replace the road",
+    summary: "Replace the road, with one road (`segments`) or a road network (`roads`, `junctions`)",
     description: Some(
-        "Beyond the schema (geometry no JSON schema can state, so only here and in the 422 description): each quad strictly convex with edges of at least 1 mm, consecutive segments joined seamlessly without folding back, no two non-adjacent segments overlapping, and `regions` covering every segment exactly once with unique names. With `serve --region` it applies to every region of the deployment at one instant, or to none (docs/regions.md); the answer then adds `regions` and `switch_at_ms`, and a region's refusal keeps its status with `error.region` naming it.",
+        "Beyond the schema (geometry no JSON schema can state, so only here and in the 422 description): each quad strictly convex with edges of at least 1 mm, consecutive segments joined seamlessly without folding back, no two non-adjacent segments overlapping, and `regions` covering every segment exactly once with unique names. A network: each road's segments as a chain's, each junction strictly convex, the names unique among the roads and among the junctions, at most 20000 cells (segments and junctions), cells meeting only along whole shared edges (an edge of no more than two cells), not overlapping, all connected, every passage at least `min_passage_m` of `GET /api/road/geometry` wide (2·D_s + D_c and margins with the fleet's parameters), no two walls meeting at less than 90°; a network has no regions. With `serve --region` (one road divided into regions: a network is refused there with 422 naming `regions`) it applies to every region of the deployment at one instant, or to none (docs/regions.md); the answer then adds `regions` and `switch_at_ms`, and a region's refusal keeps its status with `error.region` naming it.",
     ),
-    body: Body::Json(schema_of::<RoadLayout>),
+    body: Body::Json(schema_of::<AirspaceLayout>),
     answers: &[
         answer(200, "applied; goals outside the new road were cleared", schema_of::<RoadReplaced>),
         refusal(
             422,
-            "`invalid_road`: the layout breaks a rule (`rule` names it, `field` and `segment` where): the schema's (no segment, more than 2000, a coordinate beyond ±1e6 m) or the geometry's (not_convex, degenerate_edge, seamless_join, folds_back, overlap, and for regions reversed_region, region_out_of_range, region_overlap, region_gap, duplicate_region_name)",
+            "`invalid_road`: the layout breaks a rule (`rule` names it, `field` and `segment` where: `segments[3]`, `regions[1].segments`, `roads[2].segments[3]`, `roads[0].name`, `junctions[1].polygon`, ...): the schema's (no segment, more than 2000, a coordinate beyond ±1e6 m) or the geometry's (not_convex, degenerate_edge, seamless_join, folds_back, overlap, and for regions reversed_region, region_out_of_range, region_overlap, region_gap, duplicate_region_name; for a network also too_many_segments, duplicate_name, shared_by_three, partial_edge, disconnected, narrow_passage, sharp_corner); `invalid_value` with `field` `regions` for a network with regions, or with `field` `roads` when the fleet's parameters changed since the network was checked (put it again)",
         ),
-        refusal(409, "a flying UAV would be outside the new road or closer than D_s to a wall"),
+        refusal(409, "a flying UAV would be outside the new road or network or closer than D_s to a wall"),
     ],
     ..READ
 };
@@ -76,7 +76,7 @@ pub const PUT_ROAD: Doc = Doc {
 /// `GET /api/road/geometry`.
 pub const GET_ROAD_GEOMETRY: Doc = Doc {
     id: "getRoadGeometry",
-    summary: "The road's walls and centre line, for drawing",
+    summary: "The road's walls and centre line, or a network's walls and cells, for drawing",
     answers: &[answer(200, "geometry", schema_of::<RoadView>)],
     ..READ
 };
@@ -196,14 +196,14 @@ pub const LOAD_SCENARIO: Doc = Doc {
     id: "loadScenario",
     summary: "Replace road, parameters and fleet with a scenario (the `airroads run` format)",
     description: Some(
-        "Beyond the schema (only here and in the 422 description): the road must pass the geometry rules of `PUT /api/road`; each UAV's start and goal must be inside that road at least D_s from its walls, the starts D_c apart and the ids unique; a UDP link's host as `Link` says; and the fleet must not exceed `--max-uavs` (a setting of the server). With `serve --region` it applies to every region of the deployment at one instant, or to none (docs/regions.md); the answer then adds `regions` and `switch_at_ms`, and a region's refusal keeps its status with `error.region` naming it.",
+        "Beyond the schema (only here and in the 422 description): the road or network must pass the geometry rules of `PUT /api/road` (a network's passages wide enough for this scenario's parameters); each UAV's start and goal must be inside that road at least D_s from its walls, the starts D_c apart and the ids unique; a UDP link's host as `Link` says; and the fleet must not exceed `--max-uavs` (a setting of the server). With `serve --region` (one road divided into regions: a network is refused there with 422 naming `regions`) it applies to every region of the deployment at one instant, or to none (docs/regions.md); the answer then adds `regions` and `switch_at_ms`, and a region's refusal keeps its status with `error.region` naming it.",
     ),
     body: Body::Json(schema_of::<Scenario>),
     answers: &[
         answer(200, "loaded", schema_of::<ScenarioLoaded>),
         refusal(
             422,
-            "a field has an invalid value; `field` names it (`params.dt`, `segments[3]`, `uavs[1].start`, ...): out of the schema's ranges, a road that breaks a geometry rule, a start or goal outside the road or closer than D_s to a wall, starts closer than D_c, a duplicate id, a refused link; `fleet_full` when the fleet would exceed --max-uavs",
+            "a field has an invalid value; `field` names it (`params.dt`, `segments[3]`, `roads[0].segments[2]`, `junctions[1].polygon`, `uavs[1].start`, ...): out of the schema's ranges, a road or network that breaks a geometry rule (the rule's name ends the message in brackets), a start or goal outside the road or closer than D_s to a wall, starts closer than D_c, a duplicate id, a refused link; `fleet_full` when the fleet would exceed --max-uavs",
         ),
     ],
     ..READ

@@ -83,6 +83,48 @@ fn the_limits_the_validators_check_are_in_the_schemas() {
 }
 
 #[test]
+fn the_road_and_the_scenario_document_a_chain_and_a_network() {
+    let doc = document();
+    let schemas = &doc["components"]["schemas"];
+    let body = &doc["paths"]["/api/road"]["put"]["requestBody"]["content"]["application/json"]["schema"];
+    assert_eq!(body["$ref"], "#/components/schemas/RoadOrNetwork");
+    let forms: Vec<&str> = schemas["RoadOrNetwork"]["anyOf"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| f["$ref"].as_str().unwrap())
+        .collect();
+    assert_eq!(forms, ["#/components/schemas/RoadLayout", "#/components/schemas/NetworkLayout"]);
+    let network = &schemas["NetworkLayout"];
+    assert_eq!(network["additionalProperties"], Value::Bool(false));
+    assert_eq!(network["required"], serde_json::json!(["roads"]));
+    assert!(
+        network["properties"]["roads"]["description"].as_str().unwrap().contains("more than 20000 cells")
+    );
+    assert_eq!(schemas["SpeedLimit"]["maximum"].as_f64(), Some(roads::network::MAX_SPEED_LIMIT));
+    assert_eq!(schemas["Junction"]["properties"]["polygon"]["minItems"].as_u64(), Some(3));
+    // The geometry rules no schema states are in the 422 description.
+    let refusal = doc["paths"]["/api/road"]["put"]["responses"]["422"]["description"].as_str().unwrap();
+    for rule in [
+        "duplicate_name",
+        "shared_by_three",
+        "partial_edge",
+        "disconnected",
+        "narrow_passage",
+        "sharp_corner",
+    ] {
+        assert!(refusal.contains(rule), "{rule} is not documented: {refusal}");
+    }
+    // A scenario: `segments` without `roads`, or `roads` without `segments` and `regions`.
+    let scenario = &schemas["Scenario"];
+    let required: Vec<&Value> =
+        scenario["anyOf"].as_array().unwrap().iter().map(|f| &f["required"]).collect();
+    assert_eq!(required, [&serde_json::json!(["segments"]), &serde_json::json!(["roads"])]);
+    assert!(scenario["properties"]["roads"].is_object() && scenario["properties"]["junctions"].is_object());
+    assert!(!scenario["required"].as_array().unwrap().iter().any(|r| r == "segments"));
+}
+
+#[test]
 fn the_stream_lists_every_status_at_its_number() {
     let doc = document();
     let codes = doc["x-websocket"]["status_codes"].as_array().unwrap();

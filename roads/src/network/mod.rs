@@ -26,10 +26,16 @@ use uav::Vec2;
 
 /// A road network as users write it: named roads (chains of quads, as a chain layout's segments)
 /// and named junctions whose edges the roads' ends (or other junctions) share.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 pub struct NetworkLayout {
-    /// The roads.
+    /// The roads. Their count is bounded by the cells' (at most [`MAX_CELLS`] with the junctions),
+    /// stated in the description: a list of that many roads as a schema's bound would be the
+    /// bound of no body the server reads (4 MiB).
+    #[schemars(length(min = 1))]
+    #[schemars(
+        description = "the network's roads, at least one, names unique. Beyond the schema a network is refused with 422 (`rule` naming the rule, `field` the road, segment or junction) when a cell breaks a road's rule (not_convex, degenerate_edge, seamless_join, folds_back), roads and junctions together have more than 20000 cells (too_many_segments), a name is used twice (duplicate_name), cells overlap (overlap), an edge is shared by three cells (shared_by_three) or only in part (partial_edge), the network is not connected (disconnected), a passage is narrower than a UAV needs with the fleet's parameters (narrow_passage), or two walls meet at less than 90° (sharp_corner)"
+    )]
     pub roads: Vec<NetworkRoad>,
     /// The junctions (none: the roads join end to end or side to end).
     #[serde(default)]
@@ -42,6 +48,7 @@ pub struct NetworkLayout {
 #[serde(deny_unknown_fields)]
 pub struct NetworkRoad {
     /// Unique among the roads: 1 to 64 characters from `A-Z a-z 0-9 _ -`.
+    #[schemars(pattern(crate::schema::region_name_pattern()))]
     pub name: String,
     /// Its segments in order, from its start to its end.
     #[schemars(with = "crate::schema::Segments")]
@@ -51,6 +58,7 @@ pub struct NetworkRoad {
     pub one_way: bool,
     /// Its speed limit (m/s), none by default.
     #[serde(default)]
+    #[schemars(with = "Option<crate::schema::SpeedLimit>")]
     pub speed_limit: Option<f64>,
 }
 
@@ -59,6 +67,7 @@ pub struct NetworkRoad {
 #[serde(deny_unknown_fields)]
 pub struct Junction {
     /// Unique among the junctions: 1 to 64 characters from `A-Z a-z 0-9 _ -`.
+    #[schemars(pattern(crate::schema::region_name_pattern()))]
     pub name: String,
     /// Its vertices.
     #[schemars(with = "Vec<crate::schema::Point>", length(min = 3, max = 8))]
