@@ -336,9 +336,12 @@ test("a road network is drawn cell by cell; a click on a junction adds a UAV the
       return uavs.length === 17 && uavs[16];
     });
     assert.ok(near(added.p, centre, 0.3), `added at ${added.p}, clicked ${centre}`);
-    // The editor draws one road: it starts empty on a network.
+    // The editor takes the live network as it is: every road and junction.
     await page.click("#mode-edit");
-    assert.equal(await page.evaluate(() => window.__airroads.editor.segments.length), 0);
+    const layout = await page.evaluate(() => window.__airroads.editor.layout);
+    assert.equal(layout.roads.length, geometry.layout.roads.length);
+    assert.deepEqual(layout.junctions, geometry.layout.junctions);
+    assert.deepEqual(layout.roads.map((r) => r.segments), geometry.layout.roads.map((r) => r.segments));
   });
 });
 
