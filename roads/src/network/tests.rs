@@ -351,8 +351,9 @@ proptest! {
         let cells = net.cells().len();
         for hint in [0, cells / 2, net.locate(&p).unwrap_or(0), cells] {
             prop_assert_eq!(net.walls_near_in(hint, &p, radius).collect::<Vec<_>>(), net.walls_near(&p, radius));
-            let wide = radius + 3.0;
-            prop_assert_eq!(net.walls_near_in(hint, &p, wide).collect::<Vec<_>>(), net.walls_near(&p, wide));
+            for wide in [radius + 3.0, radius + 10.0, radius + 20.0] {
+                prop_assert_eq!(net.walls_near_in(hint, &p, wide).collect::<Vec<_>>(), net.walls_near(&p, wide));
+            }
             prop_assert_eq!(net.boundary_distance_in(hint, &p).to_bits(), net.boundary_distance(&p).to_bits());
             prop_assert_eq!(net.contains_in(hint, &p), net.contains(&p));
         }
