@@ -5,7 +5,8 @@
 //! metrics a headless run records. Prints tick p50/p99 and the mean time of each stage per tick and
 //! per UAV, then how the per-UAV cost of the largest fleet compares with the smallest's. With `--road
 //! city` the UAVs fly across a street grid instead (`fleet::city::city_scenario`: B × B blocks,
-//! square junctions, two-way streets 6 m wide, about 17 UAVs per block, goals 1.5–4 blocks away).
+//! square junctions, two-way streets 6 m wide limited to 3 m/s, about 17 UAVs per block, goals 1.5–4
+//! blocks away).
 
 use flights::say;
 

@@ -1,14 +1,15 @@
 //! The city grid of `airroads bench scale --road city` (BENCHMARKS.md "Fleet engine at scale"): a
 //! street grid of B × B blocks, square junctions at the crossings joined by two-way streets, with
 //! UAVs flying from random points of the streets to random goals a few blocks away. Sized from the
-//! fleet so that each UAV has about as much street as on the trunk road of [`crate::trunk`].
+//! fleet so that each UAV has about as much street as on the trunk road of [`crate::trunk`], and
+//! limited to 3 m/s on the streets as there.
 
 use super::networks::{polygon, road_through, xy};
 use crate::scenario::{Scenario, ScenarioUav, min_passage_m};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use roads::RoadError;
-use roads::network::{Network, NetworkLayout};
+use roads::network::{Network, NetworkLayout, NetworkRoad};
 use std::collections::HashMap;
 use uav::{Params, Vec2};
 
@@ -18,6 +19,10 @@ pub const CITY_STREET_WIDTH_M: f64 = 6.0;
 pub const CITY_PITCH_M: f64 = 24.0;
 /// UAVs per block of the grid sized by [`city_scenario`]: about 14 m² of street each, as on the trunk.
 pub const CITY_UAVS_PER_BLOCK: f64 = 17.0;
+/// Speed limit (m/s) of every street: the trunk road's traffic rules cap speed at 3 m/s as well;
+/// without it the `rl` policy flies up to 7 m/s down a street, and every UAV's activation radius
+/// with it. Routes are unchanged: they assume 2 m/s ([`roads::network::CRUISE_MPS`]).
+pub const CITY_SPEED_LIMIT_MPS: f64 = 3.0;
 /// Longest segment (m) of a street.
 const SEGMENT_M: f64 = 9.0;
 /// How far (m) starts and goals keep from a street's walls (D_s and room to set off or to hover).
@@ -133,7 +138,7 @@ fn grid_layout(blocks: usize) -> (NetworkLayout, Vec<Street>) {
             }
         };
         let edges: Vec<(Vec2, Vec2)> = (0..=pieces).map(at).collect();
-        road_through(name, &edges, false)
+        NetworkRoad { speed_limit: Some(CITY_SPEED_LIMIT_MPS), ..road_through(name, &edges, false) }
     };
     let mut layout = NetworkLayout { roads: Vec::new(), junctions: Vec::new() };
     let mut streets = Vec::new();
@@ -197,6 +202,9 @@ mod tests {
             let net = valid.road.network().expect("a city grid is a network");
             assert_eq!(net.layout().junctions.len(), (blocks + 1) * (blocks + 1));
             assert_eq!(net.layout().roads.len(), 2 * blocks * (blocks + 1));
+            assert!(
+                net.layout().roads.iter().all(|r| r.speed_limit == Some(CITY_SPEED_LIMIT_MPS) && !r.one_way)
+            );
             for u in &valid.uavs {
                 let trip = (u.goal - u.start).norm();
                 assert!(TRIP_PITCHES.contains(&(trip / CITY_PITCH_M)), "{}: trip {trip} m", u.id);

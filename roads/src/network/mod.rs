@@ -137,6 +137,8 @@ pub struct Network {
     space: space::Space,
     /// The passages numbered for the route search.
     passage_index: route::PassageIndex,
+    /// Per cell, its speed limit if it is a junction ([`Network::speed_limit`]).
+    junction_limits: Vec<Option<f64>>,
     /// Unique per built network (clones share it), from the same counter as a road's.
     id: u64,
 }
@@ -161,8 +163,9 @@ impl Network {
             .collect::<Vec<_>>();
         let space = space::Space::new(&cells, &walls);
         let passage_index = route::PassageIndex::new(&passages);
+        let junction_limits = Self::junction_limits(&layout, &cells, &passages);
         let id = crate::road::next_id();
-        Ok(Self { layout, cells, passages, walls, space, passage_index, id })
+        Ok(Self { layout, cells, passages, walls, space, passage_index, junction_limits, id })
     }
 
     /// A number unique to this network among the roads and networks built by the process (its

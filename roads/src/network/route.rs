@@ -99,12 +99,36 @@ impl Network {
         leaving_ok && entering_ok
     }
 
-    /// The speed limit (m/s) in cell `cell`: its road's, if it has one (none in a junction).
+    /// The speed limit (m/s) in cell `cell`: its road's, if it has one; in a junction the largest
+    /// limit of the roads that meet there when every one has a limit (none otherwise: a UAV crossing
+    /// between limited roads does not speed up inside the junction).
     pub fn speed_limit(&self, cell: usize) -> Option<f64> {
         match self.cells.get(cell)?.kind {
             CellKind::Segment { road, .. } => self.layout.roads[road].speed_limit,
-            CellKind::Junction { .. } => None,
+            CellKind::Junction { .. } => self.junction_limits.get(cell).copied().flatten(),
         }
+    }
+
+    /// Every cell's junction speed limit ([`Network::speed_limit`]; None for segments), from `cells`,
+    /// their `passages` and the roads of `layout`.
+    pub(super) fn junction_limits(
+        layout: &super::NetworkLayout,
+        cells: &[super::Cell],
+        passages: &[Vec<super::Passage>],
+    ) -> Vec<Option<f64>> {
+        let road_limit = |c: usize| match cells[c].kind {
+            CellKind::Segment { road, .. } => layout.roads[road].speed_limit,
+            CellKind::Junction { .. } => None,
+        };
+        (0..cells.len())
+            .map(|c| match cells[c].kind {
+                CellKind::Junction { .. } if !passages[c].is_empty() => {
+                    let limits: Option<Vec<f64>> = passages[c].iter().map(|p| road_limit(p.other)).collect();
+                    limits.map(|l| l.into_iter().fold(0.0, f64::max))
+                }
+                _ => None,
+            })
+            .collect()
     }
 
     /// Seconds to fly `metres` in cell `cell` (its road's speed limit, else [`CRUISE_MPS`]).

@@ -15,12 +15,14 @@ type CellBox = GeomWithData<Rectangle<[f64; 2]>, usize>;
 /// Tolerance (m) of the point-in-cell test, as for a chain's segments.
 const CONTAINS_TOL_M: f64 = crate::road::CONTAINS_TOL_M;
 
-/// Radius (m) of each cell's list of nearby walls: the walls within this distance of a point in the
-/// cell's box are in the list, so queries from there read it instead of the tree.
-pub const CELL_NEAR_M: f64 = 8.0;
+/// Radii (m) of each cell's lists of nearby walls: the walls within such a distance of a point in
+/// the cell's box are in that list, so a query from there within that radius reads the shortest list
+/// that serves instead of the tree (a filter's activation radius is 2.6 m at rest, 7.6 m at 3.7 m/s,
+/// 15 m at 7.3 m/s).
+pub const CELL_NEAR_M: [f64; 3] = [4.0, 8.0, 16.0];
 
-/// Cells with more walls than this near them keep no list (the tree answers).
-const CELL_NEAR_CAPACITY: usize = 96;
+/// Lists longer than this are not kept (the tree answers).
+const CELL_NEAR_CAPACITY: usize = 256;
 
 /// The spatial side of a [`Network`], built once with it.
 #[derive(Debug, Clone)]
@@ -31,10 +33,10 @@ pub(super) struct Space {
     cell_tree: RTree<CellBox>,
     /// Per cell, its box grown by the point-in-cell tolerance (as in `cell_tree`).
     boxes: Vec<AABB<[f64; 2]>>,
-    /// Per cell, the walls within [`CELL_NEAR_M`] of its box, ascending (a superset: those whose
-    /// boxes touch the box grown by that much), or None when there are more than
-    /// [`CELL_NEAR_CAPACITY`].
-    near: Vec<Option<Box<[u32]>>>,
+    /// Per cell and radius of [`CELL_NEAR_M`], the walls within it of the cell's box, ascending (a
+    /// superset: those whose boxes touch the box grown by that much), or None when there are more
+    /// than [`CELL_NEAR_CAPACITY`].
+    near: Vec<[Option<Box<[u32]>>; 3]>,
 }
 
 /// The walls within a distance of a point, ascending: a cell's list filtered by the tree's own
@@ -121,30 +123,36 @@ impl Space {
             })
             .collect();
         let wall_tree = RTree::bulk_load(lines);
-        let near = boxes
-            .iter()
-            .map(|b| {
-                // Grown a little beyond CELL_NEAR_M: a wall that close is in the list whatever the rounding.
-                let (lo, hi) = (b.lower(), b.upper());
-                let scale = lo.iter().chain(&hi).fold(1.0f64, |m, c| m.max(c.abs()));
-                let r = CELL_NEAR_M + 1e-9 * scale;
-                let grown = AABB::from_corners([lo[0] - r, lo[1] - r], [hi[0] + r, hi[1] + r]);
-                // Wall indices fit in u32: a network has at most MAX_CELLS cells of at most 8 edges.
-                let mut ids: Vec<u32> =
-                    wall_tree.locate_in_envelope_intersecting(&grown).map(|l| l.data as u32).collect();
-                ids.sort_unstable();
-                (ids.len() <= CELL_NEAR_CAPACITY).then(|| ids.into_boxed_slice())
-            })
-            .collect();
+        let list = |b: &AABB<[f64; 2]>, radius: f64| {
+            // Grown a little beyond the radius: a wall that close is in the list whatever the rounding.
+            let (lo, hi) = (b.lower(), b.upper());
+            let scale = lo.iter().chain(&hi).fold(1.0f64, |m, c| m.max(c.abs()));
+            let r = radius + 1e-9 * scale;
+            let grown = AABB::from_corners([lo[0] - r, lo[1] - r], [hi[0] + r, hi[1] + r]);
+            // Wall indices fit in u32: a network has at most MAX_CELLS cells of at most 8 edges.
+            let mut ids: Vec<u32> =
+                wall_tree.locate_in_envelope_intersecting(&grown).map(|l| l.data as u32).collect();
+            ids.sort_unstable();
+            (ids.len() <= CELL_NEAR_CAPACITY).then(|| ids.into_boxed_slice())
+        };
+        let near = boxes.iter().map(|b| CELL_NEAR_M.map(|radius| list(b, radius))).collect();
         let cell_boxes =
             boxes.iter().enumerate().map(|(c, b)| GeomWithData::new(Rectangle::from_aabb(*b), c));
         Self { walls, wall_tree, cell_tree: RTree::bulk_load(cell_boxes.collect()), boxes, near }
     }
 
-    /// The list of walls near cell `cell` when `x` is in its box and the list exists.
-    fn list_at(&self, cell: usize, x: &Vec2) -> Option<&[u32]> {
+    /// The shortest list of cell `cell` that holds every wall within `radius` of `x` (the radius at
+    /// most the last of [`CELL_NEAR_M`], `x` in the cell's box, the list kept), and its radius.
+    fn list_at(&self, cell: usize, x: &Vec2, radius: f64) -> Option<(&[u32], f64)> {
         let inside = self.boxes.get(cell).is_some_and(|b| b.contains_point(&[x.x, x.y]));
-        self.near.get(cell).filter(|_| inside)?.as_deref()
+        let lists = self.near.get(cell).filter(|_| inside)?;
+        let tier = CELL_NEAR_M.iter().position(|&r| radius <= r)?;
+        Some((lists[tier].as_deref()?, CELL_NEAR_M[tier]))
+    }
+
+    /// [`Space::list_at`] for the cell `hint` or, when `x` is not in its box, the cell `x` is in.
+    fn list_near(&self, net: &Network, hint: usize, x: &Vec2, radius: f64) -> Option<(&[u32], f64)> {
+        self.list_at(hint, x, radius).or_else(|| self.list_at(net.locate(x)?, x, radius))
     }
 }
 
@@ -185,11 +193,10 @@ impl Network {
     /// [`Network::walls_near`] for a point believed to be in cell `hint` (a UAV's tracked cell, any
     /// number): the same walls in the same order, read from the list of the cell `x` is in (the
     /// hint's when `x` is in its box) instead of the tree, without allocating, for a radius up to
-    /// [`CELL_NEAR_M`].
+    /// the last of [`CELL_NEAR_M`].
     pub fn walls_near_in(&self, hint: usize, x: &Vec2, radius: f64) -> NetworkWalls<'_> {
-        if x.x.is_finite() && x.y.is_finite() && radius <= CELL_NEAR_M {
-            let list = self.space.list_at(hint, x).or_else(|| self.space.list_at(self.locate(x)?, x));
-            if let Some(ids) = list {
+        if x.x.is_finite() && x.y.is_finite() {
+            if let Some((ids, _)) = self.space.list_near(self, hint, x, radius) {
                 let (lines, r2) = (&self.space.walls[..], radius * radius);
                 return NetworkWalls(Near::List { ids: ids.iter(), lines, x: [x.x, x.y], r2 });
             }
@@ -205,17 +212,17 @@ impl Network {
     }
 
     /// [`Network::boundary_distance`] for a point believed to be in cell `hint` (any number): the
-    /// same value, from the list of the cell `x` is in when the nearest wall is within
-    /// [`CELL_NEAR_M`], else from the tree.
+    /// same value, from the shortest list of the cell `x` is in that holds the nearest wall, else
+    /// from the tree.
     pub fn boundary_distance_in(&self, hint: usize, x: &Vec2) -> f64 {
         if x.x.is_finite() && x.y.is_finite() {
-            let list = self.space.list_at(hint, x).or_else(|| self.space.list_at(self.locate(x)?, x));
-            if let Some(ids) = list {
-                let at = [x.x, x.y];
+            let at = [x.x, x.y];
+            for radius in CELL_NEAR_M {
+                let Some((ids, radius)) = self.space.list_near(self, hint, x, radius) else { break };
                 let d2 = ids.iter().map(|&k| wall_line(&self.space.walls[k as usize]).distance_2(&at));
                 let d2 = d2.fold(f64::INFINITY, f64::min);
-                // Every wall within CELL_NEAR_M of x is in the list: the nearest one is, when that close.
-                if d2 <= CELL_NEAR_M * CELL_NEAR_M {
+                // Every wall within `radius` of x is in the list: the nearest one is, when that close.
+                if d2 <= radius * radius {
                     return d2.sqrt();
                 }
             }

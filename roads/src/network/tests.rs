@@ -351,8 +351,9 @@ proptest! {
         let cells = net.cells().len();
         for hint in [0, cells / 2, net.locate(&p).unwrap_or(0), cells] {
             prop_assert_eq!(net.walls_near_in(hint, &p, radius).collect::<Vec<_>>(), net.walls_near(&p, radius));
-            let wide = radius + 3.0;
-            prop_assert_eq!(net.walls_near_in(hint, &p, wide).collect::<Vec<_>>(), net.walls_near(&p, wide));
+            for wide in [radius + 3.0, radius + 10.0, radius + 20.0] {
+                prop_assert_eq!(net.walls_near_in(hint, &p, wide).collect::<Vec<_>>(), net.walls_near(&p, wide));
+            }
             prop_assert_eq!(net.boundary_distance_in(hint, &p).to_bits(), net.boundary_distance(&p).to_bits());
             prop_assert_eq!(net.contains_in(hint, &p), net.contains(&p));
         }
@@ -376,4 +377,25 @@ fn walls_meeting_at_less_than_90_degrees_are_refused() {
         junctions: vec![square("end", 0.0, 0.0, 2.0)],
     };
     assert!(Network::new(square_end, 0.5).is_ok());
+}
+
+#[test]
+fn a_junction_between_limited_roads_takes_their_largest_limit() {
+    let mut layout = grid(2, 1, 10.0, 2.0, 1);
+    let junction =
+        |net: &Network| net.cells().iter().position(|c| matches!(c.kind, CellKind::Junction { .. })).unwrap();
+    let net = Network::new(layout.clone(), 0.5).unwrap();
+    assert_eq!(net.speed_limit(junction(&net)), None);
+    for (k, road) in layout.roads.iter_mut().enumerate() {
+        road.speed_limit = Some(1.0 + k as f64);
+    }
+    let net = Network::new(layout.clone(), 0.5).unwrap();
+    let j = junction(&net);
+    let attached: Vec<f64> = net.passages(j).iter().filter_map(|p| net.speed_limit(p.other)).collect();
+    assert!(!attached.is_empty());
+    assert_eq!(net.speed_limit(j), attached.iter().copied().reduce(f64::max));
+    layout.roads[0].speed_limit = None;
+    let net = Network::new(layout, 0.5).unwrap();
+    let unlimited = net.passages(junction(&net)).iter().any(|p| net.speed_limit(p.other).is_none());
+    assert_eq!(net.speed_limit(junction(&net)).is_none(), unlimited);
 }
