@@ -195,11 +195,12 @@ impl Network {
     /// hint's when `x` is in its box) instead of the tree, without allocating, for a radius up to
     /// the last of [`CELL_NEAR_M`].
     pub fn walls_near_in(&self, hint: usize, x: &Vec2, radius: f64) -> NetworkWalls<'_> {
-        if x.x.is_finite() && x.y.is_finite() {
-            if let Some((ids, _)) = self.space.list_near(self, hint, x, radius) {
-                let (lines, r2) = (&self.space.walls[..], radius * radius);
-                return NetworkWalls(Near::List { ids: ids.iter(), lines, x: [x.x, x.y], r2 });
-            }
+        if x.x.is_finite()
+            && x.y.is_finite()
+            && let Some((ids, _)) = self.space.list_near(self, hint, x, radius)
+        {
+            let (lines, r2) = (&self.space.walls[..], radius * radius);
+            return NetworkWalls(Near::List { ids: ids.iter(), lines, x: [x.x, x.y], r2 });
         }
         NetworkWalls(Near::Tree(self.walls_near(x, radius).into_iter()))
     }
