@@ -63,17 +63,6 @@ struct Request {
     can_stop: bool,
 }
 
-/// The state of one zone this tick (dashboard, Rerun).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct JunctionUse {
-    /// The zone's cell in the network.
-    pub cell: usize,
-    /// UAVs holding a grant (inside, on their way in, or just out).
-    pub admitted: u32,
-    /// UAVs waiting for their turn.
-    pub waiting: u32,
-}
-
 /// The junction rules' state between ticks.
 #[derive(Debug, Default)]
 pub struct JunctionRules {
@@ -84,8 +73,6 @@ pub struct JunctionRules {
     zone_of_cell: Vec<Option<usize>>,
     /// Per zone, the movements granted (held) this tick.
     held: Vec<Vec<Movement>>,
-    /// Per zone, the UAVs waiting this tick.
-    waiting: Vec<u32>,
     /// Scratch: this tick's requests; one zone's refused requests with their wait.
     requests: Vec<Request>,
     refused: Vec<(Movement, f64)>,
@@ -97,20 +84,6 @@ pub struct JunctionRules {
 }
 
 impl JunctionRules {
-    /// The conflict zones of the network of the last [`JunctionRules::plan`].
-    pub fn zones(&self) -> &[ConflictZone] {
-        &self.zones
-    }
-
-    /// Each zone with who holds a grant to it and who waits, as of the last tick.
-    pub fn junction_use(&self) -> impl Iterator<Item = JunctionUse> + '_ {
-        self.zones.iter().zip(&self.held).zip(&self.waiting).map(|((z, held), &waiting)| JunctionUse {
-            cell: z.cell,
-            admitted: held.len() as u32,
-            waiting,
-        })
-    }
-
     /// Applies the rules at time `now` to the UAVs that `tracked` says fly to a goal: sets each one's
     /// `traffic.junction` (its grant), `traffic.hold` (where its way stops this tick) and
     /// `traffic.waiting`. `rule` narrows the passages as the UAVs' ways do; movements closer than
@@ -133,11 +106,9 @@ impl JunctionRules {
                 self.zone_of_cell[z.cell] = Some(k);
             }
             self.held = vec![Vec::new(); self.zones.len()];
-            self.waiting = vec![0; self.zones.len()];
             uavs.iter_mut().for_each(|u| u.traffic.junction = None);
         }
         self.held.iter_mut().for_each(Vec::clear);
-        self.waiting.iter_mut().for_each(|w| *w = 0);
         self.requests.clear();
         for (k, u) in uavs.iter_mut().enumerate() {
             u.traffic.hold = None;
@@ -222,7 +193,6 @@ impl JunctionRules {
                 continue;
             };
             self.refused.push((r.movement, r.since));
-            self.waiting[zone] += 1;
             // Its place in the line of its arm: FOLLOW_GAP_IN_DC·D_c behind the one ahead of it.
             let place = match line {
                 Some(l) => {
