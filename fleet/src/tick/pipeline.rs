@@ -183,25 +183,16 @@ impl TickPipeline {
             uav.traffic.progress.update(remaining, now);
             uav.last.stall_s = uav.traffic.progress.stalled_for(now).unwrap_or(0.0);
         };
-        if parallel(fleet.uavs.len()) {
-            fleet.uavs.par_iter_mut().for_each(follow);
-        } else {
-            fleet.uavs.iter_mut().for_each(follow);
-        }
+        for_each_uav(fleet.uavs, |_, uav| follow(uav));
         if fleet.config.nav == NavMode::Traffic {
             let rules = &mut fleet.traffic.junctions;
             rules.plan(net, nav.gates, &params, now, fleet.uavs, tracked);
         } else {
             fleet.uavs.iter_mut().for_each(|u| u.traffic.hold = None);
         }
-        let choose = |uav: &mut Uav| {
+        for_each_uav(fleet.uavs, |_, uav| {
             uav.last.target = nav.choose(&mut uav.nav, uav.state.p, uav.traffic.hold);
-        };
-        if parallel(fleet.uavs.len()) {
-            fleet.uavs.par_iter_mut().for_each(choose);
-        } else {
-            fleet.uavs.iter_mut().for_each(choose);
-        }
+        });
     }
 
     /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::traffic::yielding`]).
@@ -331,11 +322,7 @@ impl TickPipeline {
             }
             me.last.u_ref = u;
         };
-        if parallel(fleet.uavs.len()) {
-            fleet.uavs.par_iter_mut().enumerate().for_each(limit);
-        } else {
-            fleet.uavs.iter_mut().enumerate().for_each(limit);
-        }
+        for_each_uav(fleet.uavs, |k, uav| limit((k, uav)));
     }
 
     /// The traffic rules' speed limit (narrower road, slower flight; slower still in dense traffic)
@@ -363,10 +350,16 @@ impl TickPipeline {
             }
             me.last.u_ref = u;
         };
-        if parallel(fleet.uavs.len()) {
-            fleet.uavs.par_iter_mut().enumerate().for_each(limit);
-        } else {
-            fleet.uavs.iter_mut().enumerate().for_each(limit);
-        }
+        for_each_uav(fleet.uavs, |k, uav| limit((k, uav)));
+    }
+}
+
+/// Calls `f` with each UAV and its index: in parallel for large fleets ([`parallel`]), with the same
+/// result on any number of threads (each call reads only its own UAV and shared plain data).
+fn for_each_uav(uavs: &mut [Uav], f: impl Fn(usize, &mut Uav) + Sync + Send) {
+    if parallel(uavs.len()) {
+        uavs.par_iter_mut().enumerate().for_each(|(k, uav)| f(k, uav));
+    } else {
+        uavs.iter_mut().enumerate().for_each(|(k, uav)| f(k, uav));
     }
 }
