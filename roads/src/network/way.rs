@@ -170,14 +170,8 @@ impl Way {
 
     /// What is left to fly (m): from `p` through the middle of every gate still ahead to the goal.
     pub fn remaining(&self, p: Vec2) -> f64 {
-        let mut total = 0.0;
-        let mut from = p;
-        for gate in &self.gates[self.at..] {
-            let middle = (gate.left + gate.right) / 2.0;
-            total += (middle - from).norm();
-            from = middle;
-        }
-        total + (self.goal - from).norm()
+        let (total, last) = through_middles(p, &self.gates[self.at..]);
+        total + (self.goal - last).norm()
     }
 
     /// The temporary target p^r of a UAV at `p` (after [`Way::follow`]): the goal when it is within
@@ -259,14 +253,7 @@ impl Way {
     /// The length (m) from `p` through the middles of the gates ahead to the middle of gate `gate`
     /// (the passage from cell `gate` to cell `gate + 1` of the way); 0 once that gate is behind.
     pub fn to_gate(&self, p: Vec2, gate: usize) -> f64 {
-        let mut total = 0.0;
-        let mut from = p;
-        for g in self.gates.get(self.at..=gate).unwrap_or_default() {
-            let middle = (g.left + g.right) / 2.0;
-            total += (middle - from).norm();
-            from = middle;
-        }
-        total
+        through_middles(p, self.gates.get(self.at..=gate).unwrap_or_default()).0
     }
 
     /// The distance (m) from `p` to gate `gate`'s interval (0 past the end of the way).
@@ -330,6 +317,18 @@ thread_local! {
     /// Each thread's buffers for [`Way::taut_path_into`] (the portals and the path): a target costs
     /// no allocation once they have grown to the longest path.
     static SCRATCH: RefCell<(Vec<Gate>, Vec<Vec2>)> = const { RefCell::new((Vec::new(), Vec::new())) };
+}
+
+/// The length (m) of the polyline from `p` through the middles of `gates`, and its last point.
+fn through_middles(p: Vec2, gates: &[Gate]) -> (f64, Vec2) {
+    let mut total = 0.0;
+    let mut from = p;
+    for g in gates {
+        let middle = (g.left + g.right) / 2.0;
+        total += (middle - from).norm();
+        from = middle;
+    }
+    (total, from)
 }
 
 /// The distance from `p` to the gate's interval.
