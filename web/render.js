@@ -60,11 +60,7 @@ function drawNetwork(ctx, cam, geometry, dim) {
   for (const c of cells) polygon(ctx, cam, c.polygon);
   ctx.stroke();
   ctx.setLineDash([]);
-  ctx.strokeStyle = "#26303b";
-  ctx.lineWidth = 3;
-  ctx.beginPath();
-  for (const [a, b] of geometry.walls) line(ctx, cam, a, b);
-  ctx.stroke();
+  drawWalls(ctx, cam, geometry);
   ctx.font = "11px system-ui, sans-serif";
   ctx.textAlign = "center";
   ctx.textBaseline = "middle";
@@ -75,6 +71,15 @@ function drawNetwork(ctx, cam, geometry, dim) {
     ctx.fillText(c.name, x, y);
   }
   ctx.globalAlpha = 1;
+}
+
+/** The live road's walls, solid and thick. */
+function drawWalls(ctx, cam, geometry) {
+  ctx.strokeStyle = "#26303b";
+  ctx.lineWidth = 3;
+  ctx.beginPath();
+  for (const [a, b] of geometry.walls) line(ctx, cam, a, b);
+  ctx.stroke();
 }
 
 /** The live road: surface, passable joint edges, walls and centre line; or a network's cells. */
@@ -103,11 +108,7 @@ export function drawRoad(ctx, cam, geometry, dim) {
   });
   ctx.stroke();
   ctx.setLineDash([]);
-  ctx.strokeStyle = "#26303b";
-  ctx.lineWidth = 3;
-  ctx.beginPath();
-  for (const [a, b] of geometry.walls) line(ctx, cam, a, b);
-  ctx.stroke();
+  drawWalls(ctx, cam, geometry);
   drawRegions(ctx, cam, segs, geometry.layout.regions);
   ctx.globalAlpha = 1;
 }
