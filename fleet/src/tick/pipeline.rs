@@ -12,6 +12,7 @@ use crate::tick::filtering::FilterStage;
 use crate::tick::neighbours::NeighbourSearch;
 use crate::tick::rows::{NeighbourLists, RowBuilder};
 use crate::tick::{StageTimes, parallel};
+use crate::traffic::cycles::back_off_target;
 use crate::traffic::passing::pass_point;
 use crate::traffic::speed::{crowd_limit, govern, keep_distance};
 use crate::traffic::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
@@ -187,11 +188,16 @@ impl TickPipeline {
         if fleet.config.nav == NavMode::Traffic {
             let rules = &mut fleet.traffic.junctions;
             rules.plan(net, nav.gates, &params, now, fleet.uavs, tracked);
+            let waits = (&self.neighbours.lists, rules.waits_for());
+            fleet.traffic.cycles.resolve(net, &params, now, fleet.uavs, waits, tracked);
         } else {
             fleet.uavs.iter_mut().for_each(|u| u.traffic.hold = None);
         }
         for_each_uav(fleet.uavs, |_, uav| {
             uav.last.target = nav.choose(&mut uav.nav, uav.state.p, uav.traffic.hold);
+            if let Some(aside) = back_off_target(uav) {
+                uav.last.target = aside;
+            }
         });
     }
 

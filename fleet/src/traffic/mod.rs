@@ -7,6 +7,7 @@
 //!   with priority (stalled longer, then the smaller id) backs off for [`BACK_OFF_S`] to the far
 //!   right of its lane, or, in a single-file part, back to the nearest place where two fit.
 
+pub mod cycles;
 pub mod following;
 pub mod junctions;
 pub mod passing;
@@ -36,7 +37,7 @@ pub const BACK_OFF_S: f64 = 3.0;
 pub const FOLLOW_GAP_IN_DC: f64 = 2.0;
 
 /// Neighbours closer than this many D_c count as blocking each other in the deadlock rule.
-const BLOCKING_IN_DC: f64 = 3.0;
+pub(crate) const BLOCKING_IN_DC: f64 = 3.0;
 
 /// The state of one single-file section this tick (dashboard, Rerun).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -75,6 +76,8 @@ pub struct TrafficRules {
     along: crate::traffic::following::TrafficAlong,
     /// On a network: the junctions and merges (`crate::traffic::junctions`).
     pub(crate) junctions: crate::traffic::junctions::JunctionRules,
+    /// On a network: the cycles of waits found and broken (`crate::traffic::cycles`).
+    pub(crate) cycles: crate::traffic::cycles::WaitCycles,
 }
 
 impl TrafficRules {
