@@ -50,16 +50,9 @@ pub struct WaitCycles {
     seen: Vec<u8>,
     /// Scratch: the walk being followed.
     walk: Vec<usize>,
-    /// Cycles broken since the fleet began.
-    broken: u64,
 }
 
 impl WaitCycles {
-    /// How many cycles of waits were broken since the fleet began.
-    pub fn broken(&self) -> u64 {
-        self.broken
-    }
-
     /// Finds this tick's cycles of waits among the UAVs that `tracked` says fly to a goal and
     /// breaks each; keeps the back-offs under way. `refused_for` is the junction rules' waits
     /// (per UAV), `neighbours` each UAV's own neighbours. Sets `traffic.back_off` and
@@ -111,19 +104,17 @@ impl WaitCycles {
                 }
             }
             let cycle = (self.seen[k] == 1).then(|| self.walk.iter().position(|&w| w == k)).flatten();
-            if let Some(from) = cycle
-                && self.break_cycle(net, params, now, uavs, from)
-            {
-                self.broken += 1;
+            if let Some(from) = cycle {
+                self.break_cycle(net, params, now, uavs, from);
             }
             self.walk.iter().for_each(|&w| self.seen[w] = 2);
         }
     }
 
     /// Breaks the cycle `walk[from..]`: the UAV of least priority among those their predecessor
-    /// waits for in body that can step off its predecessor's way inside the network backs off.
-    /// False when none can.
-    fn break_cycle(&self, net: &Network, params: &Params, now: f64, uavs: &mut [Uav], from: usize) -> bool {
+    /// waits for in body that can step off its predecessor's way inside the network backs off (none
+    /// when none can: the cycle is tried again next tick, as the UAVs may have moved).
+    fn break_cycle(&self, net: &Network, params: &Params, now: f64, uavs: &mut [Uav], from: usize) {
         let cycle = &self.walk[from..];
         let (d_c, keep) = (params.kept_d_c(), params.kept_d_s() + KEEP_M);
         let mut candidates: Vec<(usize, usize)> = Vec::with_capacity(cycle.len());
@@ -149,10 +140,9 @@ impl WaitCycles {
                 let u = &mut uavs[victim];
                 u.traffic.back_off = Some((target, now + BACK_OFF_S));
                 u.traffic.waiting = Some(WaitReason::DeadlockBackoff);
-                return true;
+                return;
             }
         }
-        false
     }
 }
 
