@@ -2,12 +2,13 @@
 //! ways meet head-on inside a cell, where no lane keeps them apart, stop facing each other under the
 //! filter; the cycle of their waits is found and one steps aside, so both arrive, D_c apart.
 
+mod support;
+
+use fleet::Fleet;
 use fleet::traffic::WaitReason;
-use fleet::{Fleet, FleetConfig};
-use links::SimLink;
-use policies::PolicyRegistry;
 use roads::network::{Junction, Network, NetworkLayout, NetworkRoad};
-use uav::{Params, UavState, Vec2};
+use support::pd_fleet;
+use uav::{Params, Vec2};
 
 /// A square junction (side 4 m) at the origin with a straight two-way road of `length` m, 4 m
 /// wide, east and west of it, and north and south too when `crossing`.
@@ -29,19 +30,6 @@ fn junction(length: f64, crossing: bool) -> Network {
     }
     let square = Junction { name: "x".into(), polygon: vec![[-h, -h], [h, -h], [h, h], [-h, h]] };
     Network::new(NetworkLayout { roads, junctions: vec![square] }, 0.6).expect("a valid network")
-}
-
-/// A fleet of `pd` UAVs on `net`, each from its start to its goal.
-fn fleet(net: &Network, uavs: &[(Vec2, Vec2)]) -> Fleet {
-    let params = Params::default();
-    let config = FleetConfig { params, ..FleetConfig::default() };
-    let mut fleet = Fleet::new(config, net.clone(), PolicyRegistry::with_pd(params.delta));
-    for (k, &(start, goal)) in uavs.iter().enumerate() {
-        let state = UavState::at_rest(start);
-        let link = Box::new(SimLink::new(state, params.dt));
-        fleet.add(format!("u{k:02}"), "pd".into(), link, state, Some(goal));
-    }
-    fleet
 }
 
 /// What a flight showed: when each UAV arrived, the closest pair (m), whether anyone backed off, and
@@ -78,7 +66,7 @@ fn two_uavs_swapping_places_in_a_street_meet_head_on_and_pass() {
     let net = junction(16.0, false);
     for (y, offset) in [(0.0, 0.0), (0.5, 0.0), (-1.0, 0.02), (1.2, -0.03)] {
         let (a, b) = (Vec2::new(6.0, y), Vec2::new(14.0, y + offset));
-        let mut fleet = fleet(&net, &[(a, b), (b, a)]);
+        let mut fleet = pd_fleet(net.clone(), &[(a, b), (b, a)]);
         let (arrived, closest, backed, _) = fly(&mut fleet, 60.0);
         assert!(backed, "y {y}: one of them stepped aside");
         assert!(arrived.iter().all(Option::is_some), "y {y}: both arrive: {arrived:?}");
@@ -94,7 +82,7 @@ fn a_line_waiting_for_a_crossing_stream_is_a_chain_not_a_deadlock() {
     let mut uavs: Vec<(Vec2, Vec2)> =
         (0..25).map(|k| (Vec2::new(1.0, -4.0 - k as f64), Vec2::new(1.0, 28.0 - k as f64))).collect();
     uavs.extend((0..6).map(|k| (Vec2::new(8.0 + k as f64, 1.0), Vec2::new(-20.0 + k as f64, 1.0))));
-    let mut fleet = fleet(&net, &uavs);
+    let mut fleet = pd_fleet(net.clone(), &uavs);
     let (arrived, closest, backed, stall) = fly(&mut fleet, 120.0);
     assert!(arrived.iter().all(Option::is_some), "everyone arrives: {arrived:?}");
     assert!(closest >= Params::default().d_c - 1e-6, "closest pair {closest} m");
