@@ -156,6 +156,23 @@ impl JunctionRules {
     /// refused UAV of its arm is refused too and waits in line behind it.
     fn decide(&mut self, now: f64, d_c: f64, uavs: &mut [Uav]) {
         let requests = &mut self.requests;
+        // Along an arm the order is the order on it: a UAV counts as having asked no later than any
+        // UAV of its arm behind it (one that asked again after a grant it gave back, say, would
+        // otherwise be decided after those behind it, and one of them granted would stand behind it
+        // holding the zone while it is refused for that grant: a merge stuck for good).
+        requests.sort_by(|a, b| {
+            (a.zone, a.movement.entry)
+                .cmp(&(b.zone, b.movement.entry))
+                .then(b.distance.total_cmp(&a.distance))
+        });
+        let mut behind = (usize::MAX, usize::MAX, f64::INFINITY);
+        for r in requests.iter_mut() {
+            if (r.zone, r.movement.entry) != (behind.0, behind.1) {
+                behind = (r.zone, r.movement.entry, f64::INFINITY);
+            }
+            behind.2 = behind.2.min(r.since);
+            r.since = behind.2;
+        }
         requests.sort_by(|a, b| {
             (a.zone, a.since, a.movement.entry)
                 .partial_cmp(&(b.zone, b.since, b.movement.entry))
