@@ -38,7 +38,8 @@ fn junction(arms: &[&str], length: f64) -> Network {
         })
         .collect();
     let square = Junction { name: "x".into(), polygon: vec![[-h, -h], [h, -h], [h, h], [-h, h]] };
-    Network::new(NetworkLayout { roads, junctions: vec![square] }, 0.6).expect("a valid junction")
+    Network::new(NetworkLayout { roads, junctions: vec![square], regions: None }, 0.6)
+        .expect("a valid junction")
 }
 
 /// A fleet of `pd` UAVs on `net`, each from its start to its goal.
