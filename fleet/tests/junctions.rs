@@ -39,7 +39,8 @@ fn junction(arms: &[&str], length: f64) -> Network {
         })
         .collect();
     let square = Junction { name: "x".into(), polygon: vec![[-h, -h], [h, -h], [h, h], [-h, h]] };
-    Network::new(NetworkLayout { roads, junctions: vec![square] }, 0.6).expect("a valid junction")
+    Network::new(NetworkLayout { roads, junctions: vec![square], regions: None }, 0.6)
+        .expect("a valid junction")
 }
 
 /// The network's zones as the fleet finds them (the gates of its navigator, D_c as kept).
