@@ -11,10 +11,10 @@
 mod support;
 
 use serde_json::{Value, json};
-use std::collections::BTreeMap;
 use std::net::SocketAddr;
-use std::time::{Duration, Instant};
-use support::procs::{D_C, TICK_S, TOLERANCE_M, distance, free_endpoint, get, serve, uavs};
+use std::time::Duration;
+use support::procs::{get, uavs};
+use support::regions::{assert_handed_over, fly_until_arrived, ownership, serve_regions};
 
 /// The stated bound on a UAV's unowned time in a handover (docs/regions.md, Handover).
 const MAX_UNOWNED_S: f64 = 0.25;
@@ -32,104 +32,32 @@ async fn send(addr: SocketAddr, method: &str, path: &str, body: &Value) -> (u16,
     (status, serde_json::from_str(&body).unwrap_or(Value::Null))
 }
 
-/// Every UAV's ownership intervals over all regions, by UAV: `(from, to, region)`, by `from`.
-async fn ownership(regions: &[(&str, SocketAddr)]) -> BTreeMap<String, Vec<(f64, f64, String)>> {
-    let mut by_uav: BTreeMap<String, Vec<(f64, f64, String)>> = BTreeMap::new();
-    for (name, addr) in regions {
-        let doc = get(*addr, "/api/region/ownership").await;
-        for i in doc["intervals"].as_array().unwrap() {
-            let to = i["to"].as_f64().unwrap_or(f64::INFINITY);
-            let entry = (i["from"].as_f64().unwrap(), to, name.to_string());
-            by_uav.entry(i["id"].as_str().unwrap().to_string()).or_default().push(entry);
-        }
-    }
-    for intervals in by_uav.values_mut() {
-        intervals.sort_by(|a, b| a.0.total_cmp(&b.0));
-    }
-    by_uav
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_divided_network_hands_uavs_over_at_every_border_and_refuses_bad_regions() {
     let path = support::repo().join("scenarios/depot-regions.json");
     let scenario = path.to_str().unwrap();
-    let ports: Vec<String> = (0..3).map(|_| free_endpoint()).collect();
-    let (_w, west, _) = serve(&["--scenario", scenario, "--region", "west", "--zenoh-listen", &ports[0]]);
-    let (_e, east, _) = serve(&[
-        "--scenario",
-        scenario,
-        "--region",
-        "east",
-        "--zenoh-listen",
-        &ports[1],
-        "--zenoh-connect",
-        &ports[0],
-    ]);
-    let (_b, branches, _) = serve(&[
-        "--scenario",
-        scenario,
-        "--region",
-        "branches",
-        "--zenoh-listen",
-        &ports[2],
-        "--zenoh-connect",
-        &ports[0],
-        "--zenoh-connect",
-        &ports[1],
-    ]);
-    let regions = [("west", west), ("east", east), ("branches", branches)];
+    let (_servers, regions) = serve_regions(scenario, &["west", "east", "branches"]);
+    let (west, east, branches) = (regions[0].1, regions[1].1, regions[2].1);
     // Each region flies the UAVs that start in its cells: the spoke's ten, none, the branches' six.
     let mut counts = Vec::new();
-    for (_, addr) in regions {
+    for &(_, addr) in &regions {
         counts.push(uavs(&get(addr, "/api/state?scope=region").await).len());
     }
     assert_eq!(counts, [10, 0, 6]);
-    let started = Instant::now();
-    let mut arrived = Vec::new();
-    while started.elapsed() < Duration::from_secs(110) {
-        let asked = Instant::now();
-        let (sw, se, sb) = tokio::join!(
-            get(west, "/api/state?scope=region"),
-            get(east, "/api/state?scope=region"),
-            get(branches, "/api/state?scope=region")
-        );
-        let skew = asked.elapsed().as_secs_f64() + 2.0 * TICK_S;
-        let all: Vec<_> = [&sw, &se, &sb].iter().flat_map(|s| uavs(s)).collect();
-        for (i, x) in all.iter().enumerate() {
-            for y in &all[i + 1..] {
-                let d = distance(x.1, y.1);
-                let slack = TOLERANCE_M + distance(x.2, y.2) * skew;
-                // The same UAV in two snapshots (taken around its handover) is not a pair.
-                assert!(x.0 == y.0 || d >= D_C - slack, "{} and {} {d} m apart", x.0, y.0);
-            }
-        }
-        arrived = all.iter().filter(|u| u.3).map(|u| u.0.clone()).collect();
-        arrived.sort();
-        arrived.dedup();
-        if arrived.len() == FLEET {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    let arrived = fly_until_arrived(&regions, FLEET, Duration::from_secs(110)).await;
     assert_eq!(arrived.len(), FLEET, "all arrive within 110 s: {arrived:?}");
     let by_uav = ownership(&regions).await;
     assert_eq!(by_uav.len(), FLEET, "{by_uav:?}");
-    let mut longest_gap = 0.0f64;
-    for (id, intervals) in &by_uav {
-        let path: Vec<&str> = intervals.iter().map(|i| i.2.as_str()).collect();
-        let expected =
-            if id.starts_with("out") { ["west", "east", "branches"] } else { ["branches", "east", "west"] };
-        assert_eq!(path, expected, "{id}: {intervals:?}");
-        for pair in intervals.windows(2) {
-            let gap = pair[1].0 - pair[0].1;
-            assert!(gap >= 0.0, "{id}: owned by {} and {} at once ({intervals:?})", pair[0].2, pair[1].2);
-            assert!(gap <= MAX_UNOWNED_S, "{id}: unowned {gap} s between {} and {}", pair[0].2, pair[1].2);
-            longest_gap = longest_gap.max(gap);
+    let path = |id: &str| {
+        if id.starts_with("out") {
+            vec!["west", "east", "branches"]
+        } else {
+            vec!["branches", "east", "west"]
         }
-        assert!(intervals.last().unwrap().1.is_infinite(), "{id}: owned at the end");
-    }
+    };
+    let longest_gap = assert_handed_over(&by_uav, path, MAX_UNOWNED_S);
     eprintln!("{} handovers on the network, longest unowned gap {longest_gap:.3} s", 2 * FLEET);
-    for (_, addr) in regions {
+    for &(_, addr) in &regions {
         let metrics = get(addr, "/api/metrics").await;
         assert_eq!(metrics["region"]["refused"], 0, "{}", metrics["region"]);
         assert_eq!(metrics["region"]["handover"]["refused"], 0, "{}", metrics["region"]);
@@ -179,7 +107,7 @@ async fn a_divided_network_hands_uavs_over_at_every_border_and_refuses_bad_regio
     plain.as_object_mut().unwrap().remove("regions");
     let (status, body) = send(east, "PUT", "/api/road", &plain).await;
     assert_eq!((status, &body["error"]["field"]), (422, &json!("regions")), "{body}");
-    for (_, addr) in regions {
+    for &(_, addr) in &regions {
         assert_eq!(get(addr, "/api/road").await, road, "unchanged");
     }
     assert_eq!(get(west, "/api/road/geometry").await["version"], version);
@@ -189,7 +117,7 @@ async fn a_divided_network_hands_uavs_over_at_every_border_and_refuses_bad_regio
     moved["regions"][1]["roads"][0]["segments"] = json!([4, 5]);
     let (status, body) = send(branches, "PUT", "/api/road", &moved).await;
     assert_eq!(status, 200, "{body}");
-    for (_, addr) in regions {
+    for &(_, addr) in &regions {
         assert_eq!(get(addr, "/api/road").await["regions"], moved["regions"]);
     }
 }
