@@ -206,7 +206,7 @@ impl TickPipeline {
         for_each_uav(fleet.uavs, |_, uav| follow(uav));
         if fleet.config.nav == NavMode::Traffic {
             let rules = &mut fleet.traffic.junctions;
-            rules.plan(net, nav.gates, &params, now, fleet.uavs, tracked);
+            rules.plan(net, (nav.gates, &params), now, (fleet.uavs, fleet.foreign), tracked);
             let waits = (&self.neighbours.lists, rules.waits_for());
             fleet.traffic.cycles.resolve(net, &params, now, fleet.uavs, waits, tracked);
         } else {
