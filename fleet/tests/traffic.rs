@@ -91,6 +91,44 @@ fn a_single_file_section_passes_both_directions_in_turn() {
     }
 }
 
+/// `n` UAVs each way through a 0.45 m wide, 5 m long single-file part between 4 m wide roads, with
+/// waiting areas 22 m long (60 UAVs each way fit in them): each side's goals are the other's starts.
+fn single_file_swap(n: usize) -> ValidScenario {
+    let layout = RoadLayout::from_centerline(
+        &[[-28.0, 0.0], [-6.0, 0.0], [-2.5, 0.0], [2.5, 0.0], [6.0, 0.0], [28.0, 0.0]],
+        &[4.0, 4.0, 0.45, 0.45, 4.0, 4.0],
+    );
+    let place = |i: usize| (27.0 - 1.2 * (i / 4) as f64, -1.2 + 0.8 * (i % 4) as f64);
+    let mut uavs = Vec::new();
+    for i in 0..n {
+        let (x, y) = place(i);
+        uavs.push(uav(&format!("w{i}"), [-x, y], [x, y]));
+        uavs.push(uav(&format!("e{i}"), [x, y], [-x, y]));
+    }
+    let params = Params { t_max: 900.0, ..Params::default() };
+    Scenario::on_road(format!("single-file-{n}"), params, layout.segments, uavs).validate().unwrap()
+}
+
+#[test]
+fn the_longest_wait_at_a_single_file_part_does_not_grow_with_the_fleet() {
+    // The zone closes a side's phase once the other side's head has waited MAX_WAIT_S in it, so a
+    // head waits at most that plus two crossings (the phase it began waiting in drains, the other's
+    // runs and drains). A head hovering at its hold point swayed past it, counted as pushed past and
+    // was admitted in a closed phase: each side's whole queue went in at once (60 each way: the
+    // head waited 209.3 s against 100.6 s with 30 each way).
+    // A crossing from hold point to hold point: about 14 m at the part's 0.87 m/s limit, speeding up
+    // and slowing down in the funnels (about 21 s measured).
+    let crossing = 25.0;
+    let mut waits = Vec::new();
+    for n in [30, 60] {
+        let m = fly(&single_file_swap(n), NavMode::Traffic, "pd");
+        assert!(m.safe && m.all_arrived, "{n} each way: {m:#?}");
+        assert!(m.max_wait_s <= fleet::zones::MAX_WAIT_S + 2.0 * crossing, "{n} each way: {m:#?}");
+        waits.push(m.max_wait_s);
+    }
+    assert!(waits[1] <= waits[0] + 10.0, "30 and 60 each way: longest waits {waits:?} s");
+}
+
 #[test]
 fn an_admitted_uav_overtaken_in_the_queue_hands_its_grant_to_the_head() {
     // `bottleneck` seeds 34 and 197 with `rl`: a UAV admitted to the section was overtaken by others

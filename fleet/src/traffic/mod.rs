@@ -36,6 +36,12 @@ pub const DEADLOCK_AFTER_S: f64 = 3.0;
 /// How long (s) a back-off lasts.
 pub const BACK_OFF_S: f64 = 3.0;
 
+/// How far (m) past its hold point a UAV must be to count as pushed past it (admitted at once if its
+/// side is open, even when the phase admits no more): one hovering at its hold point sways a few
+/// centimetres past it, and counted as pushed it was admitted past the maximum wait, so a side's
+/// whole queue went in while the other side waited (60 UAVs each way: the head waited 209 s).
+pub const PUSHED_PAST_HOLD_M: f64 = 0.3;
+
 /// Gap (in D_c) a UAV admitted to a zone keeps behind the one ahead of it on the way in.
 pub const FOLLOW_GAP_IN_DC: f64 = 2.0;
 
@@ -211,8 +217,10 @@ impl TrafficRules {
             };
             let since = *u.traffic.waiting_since.get_or_insert(now);
             let z = self.sections[zone];
-            let past_hold =
-                position.is_some_and(|p| if entry == 0 { p.s > z.hold_before } else { p.s < z.hold_after });
+            let pushed = PUSHED_PAST_HOLD_M;
+            let past_hold = position.is_some_and(|p| {
+                if entry == 0 { p.s > z.hold_before + pushed } else { p.s < z.hold_after - pushed }
+            });
             let order = position.map_or(f64::INFINITY, |p| queue_order(&p));
             let inside = position.is_some_and(|p| (z.start..=z.end).contains(&p.s));
             self.requests.push(Request { zone, entry, since, order, rank: k, who: k, past_hold, inside });

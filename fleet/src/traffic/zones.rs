@@ -1,24 +1,21 @@
 //! Reservations of conflict zones. A zone is a part of the road that UAVs from different entries may
-//! not use at the same time: today a single-file section (entries: its two ends), later a junction
-//! or a merge (entries: its arms). The ground station sees every UAV, so it admits UAVs from one
-//! entry at a time: the zone opens to the entry whose first UAV has waited longest, admits from it
-//! until another entry has waited [`MAX_WAIT_S`] during this phase or [`MAX_BATCH`] went in while
-//! others wait, and
-//! once everyone admitted has left, opens to the longest waiting of the other entries (round robin:
-//! with equal waits, the entry that just had its phase would otherwise win every tie, and a side
-//! whose UAVs waited as long as a crowd on the other side never got in), or to the same entry when
-//! nobody else waits. Invariants: UAVs from two entries never hold grants of one zone at once, and
-//! a waiting UAV is admitted after at most one batch from each other entry (no starvation), given
-//! that admitted UAVs leave. Admitted UAVs go in one after another: the next is admitted once the
-//! previous one is clear of the entry.
-
-/// Most UAVs admitted from one entry in a row while another entry has UAVs waiting (a crossing of
-/// a long section costs up to 30 s; batches of 6 and waits of 20 s alternated so often that groups
-/// of 30 each way could not swap ends in time: `headon` 278 -> 283 of 300 with `pd`, BENCHMARKS.md).
-pub const MAX_BATCH: u32 = 20;
+//! not use at the same time: a single-file section (entries: its two ends). The ground station sees
+//! every UAV, so it admits UAVs from one entry at a time: the zone opens to the entry whose first
+//! UAV has waited longest, admits from it until another entry has waited [`MAX_WAIT_S`] during this
+//! phase, and once everyone admitted has left, opens to the longest waiting of the other entries
+//! (round robin: with equal waits, the entry that just had its phase would otherwise win every tie,
+//! and a side whose UAVs waited as long as a crowd on the other side never got in), or to the same
+//! entry when nobody else waits. Invariants: UAVs from two entries never hold grants of one zone at
+//! once, and a UAV waiting at the head of its entry is admitted within [`MAX_WAIT_S`] plus the time
+//! the zone takes to empty twice (the phase it began waiting in, and the other entry's next one),
+//! at any number of UAVs waiting, given that admitted UAVs leave. Admitted UAVs go in one after
+//! another: the next is admitted once the previous one is clear of the entry.
 
 /// Longest wait (s) at one entry, counted from the start of the current phase, before the zone
-/// stops admitting from the others.
+/// stops admitting from the others. Only time closes a phase: a cap on the UAVs admitted (20 until
+/// now) closed phases early where a crossing is quick and switching costs little, but split a side
+/// whose last few then waited a whole turn of the other side behind two crossings of a long section
+/// (`headon` seed 160: 4 UAVs 113 s).
 pub const MAX_WAIT_S: f64 = 60.0;
 
 /// Longest time (s) a fleet leaves a free zone to another region's UAVs waiting at another entry
@@ -212,10 +209,7 @@ impl Reservations {
             .max_by(f64::total_cmp);
         // A phase admits at least one UAV: closing a fresh one would hand the zone to nobody when
         // both sides have waited MAX_WAIT_S (each would close the other's phase at once).
-        let others_wait = oldest_other.is_some() || theirs(open);
-        if z.admitted > 0
-            && (oldest_other.is_some_and(|w| w >= MAX_WAIT_S) || (others_wait && z.admitted >= MAX_BATCH))
-        {
+        if z.admitted > 0 && oldest_other.is_some_and(|w| w >= MAX_WAIT_S) {
             z.closed = true;
         }
         for r in requests.iter().filter(|r| r.entry == open && r.inside) {
@@ -240,9 +234,6 @@ impl Reservations {
             z.held += 1;
             z.entering += 1;
             grant(r);
-            if others_wait && z.admitted >= MAX_BATCH {
-                z.closed = true;
-            }
         }
     }
 }
@@ -328,18 +319,23 @@ mod tests {
     }
 
     #[test]
-    fn one_direction_at_a_time_in_batches_and_nobody_starves() {
-        // 2·MAX_BATCH UAVs keep arriving at entry 0, one per tick; 3 wait at entry 1 from tick 2.
-        let n = 2 * MAX_BATCH as usize;
+    fn one_direction_at_a_time_and_nobody_waits_longer_than_the_maximum() {
+        // UAVs keep arriving at entry 0, one per tick, for three maximum waits; 3 wait at entry 1
+        // from tick 2. Each admitted UAV leaves 4 ticks after its grant.
+        let (n, stay) = (3 * MAX_WAIT_S as usize, 4);
         let mut arrivals: Vec<(usize, usize)> = (0..n).map(|t| (t, 0)).collect();
         arrivals.extend([(2, 1), (2, 1), (3, 1)]);
-        let (granted, entries) = simulate(&arrivals, 4, 400);
+        let (granted, entries) = simulate(&arrivals, stay, 1000);
         assert_eq!(entries, 1, "two entries held grants at once");
         assert!(granted.iter().all(Option::is_some), "{granted:?}");
-        // Entry 1 went in after at most one batch from entry 0.
+        // Entry 1's head went in within the maximum wait and the time the zone took to empty.
         let first_from_1 = granted[n..].iter().flatten().min().copied().unwrap();
-        let before = granted[..n].iter().flatten().filter(|&&g| g < first_from_1).count();
-        assert!(before <= MAX_BATCH as usize, "{before} went first");
+        assert!(first_from_1 <= 2 + MAX_WAIT_S as usize + stay + 1, "entry 1 went in at {first_from_1}");
+        // And so did entry 0's head left waiting by entry 1's phase.
+        let last_of_phase = granted[..n].iter().flatten().filter(|&&g| g < first_from_1).max().copied();
+        let next_from_0 = granted[..n].iter().flatten().filter(|&&g| g > first_from_1).min().copied();
+        let (closed, reopened) = (last_of_phase.unwrap(), next_from_0.unwrap());
+        assert!(reopened - closed <= stay + MAX_WAIT_S as usize + stay + 2, "{closed} -> {reopened}");
     }
 
     #[test]
@@ -347,25 +343,26 @@ mod tests {
         // A crowd at entry 0 and two UAVs at entry 1, all waiting since t = 0; entry 0's UAVs rank
         // first and win every tie of waiting times. Each crossing takes longer than MAX_WAIT_S, so
         // entry 1 has waited that long whenever the zone comes free.
-        let n = MAX_BATCH as usize + 10;
+        let n = 2 * MAX_WAIT_S as usize;
         let mut arrivals: Vec<(usize, usize)> = (0..n).map(|_| (0, 0)).collect();
         arrivals.extend([(0, 1), (0, 1)]);
         let stay = MAX_WAIT_S as usize + 10;
-        let (granted, entries) = simulate(&arrivals, stay, 4 * stay * MAX_BATCH as usize);
+        let (granted, entries) = simulate(&arrivals, stay, 20 * stay);
         assert_eq!(entries, 1, "two entries held grants at once");
         let first_from_1 = granted[n..].iter().flatten().min().copied().expect("entry 1 got in");
         let before = granted[..n].iter().flatten().filter(|&&g| g < first_from_1).count();
-        assert!(before <= MAX_BATCH as usize, "{before} went first");
+        assert!(before <= MAX_WAIT_S as usize + 1, "{before} went first");
+        assert!(first_from_1 <= MAX_WAIT_S as usize + stay + 1, "entry 1 went in at {first_from_1}");
         assert!(granted.iter().all(Option::is_some), "{granted:?}");
     }
 
     #[test]
-    fn crowds_that_both_waited_long_still_go_in_batches() {
-        // MAX_BATCH UAVs waiting at each entry since t = 0, each clear of its entry 8 ticks after its
-        // grant and through after 70 (longer than MAX_WAIT_S): every phase after the first used to
-        // close after one UAV (the other side's wait counted from t = 0), one UAV per crossing. Now
-        // each phase admits for MAX_WAIT_S of its own: all cross in a few phases.
-        let n = MAX_BATCH as usize;
+    fn crowds_that_both_waited_long_still_go_in_turns_of_the_maximum_wait() {
+        // 20 UAVs waiting at each entry since t = 0, each clear of its entry 8 ticks after its grant
+        // and through after 70 (longer than MAX_WAIT_S): every phase after the first used to close
+        // after one UAV (the other side's wait counted from t = 0), one UAV per crossing. Now each
+        // phase admits for MAX_WAIT_S of its own (8 UAVs): all cross in a few phases.
+        let n = 20;
         let arrivals: Vec<(usize, usize)> = (0..2 * n).map(|k| (0, k / n)).collect();
         let (granted, entries) = simulate_clearing(&arrivals, 8, 70, 2000);
         assert_eq!(entries, 1, "two entries held grants at once");
