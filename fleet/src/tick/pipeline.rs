@@ -185,8 +185,17 @@ impl TickPipeline {
         };
         for_each_uav(fleet.uavs, |_, uav| follow(uav));
         if fleet.config.nav == NavMode::Traffic {
+            // Congestion-aware route choice (`crate::traffic::congestion`) before the junctions are
+            // asked for the movements of the ways chosen, and what they did observed after.
+            let reroute = fleet.config.reroute_margin_s;
+            if let Some(margin) = reroute {
+                fleet.traffic.congestion.choose(&nav, margin, (now, params.dt), fleet.uavs, tracked);
+            }
             let rules = &mut fleet.traffic.junctions;
             rules.plan(net, nav.gates, &params, now, fleet.uavs, tracked);
+            if reroute.is_some() {
+                fleet.traffic.congestion.observe(net, params.dt, fleet.uavs);
+            }
         } else {
             fleet.uavs.iter_mut().for_each(|u| u.traffic.hold = None);
         }

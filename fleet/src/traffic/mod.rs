@@ -7,6 +7,7 @@
 //!   with priority (stalled longer, then the smaller id) backs off for [`BACK_OFF_S`] to the far
 //!   right of its lane, or, in a single-file part, back to the nearest place where two fit.
 
+pub mod congestion;
 pub mod following;
 pub mod junctions;
 pub mod passing;
@@ -15,7 +16,7 @@ pub mod speed;
 pub(crate) mod yielding;
 pub mod zones;
 
-pub use crate::member::{UavTraffic, WaitReason};
+pub use crate::member::{RouteChoice, UavTraffic, WaitReason};
 
 use crate::member::Uav;
 use crate::ragged::Ragged;
@@ -75,6 +76,9 @@ pub struct TrafficRules {
     along: crate::traffic::following::TrafficAlong,
     /// On a network: the junctions and merges (`crate::traffic::junctions`).
     pub(crate) junctions: crate::traffic::junctions::JunctionRules,
+    /// On a network: the queues at the conflict zones and the route choice they drive
+    /// (`crate::traffic::congestion`).
+    pub(crate) congestion: crate::traffic::congestion::CongestionCosts,
 }
 
 impl TrafficRules {
