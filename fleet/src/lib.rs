@@ -17,7 +17,7 @@ mod scenario;
 mod tick;
 pub mod traffic;
 
-pub use runs::{city, families, paths, stress, trunk};
+pub use runs::{city, families, paths, split, stress, trunk};
 pub use traffic::{following, passing, sections, speed, zones};
 
 pub use condition::Condition;

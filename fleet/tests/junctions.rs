@@ -3,14 +3,15 @@
 //! no longer than the maximum behind a stream of any length, and a merge zips in the order the UAVs
 //! came. Each flight is checked tick by tick against the zones' conflicts as `roads` computes them.
 
+mod support;
+
+use fleet::Fleet;
 use fleet::traffic::WaitReason;
 use fleet::traffic::junctions::JUNCTION_MAX_WAIT_S;
-use fleet::{Fleet, FleetConfig};
-use links::SimLink;
-use policies::PolicyRegistry;
 use roads::NetworkNavigator;
 use roads::network::{Conflict, ConflictZone, Junction, Network, NetworkLayout, NetworkRoad};
-use uav::{Params, UavState, Vec2};
+use support::pd_fleet;
+use uav::{Params, Vec2};
 
 /// Half the width of the roads and of the square junction at the origin (m).
 const HALF: f64 = 2.0;
@@ -39,19 +40,6 @@ fn junction(arms: &[&str], length: f64) -> Network {
         .collect();
     let square = Junction { name: "x".into(), polygon: vec![[-h, -h], [h, -h], [h, h], [-h, h]] };
     Network::new(NetworkLayout { roads, junctions: vec![square] }, 0.6).expect("a valid junction")
-}
-
-/// A fleet of `pd` UAVs on `net`, each from its start to its goal.
-fn fleet(net: &Network, uavs: &[(Vec2, Vec2)]) -> Fleet {
-    let params = Params::default();
-    let config = FleetConfig { params, ..FleetConfig::default() };
-    let mut fleet = Fleet::new(config, net.clone(), PolicyRegistry::with_pd(params.delta));
-    for (k, &(start, goal)) in uavs.iter().enumerate() {
-        let state = UavState::at_rest(start);
-        let link = Box::new(SimLink::new(state, params.dt));
-        fleet.add(format!("u{k:02}"), "pd".into(), link, state, Some(goal));
-    }
-    fleet
 }
 
 /// The network's zones as the fleet finds them (the gates of its navigator, D_c as kept).
@@ -162,7 +150,7 @@ fn crossing_movements_take_turns_while_opposite_straights_pass_together() {
         (Vec2::new(-12.0, -1.0), Vec2::new(12.0, -1.0)),
         (Vec2::new(1.0, -12.0), Vec2::new(1.0, 12.0)),
     ];
-    let mut fleet = fleet(&net, &uavs);
+    let mut fleet = pd_fleet(net.clone(), &uavs);
     let f = fly(&mut fleet, &net, 60.0);
     assert!(f.arrived.iter().all(Option::is_some), "everyone arrives: {f:?}");
     assert_safe(&f);
@@ -183,7 +171,7 @@ fn a_crossing_movement_waits_no_longer_than_the_maximum_behind_a_stream_of_thirt
         })
         .collect();
     uavs.push((Vec2::new(1.0, -7.0), Vec2::new(1.0, 10.0)));
-    let mut fleet = fleet(&net, &uavs);
+    let mut fleet = pd_fleet(net.clone(), &uavs);
     let f = fly(&mut fleet, &net, 150.0);
     assert!(f.arrived.iter().all(Option::is_some), "everyone arrives: {f:?}");
     assert_safe(&f);
@@ -212,7 +200,7 @@ fn a_merge_zips_in_the_order_the_uavs_came() {
         uavs.push((Vec2::new(x, 1.0), Vec2::new(-1.0, -30.0 + 3.0 * k as f64)));
         uavs.push((Vec2::new(-x - 0.7, -1.0), Vec2::new(-1.0, -28.5 + 3.0 * k as f64)));
     }
-    let mut fleet = fleet(&net, &uavs);
+    let mut fleet = pd_fleet(net.clone(), &uavs);
     let f = fly(&mut fleet, &net, 120.0);
     assert!(f.arrived.iter().all(Option::is_some), "everyone arrives: {f:?}");
     assert_safe(&f);

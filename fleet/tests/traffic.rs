@@ -1,6 +1,7 @@
 //! Liveness with the traffic rules: stalls are measured, tight bends no longer trap UAVs, and a
 //! single-file section lets both directions through in turn.
 
+use fleet::zones::{Request, Reservations};
 use fleet::{FleetConfig, RunMetrics, RunOptions, Scenario, ScenarioUav, ValidScenario, run_scenario};
 use policies::PolicyRegistry;
 use roads::{NavMode, RoadLayout};
@@ -217,4 +218,77 @@ fn crowded_bends_and_a_uav_starting_inside_a_reserved_section_arrive() {
         let m = fly(&s, NavMode::Traffic, policy);
         assert!(m.safe && m.all_arrived, "seed {seed} {policy}: {m:#?}");
     }
+}
+
+/// A single-file section that spans a border: the other region's UAVs inside, from one entry, keep
+/// this fleet's UAVs at the other entry waiting until they are out (`fleet::traffic::foreign`).
+#[test]
+fn another_regions_uavs_inside_keep_the_other_entry_waiting_until_they_are_out() {
+    let request = |entry: usize, since: f64, who: usize| Request {
+        zone: 0,
+        entry,
+        since,
+        order: since,
+        rank: who,
+        who,
+        past_hold: false,
+        inside: false,
+    };
+    let mut zone = Reservations::new(1);
+    let mut granted = Vec::new();
+    // Entry 0 waits first; another region's UAVs come in from entry 1: the phase is theirs.
+    for t in 0..3 {
+        zone.begin();
+        zone.foreign_inside(0, 1);
+        let mut requests = vec![request(0, 0.0, 0)];
+        if granted.is_empty() {
+            requests.push(request(1, 1.0, 1));
+        } else {
+            zone.held(0, 1, true);
+        }
+        zone.decide(&mut requests, t as f64, |r| granted.push((t, r.who)));
+    }
+    assert_eq!(granted, vec![(0, 1)], "only their entry, one at a time");
+    assert_eq!(zone.open(0), Some(1));
+    // This fleet's UAV from entry 1 is in; theirs now come in from entry 0 too: no more admissions.
+    zone.begin();
+    zone.held(0, 1, false);
+    zone.foreign_inside(0, 0);
+    zone.decide(&mut [request(1, 2.0, 2)], 3.0, |r| granted.push((3, r.who)));
+    assert_eq!(granted.len(), 1, "{granted:?}");
+    // Everyone is out: entry 0 goes in.
+    zone.begin();
+    zone.decide(&mut [request(0, 0.0, 0), request(1, 2.0, 2)], 4.0, |r| granted.push((4, r.who)));
+    assert_eq!(granted[1..], [(4, 0)]);
+}
+
+/// Two regions' fleets each see the other's UAVs waiting at the other end of a free single-file
+/// section: by the same rule (the entry of the last phase waits, entry 0 first after none) one
+/// opens it and the other leaves it to them, for at most `FOREIGN_TURN_WAIT_S` if nobody comes in.
+#[test]
+fn two_regions_waiting_at_both_ends_of_a_free_section_take_turns() {
+    let waiting = |entry: usize| Request {
+        zone: 0,
+        entry,
+        since: 0.0,
+        order: 0.0,
+        rank: 0,
+        who: 0,
+        past_hold: false,
+        inside: false,
+    };
+    // Each fleet's decision at time `now`, its UAV waiting at `mine`, the other's at the other end.
+    let decide = |zone: &mut Reservations, mine: usize, now: f64| {
+        zone.begin();
+        zone.foreign_waiting(0, 1 - mine);
+        let mut granted = false;
+        zone.decide(&mut [waiting(mine)], now, |_| granted = true);
+        granted
+    };
+    let (mut at_0, mut at_1) = (Reservations::new(1), Reservations::new(1));
+    assert!(decide(&mut at_0, 0, 0.0), "entry 0 goes first");
+    assert!(!decide(&mut at_1, 1, 0.0), "entry 1 leaves it to the other region");
+    // Nobody from entry 0 comes in: entry 1 goes after FOREIGN_TURN_WAIT_S.
+    assert!(!decide(&mut at_1, 1, fleet::zones::FOREIGN_TURN_WAIT_S - 0.1));
+    assert!(decide(&mut at_1, 1, fleet::zones::FOREIGN_TURN_WAIT_S));
 }

@@ -1,7 +1,7 @@
 //! Headless runs and what they measure: a scenario flown to its end ([`run`]), the random stress
 //! scenarios ([`stress`], [`families`]), the trunk road and the city grid of `bench scale` ([`trunk`],
-//! [`city`]), the paths `run --plot` draws ([`paths`]), and the metrics and margins of a run
-//! ([`metrics`], [`margins`], [`histogram`]).
+//! [`city`]), the paths `run --plot` draws ([`paths`]), the metrics and margins of a run
+//! ([`metrics`], [`margins`], [`histogram`]), and a road flown by one fleet per region ([`split`]).
 
 pub mod city;
 pub mod families;
@@ -11,5 +11,6 @@ pub(crate) mod metrics;
 pub(crate) mod networks;
 pub mod paths;
 pub(crate) mod run;
+pub mod split;
 pub mod stress;
 pub mod trunk;

@@ -12,7 +12,9 @@ use crate::tick::filtering::FilterStage;
 use crate::tick::neighbours::NeighbourSearch;
 use crate::tick::rows::{NeighbourLists, RowBuilder};
 use crate::tick::{StageTimes, parallel};
-use crate::traffic::passing::pass_point;
+use crate::traffic::cycles::back_off_target;
+use crate::traffic::foreign::{ForeignNear, ForeignViews};
+use crate::traffic::passing::{FOREIGN_PASS, pass_point, pass_point_with};
 use crate::traffic::speed::{crowd_limit, govern, keep_distance};
 use crate::traffic::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::LinkPhase;
@@ -35,6 +37,9 @@ pub(crate) struct TickPipeline {
     pub neighbours: NeighbourSearch,
     /// Where each foreign UAV may be this tick ([`crate::member::ForeignUav::disk`]).
     foreign_disks: Vec<ReachDisk>,
+    /// What the traffic rules know of each foreign UAV this tick (on a road with `traffic`
+    /// navigation; empty otherwise).
+    foreign_views: ForeignViews,
     /// Each UAV's tracked segment this tick.
     segments: Vec<usize>,
     /// Every UAV's rows this tick.
@@ -68,6 +73,7 @@ impl TickPipeline {
         self.stages.neighbours_us = lap();
         match fleet.road {
             Airspace::Road(road) => {
+                self.view_foreign(road, fleet);
                 self.plan_targets(road, fleet);
                 self.make_way(fleet);
                 if fleet.config.nav == NavMode::Traffic {
@@ -75,6 +81,7 @@ impl TickPipeline {
                 }
             }
             Airspace::Network(net) => {
+                self.foreign_views.clear();
                 self.plan_ways(net, fleet);
                 self.make_way(fleet);
             }
@@ -125,6 +132,17 @@ impl TickPipeline {
         self.neighbours.update_with_foreign(&self.positions, fleet.uavs.len(), reach);
     }
 
+    /// What the traffic rules know of each foreign UAV ([`crate::traffic::foreign`]), with `traffic`
+    /// navigation: one segment lookup each.
+    fn view_foreign(&mut self, road: &Road, fleet: &TickState<'_>) {
+        if fleet.config.nav != NavMode::Traffic {
+            self.foreign_views.clear();
+            return;
+        }
+        let now = fleet.tick as f64 * fleet.config.params.dt;
+        self.foreign_views.update(road, fleet.foreign, &self.foreign_disks, now);
+    }
+
     /// Locates every UAV on its route, tracks its progress, applies the traffic rules (`traffic`
     /// navigation) and chooses its temporary target.
     fn plan_targets(&mut self, road: &Road, fleet: &mut TickState<'_>) {
@@ -150,7 +168,9 @@ impl TickPipeline {
             segments.extend(fleet.uavs.iter_mut().map(locate));
         }
         if fleet.config.nav == NavMode::Traffic {
-            fleet.traffic.plan(&nav, now, fleet.uavs, &self.neighbours.lists);
+            let foreign =
+                ForeignNear::new(&self.neighbours.foreign, &self.foreign_views.views, fleet.foreign);
+            fleet.traffic.plan(&nav, now, fleet.uavs, &self.neighbours.lists, foreign);
         }
         let choose = |(uav, &segment): (&mut Uav, &usize)| {
             let restriction = uav.traffic.restriction;
@@ -196,17 +216,24 @@ impl TickPipeline {
             if reroute.is_some() {
                 fleet.traffic.congestion.observe(net, params.dt, fleet.uavs);
             }
+            let waits = (&self.neighbours.lists, rules.waits_for());
+            fleet.traffic.cycles.resolve(net, &params, now, fleet.uavs, waits, tracked);
         } else {
             fleet.uavs.iter_mut().for_each(|u| u.traffic.hold = None);
         }
         for_each_uav(fleet.uavs, |_, uav| {
             uav.last.target = nav.choose(&mut uav.nav, uav.state.p, uav.traffic.hold);
+            if let Some(aside) = back_off_target(uav) {
+                uav.last.target = aside;
+            }
         });
     }
 
-    /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::traffic::yielding`]).
+    /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::traffic::yielding`]);
+    /// a moving foreign UAV's way is its velocity.
     fn make_way(&mut self, fleet: &mut TickState<'_>) {
         let d_c = fleet.config.params.kept_d_c();
+        let foreign = ForeignNear::new(&self.neighbours.foreign, &self.foreign_views.views, fleet.foreign);
         for k in 0..fleet.uavs.len() {
             let me = &fleet.uavs[k];
             let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { continue };
@@ -214,15 +241,20 @@ impl TickPipeline {
                 (u.nav.goal().is_some() && !u.nav.arrived)
                     .then_some(Flying { p: u.state.p, target: u.last.target })
             });
+            let foreign_flying =
+                foreign.of(k).filter(|f| f.moving()).map(|f| Flying { p: f.p, target: f.p + f.v });
+            let flying = flying.chain(foreign_flying);
             fleet.uavs[k].last.target = make_way(me.state.p, goal, flying, d_c);
         }
     }
 
-    /// UAVs flying to their goal aim beside an arrived UAV that blocks their way ([`crate::traffic::passing`]).
+    /// UAVs flying to their goal aim beside an arrived UAV that blocks their way, or a parked foreign
+    /// one ([`crate::traffic::passing`]).
     fn pass_parked(&mut self, road: &Road, fleet: &mut TickState<'_>) {
         let params = fleet.config.params;
         let nav = Navigator::new(road, fleet.config.nav, &params);
         let need = nav.clearance_at(0.0);
+        let foreign = ForeignNear::new(&self.neighbours.foreign, &self.foreign_views.views, fleet.foreign);
         // One wall query per arrived UAV, not one per flying neighbour of it.
         let stuck = &mut self.cannot_step_aside;
         stuck.clear();
@@ -243,7 +275,11 @@ impl TickPipeline {
             };
             let parked =
                 self.neighbours.lists[k].iter().filter(|&&d| stuck[d]).map(|&d| fleet.uavs[d].state.p);
-            if let Some(c) = pass_point(me.state.p, me.last.target, parked, params.kept_d_c(), clear) {
+            let (d_c, foreign_parked) = (params.kept_d_c(), foreign.of(k).filter(|f| f.parked).map(|f| f.p));
+            let c = pass_point(me.state.p, me.last.target, parked, d_c, clear).or_else(|| {
+                pass_point_with(me.state.p, me.last.target, foreign_parked, d_c, FOREIGN_PASS, clear)
+            });
+            if let Some(c) = c {
                 fleet.uavs[k].last.target = c;
             }
         }
@@ -335,15 +371,15 @@ impl TickPipeline {
     }
 
     /// The traffic rules' speed limit (narrower road, slower flight; slower still in dense traffic)
-    /// and the distance kept to every neighbour (`fleet::speed`), applied to each flying UAV's
-    /// nominal input. Per UAV, reading its
-    /// neighbours' states from plain copies (a link is not shared across threads): in parallel for
-    /// large fleets, with the same result on any number of threads.
+    /// and the distance kept to every neighbour, own or foreign (`fleet::speed`), applied to each
+    /// flying UAV's nominal input. Per UAV, reading its neighbours' states from plain copies (a link
+    /// is not shared across threads): in parallel for large fleets, the same on any number of threads.
     fn limit_speeds(&mut self, fleet: &mut TickState<'_>) {
         let params = &fleet.config.params;
         let (d_c, delta, dt) = (params.kept_d_c(), params.delta, params.dt);
         let (positions, velocities) = (&self.positions, &self.velocities);
         let (traffic, lists) = (&fleet.traffic, &self.neighbours.lists);
+        let foreign = ForeignNear::new(&self.neighbours.foreign, &self.foreign_views.views, fleet.foreign);
         let limit = |(k, me): (usize, &mut Uav)| {
             let Some(pos) = me.nav.position.filter(|_| !me.nav.arrived && me.condition.flying()) else {
                 return;
@@ -351,11 +387,16 @@ impl TickPipeline {
             let (p, v) = (me.state.p, me.state.v);
             let mut limit = traffic.speed_limit(pos.s, pos.direction());
             if me.traffic.in_traffic {
-                limit = crowd_limit(limit, p, lists[k].iter().map(|&d| positions[d]));
+                let foreign_positions = foreign.of(k).map(|f| f.p);
+                limit =
+                    crowd_limit(limit, p, lists[k].iter().map(|&d| positions[d]).chain(foreign_positions));
             }
             let mut u = govern(v, me.last.u_ref, limit, delta, dt);
             for &d in &lists[k] {
                 u = keep_distance(v, u, positions[d] - p, velocities[d], d_c, delta, dt);
+            }
+            for f in foreign.of(k) {
+                u = keep_distance(v, u, f.p - p, f.v, d_c, delta, dt);
             }
             me.last.u_ref = u;
         };

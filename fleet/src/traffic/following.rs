@@ -8,10 +8,17 @@
 //! Invariant: "ahead" is a strict total order per direction (arc length along the direction of
 //! travel, then the smaller index first), so following never forms a cycle: the first UAV of
 //! every column follows nobody, and following alone cannot deadlock.
+//!
+//! Foreign UAVs moving along the road ([`crate::traffic::foreign`]) count as well: one ahead in the
+//! lane is followed (only when strictly ahead: the other region's rules follow ours the same way),
+//! and one coming the other way is oncoming traffic.
 
 use crate::member::Uav;
 use crate::ragged::Ragged;
 use crate::traffic::FOLLOW_GAP_IN_DC;
+#[cfg(test)]
+use crate::traffic::foreign::ForeignViews;
+use crate::traffic::foreign::{ForeignNear, ForeignView};
 use crate::traffic::speed::KEEP_MARGIN_M;
 use roads::{Navigator, RoutePosition};
 
@@ -35,35 +42,45 @@ pub const CROWD_NEIGHBOURS: usize = 3;
 pub const NARROWING: f64 = 0.8;
 
 /// Sets `traffic.restriction.follow_at` of every UAV on a route that has a UAV ahead of it in its
-/// lane (among `neighbours[k]`), when the rule applies to it: a follow gap of
-/// [`FOLLOW_GAP_IN_DC`]·D_c behind the nearest one, moved on by [`LEAD_TIME_S`] of the leader's
-/// speed, but never closer to the leader than D_c plus the margin the UAVs keep.
-pub fn follow(nav: &Navigator, uavs: &mut [Uav], neighbours: &Ragged<usize>, traffic: &mut TrafficAlong) {
+/// lane (among `neighbours[k]` and the foreign UAVs near it, `foreign`), when the rule applies to
+/// it: a follow gap of [`FOLLOW_GAP_IN_DC`]·D_c behind the nearest one, moved on by [`LEAD_TIME_S`]
+/// of the leader's speed, but never closer to the leader than D_c plus the margin the UAVs keep.
+pub fn follow(
+    nav: &Navigator,
+    uavs: &mut [Uav],
+    neighbours: &Ragged<usize>,
+    foreign: ForeignNear<'_>,
+    traffic: &mut TrafficAlong,
+) {
     let gap = FOLLOW_GAP_IN_DC * nav.d_c;
     let keep = nav.d_c + KEEP_MARGIN_M;
-    traffic.update(uavs);
+    traffic.update(uavs, foreign.all());
     for k in 0..uavs.len() {
         uavs[k].traffic.restriction.follow_at = None;
         uavs[k].traffic.restriction.keep_lane = false;
         uavs[k].traffic.in_traffic = false;
         let Some(me) = uavs[k].traffic.route else { continue };
-        let Some(oncoming) = applies(nav, uavs, k, &me, &neighbours[k], traffic) else {
+        let Some(oncoming) = applies(nav, uavs, k, &me, (&neighbours[k], foreign), traffic) else {
             continue;
         };
         uavs[k].traffic.restriction.keep_lane = oncoming;
         uavs[k].traffic.in_traffic = true;
         let direction = me.direction();
-        let leader = neighbours[k]
-            .iter()
-            .filter_map(|&d| {
-                let other = uavs[d].traffic.route?;
-                let ahead = direction * (other.s - me.s);
-                (leads(nav, &me, &other) && (ahead > 0.0 || (ahead == 0.0 && d < k))).then_some((ahead, d))
-            })
-            .min_by(|a, b| a.0.total_cmp(&b.0));
-        uavs[k].traffic.restriction.follow_at = leader.map(|(ahead, d)| {
+        let own = neighbours[k].iter().filter_map(|&d| {
+            let other = uavs[d].traffic.route?;
+            let ahead = direction * (other.s - me.s);
+            (leads(nav, &me, &other) && (ahead > 0.0 || (ahead == 0.0 && d < k)))
+                .then_some((ahead, uavs[d].state.v))
+        });
+        let foreign_leaders = foreign.of(k).filter_map(|f| {
+            let other = f.flying_along()?;
+            let ahead = direction * (other.s - me.s);
+            (leads(nav, &me, &other) && ahead > 0.0).then_some((ahead, f.v))
+        });
+        let leader = own.chain(foreign_leaders).min_by(|a, b| a.0.total_cmp(&b.0));
+        uavs[k].traffic.restriction.follow_at = leader.map(|(ahead, v)| {
             let tangent = nav.road.centerline().tangent_at(me.s) * direction;
-            let lead = LEAD_TIME_S * uavs[d].state.v.dot(&tangent).max(0.0);
+            let lead = LEAD_TIME_S * v.dot(&tangent).max(0.0);
             me.s + direction * (ahead - gap + lead).min(ahead - keep)
         });
     }
@@ -80,10 +97,15 @@ pub struct TrafficAlong {
 }
 
 impl TrafficAlong {
-    fn update(&mut self, uavs: &[Uav]) {
+    /// Sorts the UAVs on a route and the `foreign` ones moving along the road by direction.
+    fn update(&mut self, uavs: &[Uav], foreign: &[ForeignView]) {
         self.forward.clear();
         self.backward.clear();
-        for pos in uavs.iter().filter_map(|u| u.traffic.route) {
+        let routes = uavs
+            .iter()
+            .filter_map(|u| u.traffic.route)
+            .chain(foreign.iter().filter_map(|f| f.flying_along()));
+        for pos in routes {
             if pos.direction() > 0.0 { self.forward.push(pos.s) } else { self.backward.push(pos.s) }
         }
         self.forward.sort_unstable_by(f64::total_cmp);
@@ -105,23 +127,29 @@ impl TrafficAlong {
 /// Whether UAV k (at `me` on its route) follows at all: not within r_s of its goal (where it slows
 /// down to park among others), and only with oncoming traffic among its neighbours or within r_s
 /// ahead along the road, or with [`CROWD_NEIGHBOURS`] neighbours within [`CROWD_RADIUS_M`] where
-/// the road narrows ahead. `Some(true)` when traffic comes the other way (the UAV also keeps to its
-/// lane through bends), `None` when it does not follow.
+/// the road narrows ahead (own `neighbours` and `foreign` ones alike). `Some(true)` when traffic
+/// comes the other way (the UAV also keeps to its lane through bends), `None` when it does not
+/// follow.
 fn applies(
     nav: &Navigator,
     uavs: &[Uav],
     k: usize,
     me: &RoutePosition,
-    neighbours: &[usize],
+    (neighbours, foreign): (&[usize], ForeignNear<'_>),
     traffic: &TrafficAlong,
 ) -> Option<bool> {
     if (me.goal_s - me.s).abs() < nav.r_s {
         return None;
     }
+    let other_way = |o: Option<RoutePosition>| o.is_some_and(|o| o.direction() != me.direction());
     let oncoming = traffic.oncoming_within(me, nav.r_s)
-        || neighbours.iter().any(|&d| uavs[d].traffic.route.is_some_and(|o| o.direction() != me.direction()));
+        || neighbours.iter().any(|&d| other_way(uavs[d].traffic.route))
+        || foreign.of(k).any(|f| other_way(f.flying_along()));
     let p = uavs[k].state.p;
-    let close = || neighbours.iter().filter(|&&d| (uavs[d].state.p - p).norm() < CROWD_RADIUS_M).count();
+    let close = || {
+        let own = neighbours.iter().filter(|&&d| (uavs[d].state.p - p).norm() < CROWD_RADIUS_M).count();
+        own + foreign.of(k).filter(|f| (f.p - p).norm() < CROWD_RADIUS_M).count()
+    };
     (oncoming || (narrows_ahead(nav, me) && close() >= CROWD_NEIGHBOURS)).then_some(oncoming)
 }
 
@@ -156,6 +184,11 @@ mod tests {
 
     /// `follow_at` of each UAV (start, goal) at rest on a straight road 4 m wide along x from 0 to 40.
     fn follow_points(uavs: &[(Vec2, Vec2)]) -> Vec<Option<f64>> {
+        follow_points_with(uavs, &[])
+    }
+
+    /// [`follow_points`] with foreign UAVs (position, velocity; fresh states, moving) near every UAV.
+    fn follow_points_with(uavs: &[(Vec2, Vec2)], foreign: &[(Vec2, Vec2)]) -> Vec<Option<f64>> {
         let road = Road::new(RoadLayout::from_centerline(&[[0.0, 0.0], [40.0, 0.0]], &[4.0, 4.0])).unwrap();
         let params = Params::default();
         let config = crate::FleetConfig { params, ..crate::FleetConfig::default() };
@@ -176,7 +209,18 @@ mod tests {
         }
         let n = uavs.len();
         let neighbours: Ragged<usize> = (0..n).map(|k| (0..n).filter(|&d| d != k).collect()).collect();
-        follow(&nav, &mut fleet.uavs, &neighbours, &mut TrafficAlong::default());
+        let uavs_foreign: Vec<crate::ForeignUav> = foreign
+            .iter()
+            .map(|&(p, v)| crate::ForeignUav { id: "f".into(), state: uav::UavState { p, v }, age_s: 0.0 })
+            .collect();
+        let disks: Vec<safety::ReachDisk> =
+            uavs_foreign.iter().map(|f| safety::point_disk(f.state.p)).collect();
+        let mut views = ForeignViews::default();
+        views.update(nav.road, &uavs_foreign, &disks, 0.0);
+        let views = views.views;
+        let foreign_lists: Ragged<usize> = (0..n).map(|_| (0..views.len()).collect()).collect();
+        let near = ForeignNear::new(&foreign_lists, &views, &uavs_foreign);
+        follow(&nav, &mut fleet.uavs, &neighbours, near, &mut TrafficAlong::default());
         fleet.uavs.iter().map(|u| u.traffic.restriction.follow_at).collect()
     }
 
@@ -199,6 +243,22 @@ mod tests {
         assert!(behind(points[1], 12.0), "{points:?}");
         assert_eq!(points[2], None, "the front of the column follows nobody: {points:?}");
         assert_eq!(points[3], None, "1.2 m to the side is another lane: {points:?}");
+    }
+
+    #[test]
+    fn a_column_follows_a_foreign_leader_with_foreign_traffic_coming_the_other_way() {
+        let far = at(38.0, -1.0);
+        let leader = (at(11.0, -1.0), Vec2::new(1.0, 0.0));
+        let oncoming = (at(13.0, 1.0), Vec2::new(-1.0, 0.0));
+        let points = follow_points_with(&[(at(10.0, -1.0), far), (at(9.0, -1.0), far)], &[leader, oncoming]);
+        let keep = 0.3 + KEEP_MARGIN_M;
+        assert!(points[0].is_some_and(|s| s <= 11.0 - keep + 1e-9 && s > 10.0 - 1e-9), "{points:?}");
+        assert!(points[1].is_some_and(|s| s <= 10.0 - keep + 1e-9), "{points:?}");
+        // Hovering, the one ahead is not followed (it is passed once parked); nor one going away.
+        let hovering = (leader.0, Vec2::zeros());
+        assert_eq!(follow_points_with(&[(at(10.0, -1.0), far)], &[hovering, oncoming]), vec![None]);
+        let away = (leader.0, Vec2::new(-1.0, 0.0));
+        assert_eq!(follow_points_with(&[(at(10.0, -1.0), far)], &[away]), vec![None]);
     }
 
     #[test]

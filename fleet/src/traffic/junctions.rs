@@ -71,16 +71,19 @@ pub struct JunctionRules {
     zones: Vec<ConflictZone>,
     /// Per cell of the network, its zone.
     zone_of_cell: Vec<Option<usize>>,
-    /// Per zone, the movements granted (held) this tick.
-    held: Vec<Vec<Movement>>,
-    /// Scratch: this tick's requests; one zone's refused requests with their wait.
+    /// Per zone, the movements granted (held) this tick, with who holds each.
+    held: Vec<Vec<(Movement, usize)>>,
+    /// Scratch: this tick's requests; one zone's refused requests with their wait and who asked.
     requests: Vec<Request>,
-    refused: Vec<(Movement, f64)>,
+    refused: Vec<(Movement, f64, usize)>,
+    /// Per UAV, the UAV it waits for this tick when it was refused: a conflicting holder, the one
+    /// ahead of it in its arm's line, or an earlier request that goes first.
+    waits_for: Vec<Option<usize>>,
     /// Scratch: per UAV, whether it waits at the head of its arm's line this tick.
     heads: Vec<bool>,
-    /// Scratch: one zone's lines of refused UAVs, per arm: the arm, the last place taken and why
-    /// its head waits.
-    lines: Vec<(usize, u32, Conflict)>,
+    /// Scratch: one zone's lines of refused UAVs, per arm: the arm, the last place taken, who took
+    /// it and why its head waits.
+    lines: Vec<(usize, u32, usize, Conflict)>,
 }
 
 impl JunctionRules {
@@ -127,7 +130,7 @@ impl JunctionRules {
             if let Some((zone, movement)) = u.traffic.junction {
                 let crossing = ahead.is_some_and(|(z, m, ..)| (z, m) == (zone, movement));
                 if crossing || just_left(way, self.zones[zone].cell, p, LEAVE_IN_DC * d_c) {
-                    self.held[zone].push(movement);
+                    self.held[zone].push((movement, k));
                     continue;
                 }
                 u.traffic.junction = None;
@@ -142,6 +145,8 @@ impl JunctionRules {
         }
         self.heads.clear();
         self.heads.resize(uavs.len(), false);
+        self.waits_for.clear();
+        self.waits_for.resize(uavs.len(), None);
         self.decide(now, d_c, uavs);
         crate::member::mark_fronts(uavs, &self.heads, now);
     }
@@ -151,6 +156,23 @@ impl JunctionRules {
     /// refused UAV of its arm is refused too and waits in line behind it.
     fn decide(&mut self, now: f64, d_c: f64, uavs: &mut [Uav]) {
         let requests = &mut self.requests;
+        // Along an arm the order is the order on it: a UAV counts as having asked no later than any
+        // UAV of its arm behind it (one that asked again after a grant it gave back, say, would
+        // otherwise be decided after those behind it, and one of them granted would stand behind it
+        // holding the zone while it is refused for that grant: a merge stuck for good).
+        requests.sort_by(|a, b| {
+            (a.zone, a.movement.entry)
+                .cmp(&(b.zone, b.movement.entry))
+                .then(b.distance.total_cmp(&a.distance))
+        });
+        let mut behind = (usize::MAX, usize::MAX, f64::INFINITY);
+        for r in requests.iter_mut() {
+            if (r.zone, r.movement.entry) != (behind.0, behind.1) {
+                behind = (r.zone, r.movement.entry, f64::INFINITY);
+            }
+            behind.2 = behind.2.min(r.since);
+            r.since = behind.2;
+        }
         requests.sort_by(|a, b| {
             (a.zone, a.since, a.movement.entry)
                 .partial_cmp(&(b.zone, b.since, b.movement.entry))
@@ -166,17 +188,20 @@ impl JunctionRules {
             }
             let z = &self.zones[zone];
             let conflicts = |m: &Movement| z.conflict(*m, r.movement);
-            let by_holder = self.held[zone].iter().map(conflicts).find(|&c| c != Conflict::None);
+            let by_holder = self.held[zone].iter().find_map(|(m, who)| match conflicts(m) {
+                Conflict::None => None,
+                c => Some((c, *who)),
+            });
             // Earlier refused requests: a merging one always goes first (a zip), a crossing one once
             // it has waited the maximum.
-            let by_queue = self.refused.iter().find_map(|(m, since)| match conflicts(m) {
-                Conflict::Merge => Some(Conflict::Merge),
-                Conflict::Cross if now - since >= JUNCTION_MAX_WAIT_S => Some(Conflict::Cross),
+            let by_queue = self.refused.iter().find_map(|(m, since, who)| match conflicts(m) {
+                Conflict::Merge => Some((Conflict::Merge, *who)),
+                Conflict::Cross if now - since >= JUNCTION_MAX_WAIT_S => Some((Conflict::Cross, *who)),
                 _ => None,
             });
             // Behind a refused UAV of its arm: in line after it.
             let line = self.lines.iter_mut().find(|l| l.0 == r.movement.entry);
-            let by_line = line.as_ref().map(|l| l.2);
+            let by_line = line.as_ref().map(|l| (l.3, l.2));
             // In the zone, it cannot wait; unable to stop before it, it goes unless a holder conflicts.
             let blocked = if r.distance <= 0.0 {
                 None
@@ -186,21 +211,22 @@ impl JunctionRules {
                 by_line.or(by_holder).or(by_queue)
             };
             let u = &mut uavs[r.who];
-            let Some(conflict) = blocked else {
+            let Some((conflict, waits_for)) = blocked else {
                 u.traffic.junction = Some((zone, r.movement));
                 u.traffic.waiting_since = None;
-                self.held[zone].push(r.movement);
+                self.held[zone].push((r.movement, r.who));
                 continue;
             };
-            self.refused.push((r.movement, r.since));
+            self.refused.push((r.movement, r.since, r.who));
+            self.waits_for[r.who] = Some(waits_for);
             // Its place in the line of its arm: FOLLOW_GAP_IN_DC·D_c behind the one ahead of it.
             let place = match line {
                 Some(l) => {
-                    l.1 += 1;
+                    (l.1, l.2) = (l.1 + 1, r.who);
                     l.1
                 }
                 None => {
-                    self.lines.push((r.movement.entry, 0, conflict));
+                    self.lines.push((r.movement.entry, 0, r.who, conflict));
                     0
                 }
             };
@@ -210,6 +236,11 @@ impl JunctionRules {
             let reason = if conflict == Conflict::Merge { WaitReason::Merge } else { WaitReason::Junction };
             u.traffic.waiting = Some(reason);
         }
+    }
+
+    /// Per UAV (this tick), the UAV it waits for when a junction or merge refused it.
+    pub fn waits_for(&self) -> &[Option<usize>] {
+        &self.waits_for
     }
 
     /// The first zone on `way` ahead of a UAV at `p` within `approach` (m) of it: the zone, the

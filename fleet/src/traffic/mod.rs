@@ -5,10 +5,15 @@
 //!   zone admits its direction;
 //! - **deadlock resolution**: a UAV stalled for [`DEADLOCK_AFTER_S`] next to a stalled neighbour
 //!   with priority (stalled longer, then the smaller id) backs off for [`BACK_OFF_S`] to the far
-//!   right of its lane, or, in a single-file part, back to the nearest place where two fit.
+//!   right of its lane, or, in a single-file part, back to the nearest place where two fit
+//!   ([`crate::traffic::deadlocks`]);
+//! - foreign UAVs (other regions') are seen too ([`crate::traffic::foreign`]).
 
 pub mod congestion;
+pub mod cycles;
+pub(crate) mod deadlocks;
 pub mod following;
+pub mod foreign;
 pub mod junctions;
 pub mod passing;
 pub mod sections;
@@ -20,12 +25,11 @@ pub use crate::member::{RouteChoice, UavTraffic, WaitReason};
 
 use crate::member::Uav;
 use crate::ragged::Ragged;
+use crate::traffic::foreign::{ForeignNear, ForeignView};
 use crate::traffic::sections::{HOLD_M, Section, next_section, sections};
 use crate::traffic::speed::SpeedProfile;
-use crate::traffic::yielding::{Flying, make_way};
 use crate::traffic::zones::{Request, Reservations};
 use roads::{Navigator, Restriction, RoutePosition};
-use uav::Vec2;
 
 /// A stall this long (s) next to a stalled neighbour with priority makes a UAV back off.
 pub const DEADLOCK_AFTER_S: f64 = 3.0;
@@ -37,7 +41,7 @@ pub const BACK_OFF_S: f64 = 3.0;
 pub const FOLLOW_GAP_IN_DC: f64 = 2.0;
 
 /// Neighbours closer than this many D_c count as blocking each other in the deadlock rule.
-const BLOCKING_IN_DC: f64 = 3.0;
+pub(crate) const BLOCKING_IN_DC: f64 = 3.0;
 
 /// The state of one single-file section this tick (dashboard, Rerun).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -79,6 +83,8 @@ pub struct TrafficRules {
     /// On a network: the queues at the conflict zones and the route choice they drive
     /// (`crate::traffic::congestion`).
     pub(crate) congestion: crate::traffic::congestion::CongestionCosts,
+    /// On a network: the cycles of waits found and broken (`crate::traffic::cycles`).
+    pub(crate) cycles: crate::traffic::cycles::WaitCycles,
 }
 
 impl TrafficRules {
@@ -116,8 +122,16 @@ impl TrafficRules {
     }
 
     /// Applies the rules at time `now` and sets each UAV's `traffic.restriction`, from its
-    /// `traffic.route` and progress (updated by the fleet). `neighbours[k]` lists the UAVs near UAV k.
-    pub fn plan(&mut self, nav: &Navigator, now: f64, uavs: &mut [Uav], neighbours: &Ragged<usize>) {
+    /// `traffic.route` and progress (updated by the fleet). `neighbours[k]` lists the UAVs near UAV k,
+    /// `foreign` the foreign UAVs near it (followed like own UAVs, [`crate::traffic::foreign`]).
+    pub fn plan(
+        &mut self,
+        nav: &Navigator,
+        now: f64,
+        uavs: &mut [Uav],
+        neighbours: &Ragged<usize>,
+        foreign: ForeignNear<'_>,
+    ) {
         if self.road_id != nav.road.id() {
             self.road_id = nav.road.id();
             self.sections = sections(nav.road, nav);
@@ -129,15 +143,16 @@ impl TrafficRules {
             u.traffic.restriction = Restriction::default();
             u.traffic.waiting = None;
         }
-        self.reserve(nav, now, uavs);
-        crate::traffic::following::follow(nav, uavs, neighbours, &mut self.along);
-        self.resolve_deadlocks(nav, now, uavs, neighbours);
+        self.reserve(nav, now, uavs, foreign.all());
+        crate::traffic::following::follow(nav, uavs, neighbours, foreign, &mut self.along);
+        self.resolve_deadlocks(nav, now, uavs, neighbours, foreign);
     }
 
-    fn reserve(&mut self, nav: &Navigator, now: f64, uavs: &mut [Uav]) {
+    fn reserve(&mut self, nav: &Navigator, now: f64, uavs: &mut [Uav], foreign: &[ForeignView]) {
         self.zones.begin();
         self.requests.clear();
         let approach = 2.0 * nav.r_s + HOLD_M;
+        crate::traffic::foreign::occupy(&self.sections, &mut self.zones, foreign, approach);
         let gap = FOLLOW_GAP_IN_DC * nav.d_c;
         self.wanted.clear();
         // Each UAV's next section, not the one it last crossed while it is on that one's exit side;
@@ -278,54 +293,6 @@ impl TrafficRules {
             }
         }
     }
-
-    fn resolve_deadlocks(&self, nav: &Navigator, now: f64, uavs: &mut [Uav], neighbours: &Ragged<usize>) {
-        let blocking = BLOCKING_IN_DC * nav.d_c;
-        for k in 0..uavs.len() {
-            if let Some((target, until)) = uavs[k].traffic.back_off {
-                if now < until && uavs[k].traffic.route.is_some() {
-                    uavs[k].traffic.restriction.back_off = Some(target);
-                    uavs[k].traffic.waiting = Some(WaitReason::DeadlockBackoff);
-                    continue;
-                }
-                uavs[k].traffic.back_off = None;
-            }
-            let (Some(pos), Some(mine)) = (uavs[k].traffic.route, uavs[k].traffic.progress.stalled_for(now))
-            else {
-                continue;
-            };
-            if mine < DEADLOCK_AFTER_S {
-                continue;
-            }
-            // The stalled neighbours with priority (the longer stall to a tick, then the smaller id):
-            // step off their way, as an arrived UAV does ([`crate::traffic::yielding`]). A UAV held by a rule
-            // gives way to every stalled neighbour that is not held and heads towards it (one
-            // leaving a single-file section, say), whatever their stalls.
-            let (me, my_target) = (uavs[k].state.p, uavs[k].last.target);
-            let held = uavs[k].traffic.restriction.hold_at.is_some();
-            let winners = neighbours[k].iter().filter_map(|&d| {
-                let other = &uavs[d];
-                let (p, target) = (other.state.p, other.last.target);
-                let theirs = other.traffic.progress.stalled_for(now)?;
-                let first = if (theirs - mine).abs() > 1e-6 { theirs > mine } else { other.id < uavs[k].id };
-                let near = (p - me).norm() <= blocking;
-                // In each other's way: each heads towards the other (a queue behind a leader is not).
-                let towards_me = (target - p).dot(&(me - p)) > 0.0;
-                let facing = towards_me && (my_target - me).dot(&(p - me)) > 0.0;
-                let going = other.traffic.restriction.hold_at.is_none();
-                let gives_way = if held { towards_me } else { facing && first };
-                (near && going && gives_way && other.traffic.back_off.is_none())
-                    .then_some(Flying { p, target })
-            });
-            let aside = make_way(me, me, winners, nav.d_c);
-            if aside != me {
-                let target = inside_lane(nav, &pos, aside);
-                uavs[k].traffic.back_off = Some((target, now + BACK_OFF_S));
-                uavs[k].traffic.restriction.back_off = Some(target);
-                uavs[k].traffic.waiting = Some(WaitReason::DeadlockBackoff);
-            }
-        }
-    }
 }
 
 /// True when a UAV at `pos` inside a passable section, without a grant to it and with the section
@@ -352,29 +319,11 @@ fn queue_order(pos: &RoutePosition) -> f64 {
     -pos.direction() * pos.s
 }
 
-/// `x` moved across the road, if needed, so that it keeps D_s plus a margin from both sides (at the
-/// arc length of `pos`).
-fn inside_lane(nav: &Navigator, pos: &RoutePosition, x: Vec2) -> Vec2 {
-    let line = nav.road.centerline();
-    let (right, left) = nav.road.profile().at(pos.s);
-    let keep = nav.d_s + roads::CLEARANCE_MARGIN_M;
-    let n = line.normal_at(pos.s);
-    let base = line.point_at(pos.s);
-    let along = x - base;
-    let lateral = n.dot(&along);
-    let clamped = if right + left < 2.0 * keep {
-        (left - right) / 2.0
-    } else {
-        lateral.clamp(keep - right, left - keep)
-    };
-    x + n * (clamped - lateral)
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use roads::{NavMode, Road, RoadLayout};
-    use uav::Params;
+    use uav::{Params, Vec2};
 
     /// Two UAVs nose to nose on a 2 m wide road, each heading for the other's side.
     fn head_on(ids: [&str; 2]) -> (Road, Vec<(String, Vec2, Vec2)>) {
@@ -417,7 +366,7 @@ mod tests {
                 let goal = u.nav.goal().unwrap_or(u.state.p);
                 u.last.target = u.state.p + (goal - u.state.p).normalize();
             }
-            rules.plan(&nav, t, &mut fleet.uavs, &neighbours);
+            rules.plan(&nav, t, &mut fleet.uavs, &neighbours, ForeignNear::none());
             t += params.dt;
         }
         fleet.uavs.iter().map(|u| u.traffic).collect()

@@ -17,6 +17,21 @@ pub const PASS_LOOKAHEAD_IN_DC: f64 = 4.0;
 /// Lateral distance (m) beyond D_c at which the flying UAV passes a parked one.
 pub const PASS_MARGIN_M: f64 = 0.15;
 
+/// How far ahead (m) a parked foreign UAV ([`crate::traffic::foreign`]) blocks a flying one, and
+/// how far beside it (m) the flying one passes: the filter keeps a UAV much farther from a foreign
+/// UAV at rest than from one of its own fleet (the foreign one may accelerate at δ towards it at any
+/// moment, so its reach disk grows at δ even on a fresh message: 1.5–2 m as a UAV creeps up).
+pub const FOREIGN_PASS: Pass = Pass { ahead_m: 3.0, beside_m: 1.5 };
+
+/// How far ahead a parked UAV blocks a flying one, and how far beside it the flying one passes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pass {
+    /// Blocking when at most this far ahead (m) along the way.
+    pub ahead_m: f64,
+    /// Blocking when less than this far (m) off the way; passed this far to its side.
+    pub beside_m: f64,
+}
+
 /// The point a flying UAV at `p` aims at instead of `target` to pass the nearest of `parked` that
 /// blocks its straight way (ahead within [`PASS_LOOKAHEAD_IN_DC`]·`d_c`, less than `d_c` +
 /// [`PASS_MARGIN_M`] off it): `d_c` past it and `d_c` + [`PASS_MARGIN_M`] to the side away from it,
@@ -29,14 +44,27 @@ pub fn pass_point(
     d_c: f64,
     clear: impl Fn(Vec2, Vec2) -> bool,
 ) -> Option<Vec2> {
+    let pass = Pass { ahead_m: PASS_LOOKAHEAD_IN_DC * d_c, beside_m: d_c + PASS_MARGIN_M };
+    pass_point_with(p, target, parked, d_c, pass, clear)
+}
+
+/// [`pass_point`] with the blocking distances and the distance beside of `pass`.
+pub fn pass_point_with(
+    p: Vec2,
+    target: Vec2,
+    parked: impl Iterator<Item = Vec2>,
+    d_c: f64,
+    pass: Pass,
+    clear: impl Fn(Vec2, Vec2) -> bool,
+) -> Option<Vec2> {
     let way = target - p;
     let length = way.norm();
     if length < 1e-9 {
         return None;
     }
     let heading = way / length;
-    let lateral = d_c + PASS_MARGIN_M;
-    let reach = (PASS_LOOKAHEAD_IN_DC * d_c).min(length + d_c);
+    let lateral = pass.beside_m;
+    let reach = pass.ahead_m.min(length + d_c);
     let (mut nearest, mut blocker) = (f64::INFINITY, None);
     for q in parked {
         let to_q = q - p;

@@ -21,6 +21,10 @@ pub const MAX_BATCH: u32 = 20;
 /// stops admitting from the others.
 pub const MAX_WAIT_S: f64 = 60.0;
 
+/// Longest time (s) a fleet leaves a free zone to another region's UAVs waiting at another entry
+/// when none of them comes in (a UAV hovering at a hold point may be parked there, not waiting).
+pub const FOREIGN_TURN_WAIT_S: f64 = 5.0;
+
 /// The state of one zone.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 struct Zone {
@@ -40,6 +44,13 @@ struct Zone {
     last_open: Option<usize>,
     /// When the current phase opened (s).
     opened_at: f64,
+    /// Entries (bit `1 << entry`) from which UAVs of another region are inside or on their way in
+    /// this tick ([`crate::traffic::foreign`]), reported after [`Reservations::begin`].
+    foreign: u32,
+    /// Entries (bit `1 << entry`) at which UAVs of another region wait or come to wait this tick.
+    foreign_waiting: u32,
+    /// Since when (s) this fleet leaves the free zone to another region's waiting UAVs.
+    yielding_since: Option<f64>,
 }
 
 /// A UAV that asks to enter a zone from one of its entries.
@@ -96,8 +107,23 @@ impl Reservations {
     /// Starts a tick: the caller then reports every grant still held with [`Reservations::held`].
     pub fn begin(&mut self) {
         for z in &mut self.zones {
-            (z.held, z.held_entry, z.entering) = (0, None, 0);
+            (z.held, z.held_entry, z.entering, z.foreign, z.foreign_waiting) = (0, None, 0, 0, 0);
         }
+    }
+
+    /// UAVs of another region use `zone` from `entry` (0 or 1) this tick: its fleet admitted them,
+    /// this one cannot send them back, so it admits only from that entry, and only once its own
+    /// UAVs from the other entry are out (from neither while they use it from both).
+    pub fn foreign_inside(&mut self, zone: usize, entry: usize) {
+        self.zones[zone].foreign |= 1 << entry.min(31);
+    }
+
+    /// UAVs of another region wait at `zone`'s `entry` (or come to wait there) this tick: when this
+    /// fleet's UAVs wait at another entry of the free zone, the two regions take turns, each
+    /// reading the same rule (the entry of the last phase waits, and entry 0 goes first when there
+    /// was none), so they do not open it to opposite entries at once.
+    pub fn foreign_waiting(&mut self, zone: usize, entry: usize) {
+        self.zones[zone].foreign_waiting |= 1 << entry.min(31);
     }
 
     /// A UAV still holds its grant to `zone` from `entry`: on its way in (`entering`), or inside.
@@ -121,6 +147,11 @@ impl Reservations {
                 // Everyone admitted has left: the phase is over.
                 z.last_open = z.open.or(z.last_open);
                 (z.open, z.admitted, z.closed) = (None, 0, false);
+                // Only another region's UAVs inside, from one entry: a phase of theirs.
+                if z.foreign.count_ones() == 1 {
+                    z.open = Some(z.foreign.trailing_zeros() as usize);
+                    z.yielding_since = None;
+                }
             } else if z.open.is_none() {
                 // Grants held without a phase (a UAV that started inside): their entry is open.
                 z.open = z.held_entry;
@@ -149,10 +180,27 @@ impl Reservations {
                 .then(a.since.total_cmp(&b.since))
                 .then(a.rank.cmp(&b.rank))
         });
+        // Another region's UAVs wait at another entry of the free zone: take turns with them.
+        let waiting = z.foreign_waiting;
+        let theirs = move |entry: usize| waiting & !(1u32 << entry.min(31)) != 0;
+        if z.open.is_none()
+            && let Some(r) = first.filter(|r| !r.inside && theirs(r.entry))
+            && !turn_of(r.entry, z.last_open)
+            && now - *z.yielding_since.get_or_insert(now) < FOREIGN_TURN_WAIT_S
+        {
+            return;
+        }
+        z.yielding_since = None;
         if z.open.is_none() {
             z.opened_at = now;
         }
-        let open = *z.open.get_or_insert(first.map_or(requests[0].entry, |r| r.entry));
+        // Another region's UAVs inside: a new phase is theirs; a phase from another entry admits no
+        // more (its holders leave, then theirs begins).
+        let foreign = (z.foreign.count_ones() == 1).then(|| z.foreign.trailing_zeros() as usize);
+        let open = *z.open.get_or_insert(foreign.or(first.map(|r| r.entry)).unwrap_or(requests[0].entry));
+        if z.foreign != 0 && foreign != Some(open) {
+            z.closed = true;
+        }
         // The other entries' wait counts from the start of this phase: a wait that began before it
         // (while the phase before ran) would close every later phase after one UAV once both
         // entries had waited MAX_WAIT_S, and the zone would pass one UAV per crossing time (`headon`
@@ -164,9 +212,9 @@ impl Reservations {
             .max_by(f64::total_cmp);
         // A phase admits at least one UAV: closing a fresh one would hand the zone to nobody when
         // both sides have waited MAX_WAIT_S (each would close the other's phase at once).
+        let others_wait = oldest_other.is_some() || theirs(open);
         if z.admitted > 0
-            && (oldest_other.is_some_and(|w| w >= MAX_WAIT_S)
-                || (oldest_other.is_some() && z.admitted >= MAX_BATCH))
+            && (oldest_other.is_some_and(|w| w >= MAX_WAIT_S) || (others_wait && z.admitted >= MAX_BATCH))
         {
             z.closed = true;
         }
@@ -192,11 +240,18 @@ impl Reservations {
             z.held += 1;
             z.entering += 1;
             grant(r);
-            if oldest_other.is_some() && z.admitted >= MAX_BATCH {
+            if others_wait && z.admitted >= MAX_BATCH {
                 z.closed = true;
             }
         }
     }
+}
+
+/// True when `entry` may open a free zone that UAVs of another region wait for at another entry:
+/// the entry of the last phase (`last_open`, theirs or ours) waits; entry 0 goes first after none.
+/// Both regions read the same phases, so they agree.
+fn turn_of(entry: usize, last_open: Option<usize>) -> bool {
+    last_open.map_or(entry == 0, |last| last != entry)
 }
 
 #[cfg(test)]
