@@ -1,4 +1,4 @@
-//! Congestion-aware routes on a network (docs/traffic.md 7.): what the queue at a conflict zone
+//! Congestion-aware routes on a network (docs/traffic.md 8.): what the queue at a conflict zone
 //! costs a UAV that joins it, measured from the fleet, and when a UAV takes another way because of it.
 //!
 //! - **Service**, per *arm* of a zone (its passage in from one neighbour cell): the time a line of
@@ -12,7 +12,9 @@
 //! - **Cost** of crossing into a zone by an arm: service × the load, or the load of the zone's
 //!   other arms plus one if that is less (a UAV waits behind those of its arm only as long as other
 //!   arms have UAVs to let through in turn): the time to drain the queue ahead
-//!   ([`CongestionCosts::extra`], the route search's per-passage cost).
+//!   ([`CongestionCosts::extra`], the route search's per-passage cost), less, for the UAV that
+//!   chooses, the time it needs to get to that arm at cruise speed (the queue drains meanwhile;
+//!   [`CongestionCosts::extra_from`]).
 //! - **Choice**: a UAV chooses once per zone, on its way to it ([`decide_within`]), before it is
 //!   granted its movement: when the queues on its way ahead cost at least the margin, it takes the
 //!   fastest way at these costs if that is at least the margin faster than its own and goes through
@@ -27,7 +29,8 @@
 use crate::member::{Uav, WaitReason};
 use crate::traffic::junctions::ASK_M;
 use roads::NetworkNavigator;
-use roads::network::{Network, Way};
+use roads::network::{CRUISE_MPS, Network, Way};
+use uav::Vec2;
 
 /// What the route choice asks of a way to switch to it (s faster, with the queues counted), by
 /// default ([`crate::FleetConfig::reroute_margin_s`]).
@@ -36,9 +39,11 @@ pub const REROUTE_MARGIN_S: f64 = 5.0;
 /// Time constant (s) with which the service of an arm forgets what it observed.
 pub const MEMORY_S: f64 = 30.0;
 
-/// UAVs counted as crossed at every arm besides those observed: before anyone crossed, a line
-/// costs each UAV the time it has stood so far.
-pub const SERVED_PRIOR: f64 = 1.0;
+/// UAVs counted as crossed at every arm besides those observed: a line that has stood a while with
+/// nobody through yet costs each UAV a third of that while (with 1, the whole while: at a merge
+/// where the other arm went first, the first seconds of a line priced its UAVs at 30–45 s each and
+/// sent 8 of 30 round the long branch of a ladder that drained in 42.5 s).
+pub const SERVED_PRIOR: f64 = 3.0;
 
 /// Seconds between two counts of the load (and the route choices made with them).
 pub const PASS_S: f64 = 1.0;
@@ -58,6 +63,17 @@ pub const DECIDE_S: f64 = 2.0 * PASS_S;
 /// Within this distance (m) of a zone's gate a UAV at speed `speed` (m/s) chooses its way at it.
 pub fn decide_within(speed: f64) -> f64 {
     ASK_M + DECIDE_S * speed.max(1.0)
+}
+
+/// The time (s) from `p` to the passage from `cell` into `zone` at cruise speed in a straight
+/// line: no UAV gets there sooner.
+fn reach_s(net: &Network, p: Vec2, cell: usize, zone: usize) -> f64 {
+    let edge = net.passages(cell).iter().find(|q| q.other == zone).map(|q| q.edge);
+    let vertices = &net.cells()[cell].vertices;
+    edge.map_or(0.0, |k| {
+        let middle = (vertices[k] + vertices[(k + 1) % vertices.len()]) * 0.5;
+        (middle - p).norm() / CRUISE_MPS
+    })
 }
 
 /// One arm of a conflict zone: its load and what was observed of its queue.
@@ -138,6 +154,17 @@ impl CongestionCosts {
     pub fn extra(&self, net: &Network, cell: usize, edge: usize) -> f64 {
         let into = net.passages(cell).iter().find(|p| p.edge == edge).map(|p| p.other);
         into.and_then(|zone| self.arm(net, zone, cell)).map_or(0.0, |a| self.arms[a].cost_s())
+    }
+
+    /// [`CongestionCosts::extra`] as it costs a UAV at `p`: less the time it takes to get there,
+    /// during which the queue drains (at cruise speed on the straight line, a lower bound).
+    pub fn extra_from(&self, net: &Network, p: Vec2, cell: usize, edge: usize) -> f64 {
+        let into = net.passages(cell).iter().find(|q| q.edge == edge).map(|q| q.other);
+        let queue = self.extra(net, cell, edge);
+        match into {
+            Some(zone) if queue > 0.0 => (queue - reach_s(net, p, cell, zone)).max(0.0),
+            _ => queue,
+        }
     }
 
     /// The arms by which `way` enters its next zones from index `from` of its cells on: up to `n`
@@ -268,7 +295,11 @@ impl CongestionCosts {
         {
             return true;
         }
-        let queued: f64 = self.arms_ahead(net, way, usize::MAX).map(|(_, a)| self.arms[a].cost_s()).sum();
+        let cells = way.cells();
+        let queued: f64 = (self.arms_ahead(net, way, usize::MAX))
+            .map(|(i, a)| self.arms[a].cost_s() - reach_s(net, p, cells[i - 1], cells[i]))
+            .map(|cost| cost.max(0.0))
+            .sum();
         if queued >= margin_s {
             if *searches == 0 {
                 return false;
@@ -276,7 +307,7 @@ impl CongestionCosts {
             *searches -= 1;
             let costs = &*self;
             let keep = i - way.at() + 1;
-            nav.reroute(&mut u.nav, p, keep, |cell, edge| costs.extra(net, cell, edge), margin_s);
+            nav.reroute(&mut u.nav, p, keep, |cell, edge| costs.extra_from(net, p, cell, edge), margin_s);
         }
         // Counted on its way beyond the zone at once (the zone it chose at is its new way's next).
         let Some(way) = u.nav.way() else { return true };
