@@ -122,8 +122,10 @@ def square_junction(name, cx, cy, half=2.0):
                                       [cx + half, cy + half], [cx - half, cy + half]]}
 
 
-def write_network(name, params, roads, junctions, uavs):
+def write_network(name, params, roads, junctions, uavs, regions=None):
     doc = {"name": name, "params": params, "roads": roads, "junctions": junctions}
+    if regions:
+        doc["regions"] = regions
     doc["uavs"] = [{"id": i, "start": s, "goal": g} for i, s, g in uavs]
     path = os.path.join(os.path.dirname(__file__), name + ".json")
     with open(path, "w") as f:
@@ -146,12 +148,22 @@ for k in range(10):
     outbound.append((f"out{k}", start, goal))
 homebound = [(f"home{k}", list(s), [-1.0 if k % 2 else 1.0, 12.0 - 2.0 * k])
              for k, s in enumerate([(29.0, 18.0), (31.0, 16.0), (29.0, -18.0), (31.0, -16.0), (48.0, -1.0), (44.0, -1.0)])]
-write_network("depot", {"t_max": 120},
-              [network_road("trunk", (2, 0), (28, 0), 6),
+depot_roads = [network_road("trunk", (2, 0), (28, 0), 6),
                network_road("west-spoke", (-2, 0), (-22, 0), 5),
                network_road("pads", (0, 2), (0, 14), 3),
                network_road("branch-north", (30, 2), (30, 22), 5),
                network_road("branch-south", (30, -2), (30, -22), 5),
-               network_road("branch-east", (32, 0), (52, 0), 5)],
-              [square_junction("depot", 0, 0), square_junction("fork", 30, 0)],
-              outbound + homebound)
+               network_road("branch-east", (32, 0), (52, 0), 5)]
+depot_junctions = [square_junction("depot", 0, 0), square_junction("fork", 30, 0)]
+write_network("depot", {"t_max": 120}, depot_roads, depot_junctions, outbound + homebound)
+
+# The same depot in three regions (docs/regions.md): `west` (the depot, its spoke, the pads and the
+# trunk's first half), `east` (the trunk's second half and the fork) and `branches`: the borders cut
+# the trunk and separate the fork from its branches.
+write_network("depot-regions", {"t_max": 120}, depot_roads, depot_junctions, outbound + homebound, [
+    {"name": "west", "roads": [{"road": "west-spoke", "segments": [0, 4]}, {"road": "pads", "segments": [0, 2]},
+                               {"road": "trunk", "segments": [0, 2]}], "junctions": ["depot"]},
+    {"name": "east", "roads": [{"road": "trunk", "segments": [3, 5]}], "junctions": ["fork"]},
+    {"name": "branches", "roads": [{"road": r, "segments": [0, 4]}
+                                   for r in ["branch-north", "branch-south", "branch-east"]]},
+])

@@ -1,6 +1,6 @@
 //! End-to-end tests of the server flying road networks: a network put over REST (and read back,
-//! drawn, flown through its junctions by UAVs added over REST), refused when broken or divided
-//! into regions with nothing changed, loaded as a scenario, resumed after a restart, and served
+//! drawn, flown through its junctions by UAVs added over REST), refused when it or its regions are
+//! broken, with nothing changed, loaded as a scenario, resumed after a restart, and served
 //! from `serve --scenario` as a process.
 
 mod support;
@@ -136,11 +136,20 @@ async fn a_broken_or_divided_network_is_refused_naming_the_field_and_changes_not
     let narrow = json!({"roads": [{"name": "thin", "segments": roads::RoadLayout::straight(0.0, 20.0, 0.6, 2).segments}]});
     let (status, body) = put_road(&server, &narrow).await;
     assert_eq!((status, body["error"]["rule"].as_str()), (422, Some("narrow_passage")), "{body}");
-    // A network has no regions.
+    // A network's regions are sets of cells that cover it: a chain's segment range is not one, and
+    // one region of the trunk alone leaves the other cells out.
     let mut divided = depot_layout();
     divided["regions"] = json!([{"name": "all", "segments": [0, 5]}]);
     let (status, body) = put_road(&server, &divided).await;
-    assert_eq!((status, error_field(&body)), (422, "regions"), "{body}");
+    assert_eq!(status, 422, "{body}");
+    assert!(error_field(&body).starts_with("regions[0]"), "{body}");
+    divided["regions"] = json!([{"name": "all", "roads": [{"road": "trunk", "segments": [0, 5]}]}]);
+    let (status, body) = put_road(&server, &divided).await;
+    assert_eq!(
+        (status, error_field(&body), body["error"]["rule"].as_str()),
+        (422, "regions", Some("region_gap"))
+    );
+    assert!(body["error"]["message"].as_str().unwrap().contains("road `west-spoke`"), "{body}");
     // A network the UAVs (at x = 2) would be outside of: 409, naming `roads`.
     let far = json!({"roads": [{"name": "far", "segments": roads::RoadLayout::straight(50.0, 70.0, 4.0, 2).segments}]});
     let (status, body) = put_road(&server, &far).await;
@@ -171,7 +180,7 @@ async fn a_network_scenario_loads_over_rest_and_a_chain_road_replaces_it() {
         })
         .await;
     assert!(uav(&state, "out0")["p"][0].as_f64().unwrap() > start[0] + 1.0, "{}", uav(&state, "out0"));
-    // A network scenario with regions is refused, naming them.
+    // A network scenario with a chain's regions is refused, naming them.
     let mut divided = depot.clone();
     divided["regions"] = json!([{"name": "all", "segments": [0, 5]}]);
     let (status, body) = server.call("POST", "/api/scenario", Some(&divided.to_string())).await;
@@ -218,7 +227,7 @@ async fn a_network_put_over_rest_is_resumed_after_a_restart() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn serve_flies_a_network_scenario_and_refuses_to_divide_it() {
+async fn serve_flies_a_network_scenario_and_refuses_to_divide_it_without_regions() {
     let depot = support::repo().join("scenarios/depot.json");
     let (_server, addr, _) =
         support::procs::serve(&["--scenario", depot.to_str().unwrap(), "--policy", "pd"]);
@@ -226,7 +235,7 @@ async fn serve_flies_a_network_scenario_and_refuses_to_divide_it() {
     assert_eq!(road["junctions"].as_array().map(Vec::len), Some(2), "{road}");
     let state = support::procs::get(addr, "/api/state").await;
     assert_eq!(state["uavs"].as_array().map(Vec::len), Some(16));
-    // Regions divide one road: `--region` on a network exits 2, saying so.
+    // A network without regions cannot be divided: `--region` exits 2, saying so.
     let divided = std::process::Command::new(env!("CARGO_BIN_EXE_airroads"))
         .args(["serve", "--addr", "127.0.0.1:0", "--ephemeral", "--zenoh-insecure"])
         .args(["--scenario", depot.to_str().unwrap(), "--region", "west"])
@@ -235,5 +244,5 @@ async fn serve_flies_a_network_scenario_and_refuses_to_divide_it() {
         .unwrap();
     let err = String::from_utf8_lossy(&divided.stderr);
     assert_eq!(divided.status.code(), Some(2), "{err}");
-    assert!(err.contains("network") && err.contains("region"), "{err}");
+    assert!(err.contains("`west`: the network has no regions"), "{err}");
 }

@@ -13,11 +13,11 @@
 mod support;
 
 use serde_json::{Value, json};
-use std::net::SocketAddr;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::time::{Duration, Instant};
 use support::procs::{self, D_C, TICK_S, TOLERANCE_M, distance, free_endpoint, get, serve, uavs};
+use support::regions::{assert_handed_over, fly_until_arrived, ownership, serve_regions};
 
 /// The stated bound on a UAV's unowned time in a handover (`region::handover::MAX_UNOWNED_S`).
 const MAX_UNOWNED_S: f64 = 0.25;
@@ -133,105 +133,20 @@ fn three_region_scenario(dir: &Path) -> PathBuf {
     path
 }
 
-/// Every UAV's ownership intervals over all regions, by UAV: `(from, to, region)`, by `from`.
-async fn ownership(
-    regions: &[(&str, SocketAddr)],
-) -> std::collections::BTreeMap<String, Vec<(f64, f64, String)>> {
-    let mut by_uav: std::collections::BTreeMap<String, Vec<(f64, f64, String)>> = Default::default();
-    for (name, addr) in regions {
-        let doc = get(*addr, "/api/region/ownership").await;
-        assert_eq!(doc["region"], *name);
-        for i in doc["intervals"].as_array().unwrap() {
-            let to = i["to"].as_f64().unwrap_or(f64::INFINITY);
-            let entry = (i["from"].as_f64().unwrap(), to, name.to_string());
-            by_uav.entry(i["id"].as_str().unwrap().to_string()).or_default().push(entry);
-        }
-    }
-    for intervals in by_uav.values_mut() {
-        intervals.sort_by(|a, b| a.0.total_cmp(&b.0));
-    }
-    by_uav
-}
-
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn three_regions_hand_uavs_over_with_one_owner_at_every_moment() {
     let dir = scratch("three");
     let scenario = three_region_scenario(&dir);
     let scenario = scenario.to_str().unwrap();
-    let ports: Vec<String> = (0..3).map(|_| free_endpoint()).collect();
-    let (_a, a, _) = serve(&["--scenario", scenario, "--region", "a", "--zenoh-listen", &ports[0]]);
-    let (_b, b, _) = serve(&[
-        "--scenario",
-        scenario,
-        "--region",
-        "b",
-        "--zenoh-listen",
-        &ports[1],
-        "--zenoh-connect",
-        &ports[0],
-    ]);
-    let (_c, c, _) = serve(&[
-        "--scenario",
-        scenario,
-        "--region",
-        "c",
-        "--zenoh-listen",
-        &ports[2],
-        "--zenoh-connect",
-        &ports[0],
-        "--zenoh-connect",
-        &ports[1],
-    ]);
-    let regions = [("a", a), ("b", b), ("c", c)];
-    let started = Instant::now();
-    let mut arrived = Vec::new();
-    while started.elapsed() < Duration::from_secs(110) {
-        let asked = Instant::now();
-        let (sa, sb, sc) = tokio::join!(
-            get(a, "/api/state?scope=region"),
-            get(b, "/api/state?scope=region"),
-            get(c, "/api/state?scope=region")
-        );
-        let skew = asked.elapsed().as_secs_f64() + 2.0 * TICK_S;
-        let states = [&sa, &sb, &sc];
-        let all: Vec<_> = states.iter().flat_map(|s| uavs(s)).collect();
-        for (i, x) in all.iter().enumerate() {
-            for y in &all[i + 1..] {
-                let d = distance(x.1, y.1);
-                let slack = TOLERANCE_M + distance(x.2, y.2) * skew;
-                // The same UAV in two snapshots (taken around its handover) is not a pair.
-                assert!(x.0 == y.0 || d >= D_C - slack, "{} and {} {d} m apart", x.0, y.0);
-            }
-        }
-        arrived = states
-            .iter()
-            .flat_map(|s| s["uavs"].as_array().unwrap().iter())
-            .filter(|u| u["arrived"] == true)
-            .map(|u| u["id"].as_str().unwrap().to_string())
-            .collect();
-        if arrived.len() == 2 * EACH_WAY {
-            break;
-        }
-        tokio::time::sleep(Duration::from_millis(50)).await;
-    }
+    let (_servers, regions) = serve_regions(scenario, &["a", "b", "c"]);
+    let arrived = fly_until_arrived(&regions, 2 * EACH_WAY, Duration::from_secs(110)).await;
     assert_eq!(arrived.len(), 2 * EACH_WAY, "all arrive: {arrived:?}");
     let by_uav = ownership(&regions).await;
     assert_eq!(by_uav.len(), 2 * EACH_WAY, "{by_uav:?}");
-    let mut longest_gap = 0.0f64;
-    for (id, intervals) in &by_uav {
-        let path: Vec<&str> = intervals.iter().map(|i| i.2.as_str()).collect();
-        let expected = if id.starts_with("east") { ["a", "b", "c"] } else { ["c", "b", "a"] };
-        assert_eq!(path, expected, "{id}: {intervals:?}");
-        for pair in intervals.windows(2) {
-            let gap = pair[1].0 - pair[0].1;
-            assert!(gap >= 0.0, "{id}: owned by {} and {} at once ({intervals:?})", pair[0].2, pair[1].2);
-            assert!(gap <= MAX_UNOWNED_S, "{id}: unowned {gap} s between {} and {}", pair[0].2, pair[1].2);
-            longest_gap = longest_gap.max(gap);
-        }
-        assert!(intervals.last().unwrap().1.is_infinite(), "{id}: owned at the end");
-    }
+    let path = |id: &str| if id.starts_with("east") { vec!["a", "b", "c"] } else { vec!["c", "b", "a"] };
+    let longest_gap = assert_handed_over(&by_uav, path, MAX_UNOWNED_S);
     eprintln!("{} handovers, longest unowned gap {longest_gap:.3} s", 4 * EACH_WAY);
-    for (_, addr) in regions {
+    for &(_, addr) in &regions {
         let metrics = get(addr, "/api/metrics").await;
         assert_eq!(metrics["region"]["refused"], 0, "{}", metrics["region"]);
     }

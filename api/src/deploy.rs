@@ -27,7 +27,7 @@ use engine::command::{Command, NewRoad, Outcome};
 use engine::fleet_loop::now_ms;
 use fleet::{Scenario, ValidScenario};
 use regions::federation::{Answer, ApiQuery, ApiReply, Federation, Kind, Step};
-use roads::{AirspaceLayout, Road, RoadLayout};
+use roads::{Airspace, AirspaceLayout};
 
 use serde_json::{Map, Value, json};
 use std::collections::BTreeMap;
@@ -38,40 +38,32 @@ pub const SWITCH_DELAY: Duration = Duration::from_millis(500);
 /// How long a region may take to answer a commit (the delay, one tick, the disk).
 pub const COMMIT_TIMEOUT: Duration = Duration::from_secs(5);
 
-/// The region names of a layout, in order.
-fn names(layout: &RoadLayout) -> Vec<String> {
-    layout.regions.iter().flatten().map(|r| r.name.clone()).collect()
+/// A scenario's refusal as the API gives it (422 naming the field).
+fn scenario_refused(e: fleet::ScenarioError) -> ApiError {
+    match e {
+        fleet::ScenarioError::Invalid { field, reason } => ApiError::invalid(field, reason),
+        other => ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", other.to_string()),
+    }
 }
 
-/// 422 naming `regions`: a deployment of regions divides one road, never a network.
-fn no_network() -> ApiError {
-    ApiError::invalid(
-        "regions",
-        "this deployment divides one road into regions; a road network cannot be divided into regions yet",
-    )
-}
-
-/// The layout of a step's body (a road, or a scenario's road); a network is refused.
-fn layout_of(kind: Kind, body: &str) -> Result<RoadLayout, ApiError> {
+/// The layout of a step's body (a road or network, or a scenario's) and the narrowest passage a
+/// network of it must have: `min_passage_m` (the fleet's now) for a road, the scenario's own
+/// parameters' for a scenario.
+fn layout_of(kind: Kind, body: &str, min_passage_m: f64) -> Result<(AirspaceLayout, f64), ApiError> {
     match kind {
-        Kind::Road => match super::road::parse_layout(body.as_bytes())? {
-            AirspaceLayout::Road(layout) => Ok(layout),
-            AirspaceLayout::Network(_) => Err(no_network()),
-        },
+        Kind::Road => Ok((super::road::parse_layout(body.as_bytes())?, min_passage_m)),
         Kind::Scenario => {
             let scenario = super::error::parse::<Scenario>(body.as_bytes())?;
-            if scenario.roads.is_some() {
-                return Err(no_network());
-            }
-            Ok(RoadLayout { regions: scenario.regions.clone(), ..RoadLayout::new(scenario.segments.clone()) })
+            let layout = scenario.layout().map_err(scenario_refused)?;
+            Ok((layout, fleet::min_passage_m(&scenario.params)))
         }
     }
 }
 
-/// 422 unless `new` keeps the regions of `old` and their neighbours (each region's server
-/// subscribes to its neighbours once, at its start).
-fn check_same_regions(old: &Road, new: &Road) -> Result<(), ApiError> {
-    let (before, after) = (names(old.layout()), names(new.layout()));
+/// 422 unless `new` (a road or network) keeps the regions of `old` and their neighbours (each
+/// region's server subscribes to its neighbours once, at its start).
+fn check_same_regions(old: &Airspace, new: &Airspace) -> Result<(), ApiError> {
+    let (before, after) = (old.region_names(), new.region_names());
     let mut sorted = (before.clone(), after.clone());
     sorted.0.sort();
     sorted.1.sort();
@@ -83,7 +75,7 @@ fn check_same_regions(old: &Road, new: &Road) -> Result<(), ApiError> {
         );
         return Err(ApiError::invalid("regions", message));
     }
-    for name in &before {
+    for &name in &before {
         let (a, b) = (regions::neighbours_of(old, name), regions::neighbours_of(new, name));
         if a != b {
             let message = format!(
@@ -100,12 +92,9 @@ fn check_same_regions(old: &Road, new: &Road) -> Result<(), ApiError> {
 /// The scenario of `body`, validated, with only the UAVs that start in region `own`.
 fn scenario_for(rules: &links::LinkRules, body: &str, own: &str) -> Result<ValidScenario, ApiError> {
     let scenario = super::error::parse::<Scenario>(body.as_bytes())?;
-    let mut valid = scenario.validate_with(rules).map_err(|e| match e {
-        fleet::ScenarioError::Invalid { field, reason } => ApiError::invalid(field, reason),
-        other => ApiError::new(StatusCode::UNPROCESSABLE_ENTITY, "invalid_body", other.to_string()),
-    })?;
+    let mut valid = scenario.validate_with(rules).map_err(scenario_refused)?;
     let road = &valid.road;
-    valid.uavs.retain(|u| road.region_at(&u.start).is_some_and(|r| r.name == own));
+    valid.uavs.retain(|u| road.region_at(&u.start) == Some(own));
     Ok(valid)
 }
 
@@ -145,16 +134,20 @@ enum StepDone {
 }
 
 async fn run_step(app: &AppState, own: &str, step: Step) -> Result<StepDone, ApiError> {
-    let current = app.engine.road.borrow().layout.road().cloned().ok_or_else(no_network)?;
+    let (current, min_passage_m) = {
+        let view = app.engine.road.borrow();
+        (view.layout.clone(), view.min_passage_m)
+    };
     let (kind, body) = (step.kind, step.body.clone());
     let own_name = own.to_string();
     let rules = app.link_rules.clone();
     // Validated on the blocking pool, one large input at a time, as over REST.
     let (road, scenario) = app
         .validate(move || {
-            let layout = layout_of(kind, &body)?;
-            let road = super::road::road_of(layout)?;
-            let old = Road::new(current).map_err(|e| ApiError::invalid("road", e.message))?;
+            let (layout, passage_m) = layout_of(kind, &body, min_passage_m)?;
+            let road = super::road::airspace_of(layout, passage_m)?;
+            // Built before with the passages it had to have then: only its regions are read here.
+            let old = current.build(0.0).map_err(|e| ApiError::invalid("road", e.message))?;
             check_same_regions(&old, &road)?;
             let scenario =
                 (kind == Kind::Scenario).then(|| scenario_for(&rules, &body, &own_name)).transpose()?;
@@ -181,7 +174,8 @@ async fn run_step(app: &AppState, own: &str, step: Step) -> Result<StepDone, Api
     tokio::time::sleep(Duration::from_millis(wait)).await;
     let done = match scenario {
         None => {
-            let cleared_goals = match app.apply(Command::SetRoad(Box::new(NewRoad::road(road)))).await? {
+            let new = NewRoad { road, checked_passage_m: min_passage_m };
+            let cleared_goals = match app.apply(Command::SetRoad(Box::new(new))).await? {
                 Outcome::RoadReplaced { cleared_goals } => cleared_goals,
                 _ => Vec::new(),
             };
@@ -266,10 +260,8 @@ pub async fn coordinate(
     body: String,
     authorization: Option<String>,
 ) -> Response {
-    let Some(old_layout) = app.engine.road.borrow().layout.road().cloned() else {
-        return no_network().into_response();
-    };
-    let regions = names(&old_layout);
+    let old_layout = app.engine.road.borrow().layout.clone();
+    let regions: Vec<String> = old_layout.region_names().into_iter().map(String::from).collect();
     let prepare = Step { commit: false, kind, body: body.clone(), at_ms: 0 };
     for (region, answer) in
         everywhere(app, federation, &regions, &prepare, regions::federation::ASK_TIMEOUT, &authorization)
@@ -330,46 +322,5 @@ pub async fn coordinate(
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use roads::Region;
-
-    fn road(regions: &[(&str, usize, usize)]) -> Road {
-        let mut layout = RoadLayout::straight(0.0, 30.0, 4.0, 6);
-        let region = |&(name, first, last): &(&str, usize, usize)| Region {
-            name: name.into(),
-            segments: [first, last],
-        };
-        layout.regions = Some(regions.iter().map(region).collect());
-        Road::new(layout).unwrap() // the tests give ranges covering the six segments once
-    }
-
-    #[test]
-    fn a_network_is_refused_naming_regions_and_a_chain_reads_as_before() {
-        let chain = RoadLayout::straight(0.0, 30.0, 4.0, 6);
-        let network = serde_json::to_string(&roads::network::NetworkLayout::from(&chain)).unwrap();
-        let e = layout_of(Kind::Road, &network).unwrap_err();
-        assert_eq!((e.status, e.field.as_deref()), (StatusCode::UNPROCESSABLE_ENTITY, Some("regions")));
-        let depot =
-            std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/../scenarios/depot.json")).unwrap();
-        assert_eq!(layout_of(Kind::Scenario, &depot).unwrap_err().field.as_deref(), Some("regions"));
-        assert_eq!(layout_of(Kind::Road, &serde_json::to_string(&chain).unwrap()).unwrap(), chain);
-    }
-
-    #[test]
-    fn a_deployed_road_keeps_the_regions_and_their_neighbours() {
-        let old = road(&[("a", 0, 1), ("b", 2, 3), ("c", 4, 5)]);
-        // Other ranges, the same neighbours: fine.
-        assert!(check_same_regions(&old, &road(&[("a", 0, 0), ("b", 1, 4), ("c", 5, 5)])).is_ok());
-        let renamed = check_same_regions(&old, &road(&[("a", 0, 1), ("b", 2, 3), ("d", 4, 5)])).unwrap_err();
-        assert_eq!(renamed.field.as_deref(), Some("regions"));
-        assert!(
-            renamed.message.contains("(a, b, c)") && renamed.message.contains("(a, b, d)"),
-            "{}",
-            renamed.message
-        );
-        let reordered =
-            check_same_regions(&old, &road(&[("b", 0, 1), ("a", 2, 3), ("c", 4, 5)])).unwrap_err();
-        assert!(reordered.message.contains("neighbours of region `a`"), "{}", reordered.message);
-    }
-}
+#[path = "deploy_tests.rs"]
+mod tests;

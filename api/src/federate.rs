@@ -263,7 +263,7 @@ async fn ask_owner(
 /// The road's regions, in its order.
 fn region_names(app: &AppState) -> Vec<String> {
     let road = app.engine.road.borrow();
-    road.layout.regions().into_iter().flatten().map(|r| r.name.clone()).collect()
+    road.layout.region_names().into_iter().map(String::from).collect()
 }
 
 /// This region flies UAV `id` now (by the latest snapshot).
@@ -276,8 +276,7 @@ fn flown_here(app: &AppState, id: &str) -> bool {
 fn region_of_position(app: &AppState, federation: &Federation, position: [f64; 2]) -> Option<String> {
     let view = app.engine.road.borrow().clone();
     let road = federation.road(&view)?;
-    let segment = road.locate(&uav::Vec2::new(position[0], position[1]), None);
-    road.region_of(segment).map(|r| r.name.clone())
+    road.region_at(&uav::Vec2::new(position[0], position[1])).map(String::from)
 }
 
 /// Another region's answer, as it gave it.
@@ -336,8 +335,7 @@ async fn run_query(app: &AppState, query: &zenoh::query::Query) -> Option<Respon
     // anything else is not answered.
     let region = app.region.as_ref()?;
     let asker = region.federation.get()?.asker(query.key_expr().as_str())?;
-    let known =
-        app.engine.road.borrow().layout.regions().is_some_and(|rs| rs.iter().any(|r| r.name == asker));
+    let known = app.engine.road.borrow().layout.region_names().contains(&asker);
     if !known {
         return None;
     }

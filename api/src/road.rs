@@ -12,7 +12,7 @@ use axum::http::StatusCode;
 use axum::response::{IntoResponse, Response};
 use engine::command::{Command, NewRoad, Outcome};
 use roads::network::NetworkLayout;
-use roads::{Airspace, AirspaceLayout, Road, RoadError, RoadLayout};
+use roads::{Airspace, AirspaceLayout, RoadError, RoadLayout};
 use serde::de::IgnoredAny;
 use serde_json::json;
 use std::collections::BTreeMap;
@@ -25,12 +25,6 @@ pub fn parse_layout(bytes: &[u8]) -> Result<AirspaceLayout, ApiError> {
     let keys = parse::<BTreeMap<String, IgnoredAny>>(bytes).unwrap_or_default();
     if !keys.contains_key("roads") {
         return parse::<RoadLayout>(bytes).map(AirspaceLayout::Road);
-    }
-    if keys.contains_key("regions") {
-        return Err(ApiError::invalid(
-            "regions",
-            "regions divide one road's segments; a road network cannot be divided into regions yet",
-        ));
     }
     parse::<NetworkLayout>(bytes).map(AirspaceLayout::Network)
 }
@@ -89,11 +83,6 @@ fn refused(e: RoadError) -> ApiError {
     err
 }
 
-/// A validated road, or the 422 naming the field (`segments[i]`, `regions[i].segments`, ...) and the rule.
-pub(crate) fn road_of(layout: RoadLayout) -> Result<Road, ApiError> {
-    Road::new(layout).map_err(refused)
-}
-
 /// A validated road or network (passages at least `min_passage_m` wide), or the 422 naming the
 /// field and the rule.
 pub(crate) fn airspace_of(layout: AirspaceLayout, min_passage_m: f64) -> Result<Airspace, ApiError> {
@@ -123,8 +112,11 @@ mod tests {
         // A network's, with theirs.
         let e = parse_layout(br#"{"roads": [{"name": "a", "segments": 3}]}"#).unwrap_err();
         assert_eq!(e.field.as_deref(), Some("roads[0].segments"));
-        let e = parse_layout(br#"{"roads": [], "regions": []}"#).unwrap_err();
-        assert_eq!((e.code, e.field.as_deref()), ("invalid_value", Some("regions")));
+        // A network's regions are sets of cells: a chain's segment range is not one.
+        let e =
+            parse_layout(br#"{"roads": [], "regions": [{"name": "a", "segments": [0, 1]}]}"#).unwrap_err();
+        assert!(e.field.as_deref().is_some_and(|f| f.starts_with("regions[0]")), "{e:?}");
+        assert!(e.message.contains("unknown field `segments`"), "{}", e.message);
         let e = parse_layout(br#"{"roads": [], "segments": []}"#).unwrap_err();
         assert!(e.message.contains("unknown field `segments`"), "{}", e.message);
     }

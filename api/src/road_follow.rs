@@ -5,7 +5,7 @@
 
 use super::request::ApiRequest;
 use super::state::AppState;
-use engine::command::Command;
+use engine::command::{Command, NewRoad};
 use regions::federation::{Answer, ApiQuery};
 use std::time::Duration;
 
@@ -29,13 +29,15 @@ pub async fn follow(app: AppState) {
         }
         let query = ApiQuery::of(ApiRequest::GetRoad);
         let Answer::Replied(reply) = federation.ask(&region.name, &query).await else { continue };
-        let layout =
-            (reply.status == 200).then(|| serde_json::from_str::<roads::RoadLayout>(&reply.body).ok());
-        let Some(road) = layout.flatten().and_then(|l| roads::Road::new(l).ok()) else {
+        // A network is built with the passages this server's fleet needs (its parameters are the
+        // owner's: the same scenario).
+        let checked_passage_m = app.engine.road.borrow().min_passage_m;
+        let layout = (reply.status == 200).then(|| super::road::parse_layout(reply.body.as_bytes()).ok());
+        let Some(road) = layout.flatten().and_then(|l| l.build(checked_passage_m).ok()) else {
             tracing::warn!("standby of {}: the owner's road could not be read", region.name);
             continue;
         };
-        match app.apply(Command::FollowRoad(Box::new(road))).await {
+        match app.apply(Command::FollowRoad(Box::new(NewRoad { road, checked_passage_m }))).await {
             Ok(_) => taken = Some(mirror.road_version),
             Err(e) => tracing::warn!("standby of {}: the owner's road not taken: {}", region.name, e.message),
         }

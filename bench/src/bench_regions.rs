@@ -38,14 +38,14 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     let mut scenario = trunk_scenario(n, 1).context("the trunk road")?;
     let segments = scenario.segments.len();
     anyhow::ensure!(segments >= count, "{segments} segments cannot make {count} regions");
-    scenario.regions = Some(
+    scenario.regions = Some(fleet::ScenarioRegions::Road(
         (0..count)
             .map(|k| roads::Region {
                 name: format!("r{k}"),
                 segments: [k * segments / count, (k + 1) * segments / count - 1],
             })
             .collect(),
-    );
+    ));
     let scenario = scenario.validate().context("the trunk road's regions")?;
     let endpoints: Vec<String> = (0..count)
         .map(|_| free_endpoint(if args.zenoh_insecure { "tcp" } else { "tls" }))
@@ -73,7 +73,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         let name = format!("r{k}");
         let mut initial = scenario.clone();
         let road = initial.road.clone();
-        initial.uavs.retain(|u| road.region_at(&u.start).is_some_and(|r| r.name == name));
+        initial.uavs.retain(|u| road.region_at(&u.start) == Some(name.as_str()));
         let shared = RegionShared::new(&name);
         let options = ZenohOptions {
             listen: vec![endpoints[k].clone()],
@@ -104,8 +104,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
         config.max_uavs = n;
         config.region = Some(shared.clone());
         let server = Server::start(config)?;
-        let road = scenario.road.road().context("the regions bench flies a road")?;
-        let neighbours = regions::neighbours_of(road, &name).map_err(anyhow::Error::msg)?;
+        let neighbours = regions::neighbours_of(&scenario.road, &name).map_err(anyhow::Error::msg)?;
         let link = regions::start(session, &options, &shared, &neighbours, claim).await?;
         say!("  {name}: {uavs} UAVs, neighbours {}", neighbours.join(", "));
         running.push(Running { server, shared, _link: link });

@@ -177,11 +177,10 @@ fn keep_region(
     name: &str,
     prefix: &str,
 ) -> Result<regions::RegionShared, String> {
-    let road = initial.road.road().ok_or("--region: a road network cannot be divided into regions yet")?;
+    let road = &initial.road;
     regions::neighbours_of(road, name).map_err(|e| format!("--region {e}"))?;
     regions::check_prefix(prefix).map_err(|e| format!("--zenoh-prefix {e}"))?;
-    let road = &initial.road;
-    initial.uavs.retain(|u| road.region_at(&u.start).is_some_and(|r| r.name == name));
+    initial.uavs.retain(|u| road.region_at(&u.start) == Some(name));
     Ok(regions::RegionShared::new(name))
 }
 
@@ -193,11 +192,7 @@ async fn run(args: &ServeArgs, mut config: ServeConfig) -> anyhow::Result<()> {
     // A region's ownership is settled before the loop starts: a server started while the region's
     // owner lives joins as its standby and flies nothing.
     let zenoh = match &config.region {
-        Some(shared) => {
-            let road =
-                config.initial.road.road().context("--region: a road network cannot be divided yet")?;
-            Some(claim_region(args, shared, road.layout()).await?)
-        }
+        Some(shared) => Some(claim_region(args, shared, &config.initial.road.layout()).await?),
         None => None,
     };
     if config.region.as_ref().is_some_and(|r| !r.failover.is_owner()) {
@@ -287,7 +282,7 @@ fn transport(args: &ServeArgs) -> Result<regions::secure::Transport, String> {
     Ok(transport)
 }
 
-fn zenoh_options(args: &ServeArgs, road: &roads::RoadLayout) -> anyhow::Result<regions::ZenohOptions> {
+fn zenoh_options(args: &ServeArgs, road: &roads::AirspaceLayout) -> anyhow::Result<regions::ZenohOptions> {
     let transport = transport(args).map_err(anyhow::Error::msg)?;
     Ok(regions::ZenohOptions {
         listen: args.zenoh_listen.clone(),
@@ -295,7 +290,7 @@ fn zenoh_options(args: &ServeArgs, road: &roads::RoadLayout) -> anyhow::Result<r
         config_file: args.zenoh_config.clone(),
         prefix: args.zenoh_prefix.clone(),
         transport,
-        regions: road.regions.iter().flatten().map(|r| r.name.clone()).collect(),
+        regions: road.region_names().into_iter().map(String::from).collect(),
     })
 }
 
@@ -303,7 +298,7 @@ fn zenoh_options(args: &ServeArgs, road: &roads::RoadLayout) -> anyhow::Result<r
 async fn claim_region(
     args: &ServeArgs,
     shared: &regions::RegionShared,
-    road: &roads::RoadLayout,
+    road: &roads::AirspaceLayout,
 ) -> anyhow::Result<(zenoh::Session, regions::tokens::Claim)> {
     let options = zenoh_options(args, road)?;
     if options.transport == regions::secure::Transport::InsecureLoopback {
@@ -327,10 +322,10 @@ async fn start_region(
     shared: &regions::RegionShared,
     app: &api::state::AppState,
 ) -> anyhow::Result<(regions::RegionLink, zenoh::query::Queryable<()>)> {
-    let road =
-        app.engine.road.borrow().layout.road().cloned().context("a region flies a road, not a network")?;
+    let road = app.engine.road.borrow().layout.clone();
     let options = zenoh_options(args, &road)?;
-    let road = roads::Road::new(road).context("the served road")?;
+    // Served already, so valid: built again for its regions only.
+    let road = road.build(0.0).context("the served road")?;
     let neighbours = regions::neighbours_of(&road, &shared.name).map_err(anyhow::Error::msg)?;
     let link = regions::start(session.clone(), &options, shared, &neighbours, claim).await?;
     let federation = regions::federation::Federation::new(session.clone(), &options.prefix, &shared.name);

@@ -87,7 +87,7 @@ impl Engine {
         let dt = self.fleet.config.params.dt;
         Ok(match command {
             Command::SetRoad(new) => self.replace_road(*new)?,
-            Command::FollowRoad(road) => self.replace_road(NewRoad::road(*road))?,
+            Command::FollowRoad(new) => self.replace_road(*new)?,
             Command::CheckRoad(road) => {
                 self.fleet.check_road(&*road)?;
                 AppliedChange::urgent()

@@ -4,6 +4,19 @@
 use super::store::AuditRecord;
 use fleet::{EditError, ValidScenario};
 use roads::{Airspace, Road};
+
+/// `road of 4 segments` or `network of 3 roads and 1 junctions (13 cells)`.
+fn what_road(road: &Airspace) -> String {
+    match road {
+        Airspace::Road(road) => format!("road of {} segments", road.quads().len()),
+        Airspace::Network(net) => format!(
+            "network of {} roads and {} junctions ({} cells)",
+            net.layout().roads.len(),
+            net.layout().junctions.len(),
+            net.cells().len()
+        ),
+    }
+}
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU8, Ordering};
 use tokio::sync::oneshot;
@@ -16,10 +29,10 @@ pub enum Command {
     SetRoad(Box<NewRoad>),
     /// A standby takes its owner's road (`region::road_follow`); refused by an owner's loop
     /// like nothing else, applied as [`Command::SetRoad`].
-    FollowRoad(Box<Road>),
+    FollowRoad(Box<NewRoad>),
     /// Check that every UAV in the air would be safe on this road, changing nothing (the prepare
     /// step of a deployment-wide road, `serve::deploy`).
-    CheckRoad(Box<Road>),
+    CheckRoad(Box<Airspace>),
     /// Add a simulated UAV at rest at `position`.
     AddUav {
         /// Unique id.
@@ -64,17 +77,9 @@ impl Command {
     /// One line saying what it changes (the audit entry's detail).
     pub fn describe(&self) -> String {
         match self {
-            Command::SetRoad(new) => match &new.road {
-                Airspace::Road(road) => format!("road of {} segments", road.quads().len()),
-                Airspace::Network(net) => format!(
-                    "network of {} roads and {} junctions ({} cells)",
-                    net.layout().roads.len(),
-                    net.layout().junctions.len(),
-                    net.cells().len()
-                ),
-            },
-            Command::FollowRoad(road) => format!("the owner's road of {} segments", road.quads().len()),
-            Command::CheckRoad(road) => format!("check of a road of {} segments", road.quads().len()),
+            Command::SetRoad(new) => what_road(&new.road),
+            Command::FollowRoad(new) => format!("the owner's {}", what_road(&new.road)),
+            Command::CheckRoad(road) => format!("check of a {}", what_road(road)),
             Command::AddUav { id, position, .. } => {
                 format!("added `{id}` at [{}, {}]", position.x, position.y)
             }

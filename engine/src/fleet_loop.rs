@@ -314,10 +314,7 @@ impl Engine {
         let view =
             RoadView::of(self.fleet.airspace(), &self.fleet.config.params, self.road_version, since_ms);
         self.channels.road.send_replace(Arc::new(view));
-        // Only a chain road is divided into regions (a region server never flies a network).
-        if let Some(road) = self.fleet.road() {
-            self.hook.road_changed(road);
-        }
+        self.hook.road_changed(self.fleet.airspace());
     }
 }
 

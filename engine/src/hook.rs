@@ -6,7 +6,7 @@
 use super::command::{ChangeError, Command};
 use super::snapshot::Snapshot;
 use fleet::Fleet;
-use roads::Road;
+use roads::Airspace;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use uav::UavState;
@@ -76,8 +76,8 @@ pub trait LoopHook: Send {
     fn before_tick(&mut self, _fleet: &mut Fleet) {}
     /// After a tick, with its snapshot (before the readers get it); `read_at`: when the tick began.
     fn after_tick(&mut self, _snapshot: &Arc<Snapshot>, _fleet: &Fleet, _read_at: Instant) {}
-    /// The loop flies `road` from now on.
-    fn road_changed(&mut self, _road: &Road) {}
+    /// The loop flies `road` (a road or a network) from now on.
+    fn road_changed(&mut self, _road: &Airspace) {}
     /// Whether `command` may be applied now (a standby refuses every change but its owner's road).
     fn admits(&self, _command: &Command) -> Result<(), ChangeError> {
         Ok(())

@@ -14,6 +14,7 @@ pub mod progress;
 mod ragged;
 mod runs;
 mod scenario;
+mod scenario_regions;
 mod tick;
 pub mod traffic;
 
@@ -37,5 +38,7 @@ pub use runs::run::{
 };
 /// The reach disk of a neighbour that does not run the filter (moved to `safety`; kept here for users of `fleet`).
 pub use safety::{ReachDisk, WATCHDOG_HOLD_S, flown_reach_disk, obstacle_row, point_disk, reach_disk};
-pub use scenario::{Scenario, ScenarioError, ScenarioUav, UavSpec, ValidScenario, min_passage_m};
+pub use scenario::{
+    Scenario, ScenarioError, ScenarioRegions, ScenarioUav, UavSpec, ValidScenario, min_passage_m,
+};
 pub use tick::{PARALLEL_FROM_UAVS, StageTimes};

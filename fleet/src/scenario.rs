@@ -1,11 +1,13 @@
 //! Scenario files: `{"name", "params"?, "segments", "regions"?, "uavs": [{"id", "start", "goal"}]}`
-//! on one road, or `{"name", "params"?, "roads", "junctions"?, "uavs"}` on a network.
+//! on one road, or `{"name", "params"?, "roads", "junctions"?, "regions"?, "uavs"}` on a network.
 
 use links::LinkRules;
 use roads::network::{Junction, Network, NetworkLayout, NetworkRoad};
-use roads::{Airspace, CLEARANCE_MARGIN_M, Road, RoadLayout};
+use roads::{Airspace, AirspaceLayout, CLEARANCE_MARGIN_M, Road, RoadLayout};
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
+
+pub use crate::scenario_regions::ScenarioRegions;
 use uav::{Params, Vec2};
 
 /// A scenario as written in JSON.
@@ -35,11 +37,12 @@ pub struct Scenario {
     #[schemars(with = "Option<Vec<Junction>>")]
     #[schemars(description = "a road network's junctions (with `roads`); null or absent: none")]
     pub junctions: Option<Vec<Junction>>,
-    /// The road's regions, as in a road layout (`airroads serve --region`).
+    /// The road's or network's regions, as in its layout (`airroads serve --region`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    #[schemars(with = "Option<roads::schema::Regions>")]
-    #[schemars(description = "optional, as in a road layout (null or absent: the road is not divided)")]
-    pub regions: Option<Vec<roads::Region>>,
+    #[schemars(
+        description = "optional, as in the layout of the road or network (null or absent: it is not divided)"
+    )]
+    pub regions: Option<ScenarioRegions>,
     /// The fleet.
     #[schemars(length(min = 1))]
     #[schemars(
@@ -60,7 +63,7 @@ fn road_or_network_schema(schema: &mut schemars::Schema) {
     let network = serde_json::json!({
         "required": ["roads"],
         "not": {"required": ["segments"]},
-        "properties": {"roads": {"type": "array"}, "regions": {"type": "null"}}
+        "properties": {"roads": {"type": "array"}}
     });
     object.insert("anyOf".into(), serde_json::json!([road, network]));
 }
@@ -163,29 +166,46 @@ impl Scenario {
         Self { name, params, segments, regions: None, roads: None, junctions: None, uavs }
     }
 
-    /// The road (`segments`, `regions`) or the network (`roads`, `junctions`), validated.
-    fn airspace(&self) -> Result<Airspace, ScenarioError> {
-        let refused = |e: roads::RoadError| invalid(e.field, format!("{} ({})", e.message, e.rule.name()));
+    /// The layout of its road (`segments`, `regions`) or network (`roads`, `junctions`, `regions`),
+    /// not validated; a mix of the two is refused naming the field.
+    pub fn layout(&self) -> Result<AirspaceLayout, ScenarioError> {
         let Some(roads) = &self.roads else {
             if self.junctions.is_some() {
                 return Err(invalid("junctions", "junctions belong to a network: give its `roads` too"));
             }
+            let regions = self.regions.as_ref().map(|r| {
+                r.road().ok_or_else(|| {
+                    invalid("regions", "regions of one road list `segments`, not roads and junctions")
+                })
+            });
             let layout =
-                RoadLayout { regions: self.regions.clone(), ..RoadLayout::new(self.segments.clone()) };
-            return Ok(Airspace::Road(Road::new(layout).map_err(refused)?));
+                RoadLayout { regions: regions.transpose()?, ..RoadLayout::new(self.segments.clone()) };
+            return Ok(AirspaceLayout::Road(layout));
         };
         if !self.segments.is_empty() {
             return Err(invalid("segments", "give `segments` (one road) or `roads` (a network), not both"));
         }
-        if self.regions.is_some() {
-            return Err(invalid(
-                "regions",
-                "regions divide one road's segments; a network cannot be divided yet",
-            ));
-        }
-        let layout =
-            NetworkLayout { roads: roads.clone(), junctions: self.junctions.clone().unwrap_or_default() };
-        Ok(Airspace::Network(Network::new(layout, min_passage_m(&self.params)).map_err(refused)?))
+        let regions = self.regions.as_ref().map(|r| {
+            r.network().ok_or_else(|| {
+                invalid("regions", "regions of a network list `roads` (segment ranges of named roads) and `junctions`, not `segments`")
+            })
+        });
+        Ok(AirspaceLayout::Network(NetworkLayout {
+            roads: roads.clone(),
+            junctions: self.junctions.clone().unwrap_or_default(),
+            regions: regions.transpose()?,
+        }))
+    }
+
+    /// The road or the network, validated.
+    fn airspace(&self) -> Result<Airspace, ScenarioError> {
+        let refused = |e: roads::RoadError| invalid(e.field, format!("{} ({})", e.message, e.rule.name()));
+        Ok(match self.layout()? {
+            AirspaceLayout::Road(layout) => Airspace::Road(Road::new(layout).map_err(refused)?),
+            AirspaceLayout::Network(layout) => {
+                Airspace::Network(Network::new(layout, min_passage_m(&self.params)).map_err(refused)?)
+            }
+        })
     }
 
     /// Parses scenario JSON text.

@@ -39,7 +39,8 @@ fn junction(arms: &[&str], length: f64) -> Network {
         })
         .collect();
     let square = Junction { name: "x".into(), polygon: vec![[-h, -h], [h, -h], [h, h], [-h, h]] };
-    Network::new(NetworkLayout { roads, junctions: vec![square] }, 0.6).expect("a valid junction")
+    Network::new(NetworkLayout { roads, junctions: vec![square], regions: None }, 0.6)
+        .expect("a valid junction")
 }
 
 /// The network's zones as the fleet finds them (the gates of its navigator, D_c as kept).
@@ -229,4 +230,42 @@ fn a_merge_zips_in_the_order_the_uavs_came() {
     order.sort_by(|a, b| a.0.total_cmp(&b.0));
     let switches = order.windows(2).filter(|w| w[0].1 != w[1].1).count();
     assert!(switches >= 6, "the arms take turns: {order:?}");
+}
+
+#[test]
+fn another_region_s_uav_in_the_junction_holds_it_until_it_has_left() {
+    let net = junction(&["east", "west", "north", "south"], 14.0);
+    // A UAV of ours crosses northbound; another region's UAV hovers in the junction for 8 s, then
+    // flies out east at 1 m/s (its region tells us its state every tick).
+    let mut fleet = pd_fleet(net.clone(), &[(Vec2::new(1.0, -8.0), Vec2::new(1.0, 12.0))]);
+    let dt = fleet.config.params.dt;
+    let zones = zones(&net);
+    let (mut waited, mut granted_inside, mut arrived) = (0.0, false, None);
+    let mut closest = f64::INFINITY;
+    for tick in 0..(60.0 / dt) as usize {
+        let t = tick as f64 * dt;
+        let (p, v) = if t < 8.0 {
+            (Vec2::new(-0.5, 0.5), Vec2::zeros())
+        } else {
+            (Vec2::new(-0.5 + (t - 8.0), 0.5), Vec2::new(1.0, 0.0))
+        };
+        let state = uav::UavState { p, v };
+        fleet.set_foreign(&[fleet::ForeignUav { id: "far".into(), state, age_s: 0.0 }]);
+        fleet.tick();
+        let u = &fleet.uavs()[0];
+        let foreign_inside = net.locate(&p).is_some_and(|c| zones.iter().any(|z| z.cell == c));
+        granted_inside |= foreign_inside && u.traffic.junction.is_some();
+        if u.traffic.waiting == Some(WaitReason::Junction) {
+            waited += dt;
+        }
+        closest = closest.min((u.state.p - p).norm());
+        if u.nav.arrived {
+            arrived = Some(t);
+            break;
+        }
+    }
+    assert!(!granted_inside, "never granted while the other region's UAV is in the junction");
+    assert!(waited > 3.0, "it waited for the junction ({waited} s)");
+    assert!(arrived.is_some(), "it arrives once the junction is free");
+    assert!(closest >= Params::default().d_c - 1e-6, "closest to the other region's UAV {closest} m");
 }

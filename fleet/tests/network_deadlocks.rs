@@ -29,7 +29,8 @@ fn junction(length: f64, crossing: bool) -> Network {
         roads.push(road("south", [[-h, -far], [-h, -h], [h, -far], [h, -h]]));
     }
     let square = Junction { name: "x".into(), polygon: vec![[-h, -h], [h, -h], [h, h], [-h, h]] };
-    Network::new(NetworkLayout { roads, junctions: vec![square] }, 0.6).expect("a valid network")
+    Network::new(NetworkLayout { roads, junctions: vec![square], regions: None }, 0.6)
+        .expect("a valid network")
 }
 
 /// What a flight showed: when each UAV arrived, the closest pair (m), whether anyone backed off, and

@@ -7,7 +7,7 @@
 //! passes it, where it used to stop 1.2 m behind it for good.
 
 use fleet::split::{SplitOutcome, fly_split};
-use fleet::{Fleet, FleetConfig, ForeignUav, Scenario, ScenarioUav, ValidScenario};
+use fleet::{Fleet, FleetConfig, ForeignUav, Scenario, ScenarioRegions, ScenarioUav, ValidScenario};
 use links::SimLink;
 use policies::PolicyRegistry;
 use roads::{Region, Road, RoadLayout};
@@ -23,7 +23,7 @@ const MIN_DISTANCE_M: f64 = 0.3 - 0.005;
 fn with_regions(json: &str, ranges: &[[usize; 2]]) -> ValidScenario {
     let mut scenario = Scenario::from_json(json).expect("a shipped scenario parses");
     let regions = ranges.iter().enumerate().map(|(k, &segments)| Region { name: format!("r{k}"), segments });
-    scenario.regions = Some(regions.collect());
+    scenario.regions = Some(ScenarioRegions::Road(regions.collect()));
     scenario.validate().expect("the regions cover the road")
 }
 
@@ -51,10 +51,10 @@ fn single_file_across_a_border() -> ValidScenario {
         uavs.push(uav(format!("west{k}"), [40.0 - x, -y], [8.0 - x, -y]));
     }
     let mut scenario = Scenario::on_road("single_file".into(), uav::Params::default(), segments, uavs);
-    scenario.regions = Some(vec![
+    scenario.regions = Some(ScenarioRegions::Road(vec![
         Region { name: "west".into(), segments: [0, 3] },
         Region { name: "east".into(), segments: [4, 6] },
-    ]);
+    ]));
     scenario.validate().expect("a valid road with regions")
 }
 
@@ -150,10 +150,10 @@ fn single_file_parts_across_a_border_take_turns() {
         for seed in 0..20 {
             let mut scenario = family.scenario(seed);
             let n = scenario.segments.len();
-            scenario.regions = Some(vec![
+            scenario.regions = Some(ScenarioRegions::Road(vec![
                 Region { name: "first".into(), segments: [0, n / 2 - 1] },
                 Region { name: "second".into(), segments: [n / 2, n - 1] },
-            ]);
+            ]));
             let scenario = scenario.validate().expect("generated scenarios are valid");
             let one = fly(&scenario, "pd", false);
             let split = fly(&scenario, "pd", true);

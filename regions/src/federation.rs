@@ -6,7 +6,7 @@
 //! The HTTP side (what is forwarded, how reads are merged) is `serve::federate`.
 
 use engine::fleet_loop::RoadView;
-use roads::Road;
+use roads::Airspace;
 use serde::{Deserialize, Serialize};
 use std::sync::{Arc, Mutex, PoisonError};
 use std::time::Duration;
@@ -110,7 +110,7 @@ pub enum Answer {
 }
 
 /// A road with the version it was served at.
-type VersionedRoad = (u64, Arc<Road>);
+type VersionedRoad = (u64, Arc<Airspace>);
 
 /// Asks the other regions over the region's Zenoh session.
 #[derive(Clone)]
@@ -119,7 +119,8 @@ pub struct Federation {
     prefix: String,
     /// This server's region.
     pub own: String,
-    /// The served road, built once per version (to find the region of a new UAV's position).
+    /// The served road or network, built once per version (to find the region of a new UAV's
+    /// position).
     road: Arc<Mutex<Option<VersionedRoad>>>,
     /// Regions that did not answer lately, until when they count as silent.
     silent_until: Arc<Mutex<std::collections::HashMap<String, std::time::Instant>>>,
@@ -143,15 +144,16 @@ impl Federation {
         }
     }
 
-    /// The road of `view` (built at its first use per version; None if it does not build).
-    pub fn road(&self, view: &RoadView) -> Option<Arc<Road>> {
+    /// The road or network of `view` (built at its first use per version, a network with the
+    /// passages it was validated for; None if it does not build).
+    pub fn road(&self, view: &RoadView) -> Option<Arc<Airspace>> {
         let mut cached = self.road.lock().unwrap_or_else(PoisonError::into_inner);
         if let Some((version, road)) = cached.as_ref()
             && *version == view.version
         {
             return Some(road.clone());
         }
-        let road = Arc::new(Road::new(view.layout.road()?.clone()).ok()?);
+        let road = Arc::new(view.layout.clone().build(view.min_passage_m).ok()?);
         *cached = Some((view.version, road.clone()));
         Some(road)
     }

@@ -21,6 +21,7 @@ use super::ownership::OwnershipLog;
 use super::screen::{PeerRefusals, Screen};
 use fleet::{Condition, Fleet, ForeignUav};
 use links::LinkRules;
+use roads::Airspace;
 use serde::Serialize;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -127,7 +128,8 @@ pub struct Handover {
     ghosts: HashMap<String, Ghost>,
     /// UAVs adopted lately: their old owner's messages may still list them.
     adopted: HashMap<String, Instant>,
-    /// Each segment's region, when it is a neighbour of this one (by the road's version).
+    /// Each segment's (road) or cell's (network) region, when it is a neighbour of this one (by
+    /// the road's version).
     segment_owner: Vec<Option<String>>,
     road_version: Option<u64>,
     /// Releases to this region read while it was a standby, with when.
@@ -273,22 +275,31 @@ impl Handover {
         changes
     }
 
-    /// Offers every UAV of `fleet` whose tracked segment lies in a neighbouring region to that
-    /// region (one offer at a time per UAV); `road_version` tells when to recompute the segments'
-    /// regions. Only UAVs flying their policy on a fresh state are offered (a Crazyflie taking off,
-    /// landing or lost stays with its owner until it flies again).
+    /// Offers every UAV of `fleet` whose tracked cell lies in a neighbouring region to that region
+    /// (one offer at a time per UAV): on a road its tracked segment, on a network the cell it is
+    /// in; `road_version` tells when to recompute the cells' regions. Only UAVs flying their
+    /// policy on a fresh state are offered (a Crazyflie taking off, landing or lost stays with its
+    /// owner until it flies again).
     pub fn offer(&mut self, fleet: &Fleet, road_version: u64, now: Instant) {
+        let space = fleet.airspace();
         if self.road_version != Some(road_version) {
             self.road_version = Some(road_version);
-            // A region's fleet flies a road (a network cannot be divided yet: `serve` refuses it).
-            let Some(road) = fleet.road() else { return };
-            let neighbours = super::neighbours_of(road, &self.own).unwrap_or_default();
-            self.segment_owner = (0..road.quads().len())
-                .map(|s| road.region_of(s).map(|r| r.name.clone()).filter(|n| neighbours.contains(n)))
+            let neighbours = super::neighbours_of(space, &self.own).unwrap_or_default();
+            self.segment_owner = (0..space.cell_count())
+                .map(|c| {
+                    space
+                        .region_of(c)
+                        .filter(|n| neighbours.iter().any(|m| m.as_str() == *n))
+                        .map(String::from)
+                })
                 .collect();
         }
         for u in fleet.uavs() {
-            let Some(Some(to)) = u.nav.tracker.current.and_then(|s| self.segment_owner.get(s)) else {
+            let cell = match space {
+                Airspace::Road(_) => u.nav.tracker.current,
+                Airspace::Network(net) => net.locate(&u.state.p),
+            };
+            let Some(Some(to)) = cell.and_then(|c| self.segment_owner.get(c)) else {
                 continue;
             };
             if self.offers.contains_key(&u.id)

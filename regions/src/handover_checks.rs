@@ -6,6 +6,7 @@ use super::{Handover, MAX_RESERVATIONS_PER_SENDER, UavRecord};
 use crate::screen::PeerRefusals;
 use fleet::Fleet;
 use links::LinkRules;
+use roads::Airspace;
 
 impl Handover {
     /// Why this region cannot take UAV `id` offered by `from` (Err: the reason sent back).
@@ -42,13 +43,14 @@ impl Handover {
         if let Err(e) = fleet.check_start(&state, "state") {
             return refused(&self.screen.refused.unsafe_uav, format!("unsafe here: {e}"));
         }
-        // In this region or the segment next to either end (the tracker's hysteresis).
-        let Some(road) = fleet.road() else {
-            return refused(&self.screen.refused.far_from_region, "this server flies no road".into());
+        // In this region or next to it: on a road the segment past either end (the tracker's
+        // hysteresis), on a network a cell a passage joins to one of its cells.
+        let space = fleet.airspace();
+        let cell = match space {
+            Airspace::Road(road) => Some(road.locate(&state.p, None)),
+            Airspace::Network(net) => net.locate(&state.p),
         };
-        let segment = road.locate(&state.p, None);
-        let own = road.layout().regions.iter().flatten().find(|r| r.name == self.own);
-        if own.is_none_or(|r| segment + 1 < r.first() || segment > r.last() + 1) {
+        if !cell.is_some_and(|c| space.in_or_next_to_region(c, &self.own)) {
             let why = format!("[{}, {}] is not in or next to region `{}`", state.p.x, state.p.y, self.own);
             return refused(&self.screen.refused.far_from_region, why);
         }

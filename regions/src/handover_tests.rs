@@ -1,5 +1,6 @@
 //! The handover protocol between two regions' loops, messages carried by hand (as Zenoh would, in
-//! any order the tests choose): one owner at every step, refusals, stale answers and timeouts.
+//! any order the tests choose): one owner at every step, refusals, stale answers and timeouts; on a
+//! network, in `network`.
 
 use super::*;
 use fleet::{Fleet, FleetConfig};
@@ -29,8 +30,13 @@ fn road() -> Road {
 }
 
 fn side(name: &str) -> Side {
+    side_on(name, road().into())
+}
+
+/// Region `name`'s side, its fleet flying `space`.
+fn side_on(name: &str, space: roads::Airspace) -> Side {
     let config = FleetConfig::default();
-    let fleet = Fleet::new(config, road(), PolicyRegistry::with_pd(config.params.delta));
+    let fleet = Fleet::new(config, space, PolicyRegistry::with_pd(config.params.delta));
     let (inbox, inbox_rx) = sync_channel(256);
     let (outbox_tx, outbox) = tokio::sync::mpsc::channel(256);
     let screen = Arc::new(super::super::screen::Screen::default());
@@ -371,3 +377,6 @@ fn offers_off_the_road_too_close_listed_elsewhere_or_too_many_are_refused_by_nam
     assert_eq!(report["unsafe_uav"], 3);
     assert_eq!(report["far_from_region"], 1);
 }
+
+#[path = "handover_network_tests.rs"]
+mod network;

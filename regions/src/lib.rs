@@ -20,12 +20,16 @@ pub mod federation;
 pub mod handover;
 mod loop_hook;
 pub mod messages;
+#[cfg(test)]
+mod neighbours_tests;
 pub mod ownership;
 mod publish;
 pub mod screen;
 pub mod secure;
 pub mod table;
 mod takeover;
+#[cfg(test)]
+mod test_network;
 pub mod tokens;
 pub mod wire;
 
@@ -37,7 +41,7 @@ pub use ownership::OwnershipLog;
 pub use table::ForeignTable;
 
 use engine::snapshot::Snapshot;
-use roads::Road;
+use roads::Airspace;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 use std::sync::mpsc::SyncSender;
 use std::sync::{Arc, Mutex, PoisonError};
@@ -77,24 +81,20 @@ pub fn check_prefix(prefix: &str) -> Result<(), String> {
     }
 }
 
-/// The regions next to `name` on `road` (whose segment range touches its own), by segment order;
-/// the error names the region and the known ones.
-pub fn neighbours_of(road: &Road, name: &str) -> Result<Vec<String>, String> {
-    let regions = road.layout().regions.as_deref().unwrap_or_default();
-    let known = || regions.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ");
-    let Some(own) = regions.iter().find(|r| r.name == name) else {
-        return Err(if regions.is_empty() {
-            format!("`{name}`: the road has no regions")
-        } else {
-            format!("`{name}`: the road has no such region (known: {})", known())
-        });
-    };
-    let mut next: Vec<&roads::Region> = regions
-        .iter()
-        .filter(|r| r.name != name && (r.last() + 1 == own.first() || own.last() + 1 == r.first()))
-        .collect();
-    next.sort_by_key(|r| r.first());
-    Ok(next.into_iter().map(|r| r.name.clone()).collect())
+/// The regions next to `name` on `space`: on a road those whose segment range touches its own, by
+/// segment order; on a network those a passage joins to one of its cells, in the layout's order.
+/// The error names the region and the known ones.
+pub fn neighbours_of(space: &Airspace, name: &str) -> Result<Vec<String>, String> {
+    if let Some(next) = space.neighbour_regions(name) {
+        return Ok(next.into_iter().map(String::from).collect());
+    }
+    let what = if space.network().is_some() { "network" } else { "road" };
+    let known = space.region_names();
+    Err(if known.is_empty() {
+        format!("`{name}`: the {what} has no regions")
+    } else {
+        format!("`{name}`: the {what} has no such region (known: {})", known.join(", "))
+    })
 }
 
 /// A snapshot on its way to the publishing task, with when its states were read.
@@ -363,26 +363,6 @@ fn receive(table: &ForeignTable, screen: &screen::Screen, expected: &str, payloa
 #[cfg(test)]
 mod tests {
     use super::*;
-    use roads::{Region, RoadLayout};
-
-    fn road_of_three() -> Road {
-        let mut layout = RoadLayout::straight(0.0, 30.0, 4.0, 6);
-        let region = |name: &str, first, last| Region { name: name.into(), segments: [first, last] };
-        layout.regions = Some(vec![region("c", 4, 5), region("a", 0, 1), region("b", 2, 3)]);
-        Road::new(layout).unwrap() // a valid layout: three regions covering six segments
-    }
-
-    #[test]
-    fn neighbours_are_the_regions_whose_ranges_touch() {
-        let road = road_of_three();
-        assert_eq!(neighbours_of(&road, "a").unwrap(), ["b"]);
-        assert_eq!(neighbours_of(&road, "b").unwrap(), ["a", "c"]);
-        assert_eq!(neighbours_of(&road, "c").unwrap(), ["b"]);
-        let e = neighbours_of(&road, "d").unwrap_err();
-        assert!(e.contains("`d`") && e.contains("known: c, a, b"), "{e}");
-        let plain = Road::new(RoadLayout::straight(0.0, 30.0, 4.0, 6)).unwrap(); // valid
-        assert!(neighbours_of(&plain, "a").unwrap_err().contains("no regions"));
-    }
 
     #[test]
     fn prefixes_are_plain_key_chunks() {

@@ -12,7 +12,7 @@ use engine::fleet_loop::next_wall_boundary;
 use engine::hook::{Arrival, LoopEdits, LoopHook, Ownership};
 use engine::snapshot::Snapshot;
 use fleet::{Fleet, ForeignUav};
-use roads::Road;
+use roads::Airspace;
 use std::sync::{Arc, PoisonError};
 use std::time::{Duration, Instant};
 use uav::Vec2;
@@ -143,7 +143,7 @@ impl LoopHook for RegionLoop {
         self.shared.published.send_replace(Some(published));
     }
 
-    fn road_changed(&mut self, road: &Road) {
+    fn road_changed(&mut self, road: &Airspace) {
         // The other regions' messages are checked against the road flown.
         self.shared.screen.set_road(road);
     }
@@ -228,8 +228,9 @@ mod tests {
             link: None,
         };
         assert_eq!(side.admits(&add), Err(ChangeError::Standby("west".into())));
-        let road = edits(true).fleet.road().expect("the test fleet flies a road").clone();
-        assert_eq!(side.admits(&Command::FollowRoad(Box::new(road))), Ok(()));
+        let road = edits(true).fleet.airspace().clone();
+        let follow = Command::FollowRoad(Box::new(engine::command::NewRoad { road, checked_passage_m: 0.0 }));
+        assert_eq!(side.admits(&follow), Ok(()));
         assert_eq!(NoHook.admits(&add), Ok(()), "a single server admits every change");
     }
 

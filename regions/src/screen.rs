@@ -6,9 +6,11 @@
 //! reach disks grow: safe, never blind) when its sender sends faster than [`MESSAGES_PER_SECOND`]
 //! allows, names a region the road does not have, lists more than [`MAX_UAVS_PER_REGION`] UAVs, an
 //! id that breaks the id rule or comes twice, or a UAV farther than [`NEAR_M`] from the sender's
-//! segments (and the one next to each end, where its UAVs cross or are handed over).
+//! segments (and the one next to each end, where its UAVs cross or are handed over); on a network,
+//! farther than [`NEAR_M`] from the box of every cell of the sender's region and of every cell a
+//! passage joins to one of them.
 
-use roads::Road;
+use roads::Airspace;
 use serde::Serialize;
 use std::collections::{HashMap, HashSet};
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
@@ -74,11 +76,48 @@ pub enum Refusal {
     Far(String, String),
 }
 
-/// The road as the screen needs it: each region's segment range, widened by one at each end.
+/// Where a region's UAVs may be: on a road its segment range widened by one at each end, on a
+/// network its cells and those a passage joins to them.
+#[derive(Debug)]
+enum Extent {
+    Segments(usize, usize),
+    Cells(HashSet<usize>),
+}
+
+/// The road or network as the screen needs it: each region's extent.
 #[derive(Debug)]
 struct Geography {
-    road: Road,
-    ranges: HashMap<String, (usize, usize)>,
+    space: Airspace,
+    extents: HashMap<String, Extent>,
+}
+
+impl Geography {
+    /// Each region's extent on `space`; O(cells + passages).
+    fn new(space: &Airspace) -> Self {
+        let extents = match space {
+            Airspace::Road(road) => {
+                let last = road.quads().len().saturating_sub(1);
+                let regions = road.layout().regions.iter().flatten();
+                regions
+                    .map(|r| {
+                        let extent = Extent::Segments(r.first().saturating_sub(1), (r.last() + 1).min(last));
+                        (r.name.clone(), extent)
+                    })
+                    .collect()
+            }
+            Airspace::Network(net) => {
+                let mut cells: HashMap<String, HashSet<usize>> = HashMap::new();
+                for c in 0..net.cells().len() {
+                    let Some(region) = net.region_of(c) else { continue };
+                    let set = cells.entry(region.name.clone()).or_default();
+                    set.insert(c);
+                    set.extend(net.passages(c).iter().map(|p| p.other));
+                }
+                cells.into_iter().map(|(name, set)| (name, Extent::Cells(set))).collect()
+            }
+        };
+        Self { space: space.clone(), extents }
+    }
 }
 
 #[derive(Debug, Clone, Copy)]
@@ -102,17 +141,9 @@ fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
 }
 
 impl Screen {
-    /// The road now served (called by the loop whenever it changes).
-    pub fn set_road(&self, road: &Road) {
-        let last = road.quads().len().saturating_sub(1);
-        let ranges = road
-            .layout()
-            .regions
-            .iter()
-            .flatten()
-            .map(|r| (r.name.clone(), (r.first().saturating_sub(1), (r.last() + 1).min(last))))
-            .collect();
-        *lock(&self.geography) = Some(Arc::new(Geography { road: road.clone(), ranges }));
+    /// The road or network now served (called by the loop whenever it changes).
+    pub fn set_road(&self, space: &Airspace) {
+        *lock(&self.geography) = Some(Arc::new(Geography::new(space)));
     }
 
     fn geography(&self) -> Option<Arc<Geography>> {
@@ -121,7 +152,7 @@ impl Screen {
 
     /// True when `name` is a region of the served road.
     pub fn knows(&self, name: &str) -> bool {
-        self.geography().is_some_and(|g| g.ranges.contains_key(name))
+        self.geography().is_some_and(|g| g.extents.contains_key(name))
     }
 
     /// Takes one message of `region` from its rate allowance at `now` (refused beyond it; counted).
@@ -157,13 +188,12 @@ impl Screen {
         let Some(geography) = self.geography() else {
             return refusal(&self.refused.unknown_region, Refusal::UnknownRegion(region.into()));
         };
-        let Some(&(first, last)) = geography.ranges.get(region) else {
+        let Some(extent) = geography.extents.get(region) else {
             return refusal(&self.refused.unknown_region, Refusal::UnknownRegion(region.into()));
         };
         if uavs.len() > MAX_UAVS_PER_REGION {
             return refusal(&self.refused.too_many_uavs, Refusal::TooManyUavs(uavs.len()));
         }
-        let (road, quads) = (&geography.road, geography.road.quads());
         let mut seen = HashSet::with_capacity(uavs.len());
         let mut hint = None;
         for (id, [x, y]) in uavs {
@@ -174,13 +204,23 @@ impl Screen {
                 return refusal(&self.refused.bad_id, Refusal::BadId(id.into(), "listed twice".into()));
             }
             let p = uav::Vec2::new(x, y);
-            let s = road.locate(&p, hint);
-            hint = Some(s);
-            // Located in the range (a UAV off the road is located in the segment it is nearest),
-            // or outside it but near one of its two end segments (crossing into a neighbour's).
-            let near = |s: usize| quads[s].margin(&p) >= -NEAR_M;
-            let in_range = (first..=last).contains(&s) && near(s);
-            if !in_range && !near(first) && !near(last) {
+            let near = match (&geography.space, extent) {
+                (Airspace::Road(road), &Extent::Segments(first, last)) => {
+                    let s = road.locate(&p, hint);
+                    hint = Some(s);
+                    // Located in the range (a UAV off the road is located in the segment it is
+                    // nearest), or outside it but near one of its two end segments (crossing
+                    // into a neighbour's).
+                    let quads = road.quads();
+                    let near = |s: usize| quads[s].margin(&p) >= -NEAR_M;
+                    ((first..=last).contains(&s) && near(s)) || near(first) || near(last)
+                }
+                (Airspace::Network(net), Extent::Cells(cells)) => {
+                    net.cells_near(&p, NEAR_M).any(|c| cells.contains(&c))
+                }
+                _ => false,
+            };
+            if !near {
                 return refusal(&self.refused.far_from_region, Refusal::Far(id.into(), region.into()));
             }
         }
@@ -196,7 +236,7 @@ impl Screen {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use roads::{Region, RoadLayout};
+    use roads::{Region, Road, RoadLayout};
     use std::time::Duration;
 
     fn screen() -> Screen {
@@ -205,7 +245,7 @@ mod tests {
         let region = |name: &str, first, last| Region { name: name.into(), segments: [first, last] };
         layout.regions = Some(vec![region("a", 0, 1), region("b", 2, 3), region("c", 4, 5)]);
         let screen = Screen::default();
-        screen.set_road(&Road::new(layout).unwrap()); // a valid layout
+        screen.set_road(&Road::new(layout).unwrap().into()); // a valid layout
         screen
     }
 
@@ -241,6 +281,26 @@ mod tests {
         assert_eq!(report["far_from_region"], 2);
         assert_eq!(report["bad_id"], 4);
         assert_eq!(report["unknown_region"], 1);
+    }
+
+    #[test]
+    fn on_a_network_states_in_or_next_to_the_senders_cells_pass_and_others_are_refused() {
+        let s = Screen::default();
+        s.set_road(&crate::test_network::tee_in_three());
+        // The stem's cells, the junction a passage joins to them, a UAV drifting 5 m off the stem.
+        assert_eq!(
+            check(&s, "stem", &[("u1", [0.0, -10.0]), ("u2", [0.0, 0.0]), ("u3", [7.0, -15.0])]),
+            Ok(())
+        );
+        // The east road's far end is 16 m from the junction's box.
+        assert!(matches!(check(&s, "stem", &[("u1", [18.0, 0.0])]), Err(Refusal::Far(..))));
+        // West holds the junction: the stem's first cell is next to it, its last is not.
+        assert_eq!(
+            check(&s, "west", &[("u1", [0.0, -4.0]), ("u2", [-19.0, 0.0]), ("u3", [13.0, 0.0])]),
+            Ok(())
+        );
+        assert!(matches!(check(&s, "west", &[("u1", [0.0, -19.0])]), Err(Refusal::Far(..))));
+        assert!(s.knows("east") && !s.knows("a"));
     }
 
     #[test]

@@ -62,9 +62,80 @@ impl Airspace {
         }
     }
 
-    /// The region `x` is in (a network has none yet).
-    pub fn region_at(&self, x: &Vec2) -> Option<&Region> {
-        self.road().and_then(|road| road.region_of(road.locate(x, None)))
+    /// The name of the region `x` is in: on a road the region of the segment it is located in (the
+    /// nearest outside), on a network the region of its cell (None outside).
+    pub fn region_at(&self, x: &Vec2) -> Option<&str> {
+        match self {
+            Airspace::Road(road) => self.region_of(road.locate(x, None)),
+            Airspace::Network(net) => self.region_of(net.locate(x)?),
+        }
+    }
+
+    /// The name of the region of segment (road) or cell (network) `cell`; None when it is not
+    /// divided or has no such cell. O(log r) on a road, O(1) on a network.
+    pub fn region_of(&self, cell: usize) -> Option<&str> {
+        match self {
+            Airspace::Road(road) => road.region_of(cell).map(|r| r.name.as_str()),
+            Airspace::Network(net) => net.region_of(cell).map(|r| r.name.as_str()),
+        }
+    }
+
+    /// Its segments (road) or cells (network).
+    pub fn cell_count(&self) -> usize {
+        match self {
+            Airspace::Road(road) => road.quads().len(),
+            Airspace::Network(net) => net.cells().len(),
+        }
+    }
+
+    /// The names of its regions in the layout's order (none when it is not divided).
+    pub fn region_names(&self) -> Vec<&str> {
+        match self {
+            Airspace::Road(road) => road.layout().regions.iter().flatten().map(|r| r.name.as_str()).collect(),
+            Airspace::Network(net) => {
+                net.layout().regions.iter().flatten().map(|r| r.name.as_str()).collect()
+            }
+        }
+    }
+
+    /// The regions next to region `name` (None: no such region): on a road those whose segment
+    /// range touches its own, by segment order; on a network those a passage joins to one of its
+    /// cells, in the layout's order.
+    pub fn neighbour_regions(&self, name: &str) -> Option<Vec<&str>> {
+        match self {
+            Airspace::Road(road) => {
+                let regions = road.layout().regions.as_deref()?;
+                let own = regions.iter().find(|r| r.name == name)?;
+                let mut next: Vec<&Region> = regions
+                    .iter()
+                    .filter(|r| {
+                        r.name != name && (r.last() + 1 == own.first() || own.last() + 1 == r.first())
+                    })
+                    .collect();
+                next.sort_by_key(|r| r.first());
+                Some(next.into_iter().map(|r| r.name.as_str()).collect())
+            }
+            Airspace::Network(net) => {
+                let regions = net.layout().regions.as_deref()?;
+                let k = regions.iter().position(|r| r.name == name)?;
+                Some(net.region_neighbours(k).into_iter().map(|o| regions[o].name.as_str()).collect())
+            }
+        }
+    }
+
+    /// True when segment or cell `cell` lies in region `name` or next to it (a road: the segment
+    /// past either end of its range; a network: a cell a passage joins to one of its cells).
+    pub fn in_or_next_to_region(&self, cell: usize, name: &str) -> bool {
+        match self {
+            Airspace::Road(road) => {
+                let own = road.layout().regions.iter().flatten().find(|r| r.name == name);
+                own.is_some_and(|r| cell + 1 >= r.first() && cell <= r.last() + 1)
+            }
+            Airspace::Network(net) => {
+                let k = net.layout().regions.iter().flatten().position(|r| r.name == name);
+                k.is_some_and(|k| net.in_or_next_to_region(cell, k))
+            }
+        }
     }
 
     /// The segment (of a road) or cell (of a network) `x` is in, `previous` preferred on a road; on

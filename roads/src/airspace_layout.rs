@@ -52,9 +52,22 @@ impl AirspaceLayout {
         }
     }
 
-    /// The regions of a chain layout (a network is never divided yet).
+    /// The regions of a chain layout (a network's are [`NetworkLayout::regions`]).
     pub fn regions(&self) -> Option<&[Region]> {
         self.road().and_then(|l| l.regions.as_deref())
+    }
+
+    /// The names of its regions (a chain's or a network's) in the layout's order; none when it is
+    /// not divided.
+    pub fn region_names(&self) -> Vec<&str> {
+        match self {
+            AirspaceLayout::Road(layout) => {
+                layout.regions.iter().flatten().map(|r| r.name.as_str()).collect()
+            }
+            AirspaceLayout::Network(layout) => {
+                layout.regions.iter().flatten().map(|r| r.name.as_str()).collect()
+            }
+        }
     }
 
     /// Its cells: a chain's segments, or a network's segments and junctions.
@@ -95,7 +108,7 @@ impl JsonSchema for AirspaceLayout {
     fn json_schema(generator: &mut SchemaGenerator) -> Schema {
         json_schema!({
             "anyOf": [generator.subschema_for::<RoadLayout>(), generator.subschema_for::<NetworkLayout>()],
-            "description": "one road (a chain layout: `segments`, optional `regions`) or a road network (`roads` and optional `junctions`; a network has no regions)"
+            "description": "one road (a chain layout: `segments`, optional `regions`: segment ranges) or a road network (`roads`, optional `junctions` and `regions`: sets of cells)"
         })
     }
 }

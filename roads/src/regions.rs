@@ -55,12 +55,12 @@ impl RegionOrder {
     }
 }
 
-fn err(field: String, segment: Option<usize>, rule: RoadRule, message: String) -> RoadError {
+pub(crate) fn err(field: String, segment: Option<usize>, rule: RoadRule, message: String) -> RoadError {
     RoadError { field, segment, rule, message }
 }
 
 /// `segment 4` or `segments 4 to 6`.
-fn span(first: usize, last: usize) -> String {
+pub(crate) fn span(first: usize, last: usize) -> String {
     if first == last { format!("segment {first}") } else { format!("segments {first} to {last}") }
 }
 
@@ -127,12 +127,12 @@ pub(crate) fn check_regions(regions: Option<&[Region]>, n: usize) -> Result<Regi
 }
 
 /// All segments of a road of `n`: `segments 0 to 4`, `segment 0` or `no segment`.
-fn all(n: usize) -> String {
+pub(crate) fn all(n: usize) -> String {
     n.checked_sub(1).map_or_else(|| "no segment".into(), |last| span(0, last))
 }
 
 /// `segment 4 is` or `segments 4 to 6 are`.
-fn span_is(first: usize, last: usize) -> String {
+pub(crate) fn span_is(first: usize, last: usize) -> String {
     let verb = if first == last { "is" } else { "are" };
     format!("{} {verb}", span(first, last))
 }
@@ -156,7 +156,7 @@ fn by_first_segment(regions: &[Region], n: usize) -> Vec<usize> {
 }
 
 /// A region name is 1 to [`MAX_REGION_NAME`] characters from `A-Z a-z 0-9 _ -`.
-fn check_name(i: usize, name: &str) -> Result<(), RoadError> {
+pub(crate) fn check_name(i: usize, name: &str) -> Result<(), RoadError> {
     let field = || format!("regions[{i}].name");
     if name.is_empty() {
         return Err(err(field(), None, RoadRule::EmptyRegionName, "a region needs a name".into()));

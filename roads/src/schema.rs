@@ -82,6 +82,25 @@ impl JsonSchema for Regions {
     }
 }
 
+/// A network's regions: 1 to [`crate::network::MAX_CELLS`] named sets of cells.
+pub struct NetworkRegions;
+
+impl JsonSchema for NetworkRegions {
+    fn schema_name() -> Cow<'static, str> {
+        "NetworkRegions".into()
+    }
+
+    fn json_schema(generator: &mut SchemaGenerator) -> Schema {
+        json_schema!({
+            "type": "array",
+            "items": generator.subschema_for::<crate::network::NetworkRegion>(),
+            "minItems": 1,
+            "maxItems": crate::network::MAX_CELLS,
+            "description": "named sets of cells (segment ranges of named roads, whole junctions) that cover every cell exactly once, names unique; beyond the schema refused with 422 (`field` naming `regions[k].roads[j]` or `regions[k].junctions[j]`) for an unknown road or junction (unknown_name), a range reversed (reversed_region) or past the road's last segment (region_out_of_range), a cell in two regions (region_overlap) or in none (region_gap), a region with no cell (empty_region), an empty, invalid or repeated name"
+        })
+    }
+}
+
 /// The pattern of a region's name: 1 to [`MAX_REGION_NAME`] characters from `A-Z a-z 0-9 _ -`.
 pub fn region_name_pattern() -> String {
     format!("^[A-Za-z0-9_-]{{1,{MAX_REGION_NAME}}}$")

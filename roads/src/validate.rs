@@ -50,6 +50,10 @@ pub enum RoadRule {
     RegionOverlap,
     /// A segment is in no region.
     RegionGap,
+    /// A network's region lists no road and no junction.
+    EmptyRegion,
+    /// A network's region names a road or junction the network does not have.
+    UnknownName,
     /// A network's road or junction name is empty, longer than 64 characters or has a character
     /// outside `A-Za-z0-9_-`.
     InvalidName,
@@ -92,6 +96,8 @@ impl RoadRule {
             RoadRule::RegionOutOfRange => "region_out_of_range",
             RoadRule::RegionOverlap => "region_overlap",
             RoadRule::RegionGap => "region_gap",
+            RoadRule::EmptyRegion => "empty_region",
+            RoadRule::UnknownName => "unknown_name",
             RoadRule::InvalidName => "invalid_name",
             RoadRule::DuplicateName => "duplicate_name",
             RoadRule::JunctionSides => "junction_sides",
@@ -110,10 +116,12 @@ impl RoadRule {
 #[error("{field} ({}): {message}", rule.name())]
 pub struct RoadError {
     /// JSON path of the offending field: `segments[i]`, `segments`, `regions[i].name`,
-    /// `regions[i].segments` or `regions`.
+    /// `regions[i].segments` or `regions`; on a network also `regions[i].roads[j]`,
+    /// `regions[i].junctions[j]` and the roads' and junctions' fields.
     pub field: String,
     /// Index of the offending segment (None for layout-wide rules and for a region's name or range;
-    /// the segment in two regions or in none for [`RoadRule::RegionOverlap`], [`RoadRule::RegionGap`]).
+    /// the segment in two regions or in none for [`RoadRule::RegionOverlap`], [`RoadRule::RegionGap`],
+    /// of its road on a network, None for a junction).
     pub segment: Option<usize>,
     /// The rule that was broken.
     pub rule: RoadRule,

@@ -37,7 +37,8 @@ fn junction(sides: usize, radius: f64, turn: f64, open: u8, pieces: usize, lengt
         roads.push(NetworkRoad { name: format!("r{k}"), segments, one_way: false, speed_limit: None });
     }
     let polygon = corners.iter().map(|c| [c.x, c.y]).collect();
-    let layout = NetworkLayout { roads, junctions: vec![Junction { name: "j".into(), polygon }] };
+    let layout =
+        NetworkLayout { roads, junctions: vec![Junction { name: "j".into(), polygon }], regions: None };
     // A triangle with a closed side has a corner of 60° between walls: refused (`sharp_corner`).
     Network::new(layout, 0.5).ok()
 }

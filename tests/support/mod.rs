@@ -6,6 +6,7 @@
 pub mod crazyflies;
 pub mod firmware;
 pub mod procs;
+pub mod regions;
 
 use airroads_server::serve::{ServeConfig, Server};
 use serde_json::Value;

@@ -140,7 +140,7 @@ fn grid_layout(blocks: usize) -> (NetworkLayout, Vec<Street>) {
         let edges: Vec<(Vec2, Vec2)> = (0..=pieces).map(at).collect();
         NetworkRoad { speed_limit: Some(CITY_SPEED_LIMIT_MPS), ..road_through(name, &edges, false) }
     };
-    let mut layout = NetworkLayout { roads: Vec::new(), junctions: Vec::new() };
+    let mut layout = NetworkLayout { roads: Vec::new(), junctions: Vec::new(), regions: None };
     let mut streets = Vec::new();
     let (east, north) = (Vec2::new(1.0, 0.0), Vec2::new(0.0, 1.0));
     for i in 0..=blocks {

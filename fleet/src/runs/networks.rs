@@ -148,7 +148,7 @@ pub(super) fn polygon(name: &str, v: &[Vec2]) -> Junction {
 fn star(rng: &mut StdRng, v: &[Vec2], open: &[usize]) -> (NetworkLayout, Ends) {
     let roads = open.iter().map(|&k| spoke(format!("r{k}"), v, k, rng.random_range(6.0..14.0))).collect();
     let all: Vec<usize> = (0..open.len()).collect();
-    let layout = NetworkLayout { roads, junctions: vec![polygon("j", v)] };
+    let layout = NetworkLayout { roads, junctions: vec![polygon("j", v)], regions: None };
     (layout, Ends { from: all.clone(), to: all, from_start: false, uavs: 2..=16 })
 }
 
@@ -164,7 +164,7 @@ fn merge(rng: &mut StdRng) -> (NetworkLayout, Ends) {
     let (a, b, out) = side(&v, 2);
     let length = rng.random_range(10.0..20.0);
     roads.push(straight("out".into(), (a, b), (a + out * length, b + out * length), true));
-    let layout = NetworkLayout { roads, junctions: vec![polygon("j", &v)] };
+    let layout = NetworkLayout { roads, junctions: vec![polygon("j", &v)], regions: None };
     (layout, Ends { from: vec![0, 1], to: vec![2], from_start: true, uavs: 2..=12 })
 }
 
@@ -208,7 +208,7 @@ fn ring(
         last.segments[end][2] = first[1];
     }
     let spokes: Vec<usize> = (0..n).map(|k| 2 * k).collect();
-    let layout = NetworkLayout { roads, junctions };
+    let layout = NetworkLayout { roads, junctions, regions: None };
     let uavs = 3..=if roundabout { 16 } else { 24 };
     (layout, Ends { from: spokes.clone(), to: spokes, from_start: false, uavs })
 }
@@ -219,7 +219,7 @@ fn grid(rng: &mut StdRng) -> (NetworkLayout, Ends) {
     let (nx, ny) = (rng.random_range(2..=4usize), rng.random_range(2..=4usize));
     let pitch = rng.random_range(8.0..16.0);
     let half = rng.random_range(1.0..2.0);
-    let mut layout = NetworkLayout { roads: Vec::new(), junctions: Vec::new() };
+    let mut layout = NetworkLayout { roads: Vec::new(), junctions: Vec::new(), regions: None };
     let square = |x: f64, y: f64| {
         [
             Vec2::new(x - half, y - half),

@@ -212,7 +212,7 @@ impl TickPipeline {
                 fleet.traffic.congestion.choose(&nav, margin, (now, params.dt), fleet.uavs, tracked);
             }
             let rules = &mut fleet.traffic.junctions;
-            rules.plan(net, nav.gates, &params, now, fleet.uavs, tracked);
+            rules.plan(net, (nav.gates, &params), now, (fleet.uavs, fleet.foreign), tracked);
             if reroute.is_some() {
                 fleet.traffic.congestion.observe(net, params.dt, fleet.uavs);
             }

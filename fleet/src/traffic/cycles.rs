@@ -50,6 +50,8 @@ pub struct WaitCycles {
     seen: Vec<u8>,
     /// Scratch: the walk being followed.
     walk: Vec<usize>,
+    /// Scratch: one cycle's UAVs that their predecessor waits for in body, with that predecessor.
+    candidates: Vec<(usize, usize)>,
 }
 
 impl WaitCycles {
@@ -114,10 +116,11 @@ impl WaitCycles {
     /// Breaks the cycle `walk[from..]`: the UAV of least priority among those their predecessor
     /// waits for in body that can step off its predecessor's way inside the network backs off (none
     /// when none can: the cycle is tried again next tick, as the UAVs may have moved).
-    fn break_cycle(&self, net: &Network, params: &Params, now: f64, uavs: &mut [Uav], from: usize) {
+    fn break_cycle(&mut self, net: &Network, params: &Params, now: f64, uavs: &mut [Uav], from: usize) {
         let cycle = &self.walk[from..];
         let (d_c, keep) = (params.kept_d_c(), params.kept_d_s() + KEEP_M);
-        let mut candidates: Vec<(usize, usize)> = Vec::with_capacity(cycle.len());
+        let candidates = &mut self.candidates;
+        candidates.clear();
         for (i, &pred) in cycle.iter().enumerate() {
             let victim = cycle[(i + 1) % cycle.len()];
             if self.waits[pred] == Some(Wait::Body(victim)) {
@@ -130,7 +133,7 @@ impl WaitCycles {
             let (ua, ub) = (&uavs[a.0], &uavs[b.0]);
             stall(ua).total_cmp(&stall(ub)).then_with(|| ub.id.cmp(&ua.id))
         });
-        for (victim, pred) in candidates {
+        for &(victim, pred) in candidates.iter() {
             let (me, them) = (uavs[victim].state.p, &uavs[pred]);
             let flying = Flying { p: them.state.p, target: them.last.target };
             let aside = make_way(me, me, std::iter::once(flying), d_c);

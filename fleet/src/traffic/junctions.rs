@@ -19,7 +19,7 @@
 //! A grant is held while the UAV is in the zone and until it is [`LEAVE_IN_DC`]·D_c past the gate
 //! out of it. Cost per tick: O(UAVs + requests · holders), holders being those of one zone.
 
-use crate::member::{Uav, WaitReason};
+use crate::member::{ForeignUav, Uav, WaitReason};
 use crate::traffic::FOLLOW_GAP_IN_DC;
 use roads::network::{Conflict, ConflictZone, GateRule, Hold, Movement, Network, Way};
 use uav::Params;
@@ -45,6 +45,9 @@ pub const STOP_MARGIN_M: f64 = 0.05;
 
 /// A grant is held until its UAV is this many D_c past the gate out of the zone.
 pub const LEAVE_IN_DC: f64 = 0.0;
+
+/// Who holds a zone when another region's UAV is in it (not one of the fleet's UAVs).
+const FOREIGN: usize = usize::MAX;
 
 /// A request for a movement through a zone this tick.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -90,14 +93,14 @@ impl JunctionRules {
     /// Applies the rules at time `now` to the UAVs that `tracked` says fly to a goal: sets each one's
     /// `traffic.junction` (its grant), `traffic.hold` (where its way stops this tick) and
     /// `traffic.waiting`. `rule` narrows the passages as the UAVs' ways do; movements closer than
-    /// D_c (as kept) cross; δ gives the braking distance.
+    /// D_c (as kept) cross; δ gives the braking distance. A `foreign` UAV (another region's) in a
+    /// zone holds it against every movement from an arm.
     pub fn plan(
         &mut self,
         net: &Network,
-        rule: GateRule,
-        params: &Params,
+        (rule, params): (GateRule, &Params),
         now: f64,
-        uavs: &mut [Uav],
+        (uavs, foreign): (&mut [Uav], &[ForeignUav]),
         tracked: impl Fn(&Uav) -> bool,
     ) {
         let (d_c, delta) = (params.kept_d_c(), params.delta);
@@ -112,6 +115,15 @@ impl JunctionRules {
             uavs.iter_mut().for_each(|u| u.traffic.junction = None);
         }
         self.held.iter_mut().for_each(Vec::clear);
+        // Another region's UAV in a zone (where it is now as far as is known) holds it against
+        // every movement from an arm: its way through the zone is not known here.
+        for f in foreign {
+            let p = f.state.p + f.state.v * f.age_s;
+            if let Some(zone) = net.locate(&p).and_then(|c| self.zone_of_cell[c]) {
+                let inside = self.zones[zone].arms.len();
+                self.held[zone].push((Movement { entry: inside, exit: inside }, FOREIGN));
+            }
+        }
         self.requests.clear();
         for (k, u) in uavs.iter_mut().enumerate() {
             u.traffic.hold = None;
@@ -218,7 +230,7 @@ impl JunctionRules {
                 continue;
             };
             self.refused.push((r.movement, r.since, r.who));
-            self.waits_for[r.who] = Some(waits_for);
+            self.waits_for[r.who] = (waits_for != FOREIGN).then_some(waits_for);
             // Its place in the line of its arm: FOLLOW_GAP_IN_DC·D_c behind the one ahead of it.
             let place = match line {
                 Some(l) => {

@@ -70,7 +70,7 @@ pub fn ladder(shared_limit: Option<f64>, exit: bool) -> Network {
         square("k2", 60.0, 12.0),
         square("c", 10.0, 6.0),
     ];
-    Network::new(NetworkLayout { roads, junctions }, 0.6).expect("a valid ladder")
+    Network::new(NetworkLayout { roads, junctions, regions: None }, 0.6).expect("a valid ladder")
 }
 
 /// The group (west to east, one file 1.5 m apart in the eastbound lane from `head` m west of `j1`,

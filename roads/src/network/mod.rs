@@ -8,14 +8,18 @@
 mod check;
 pub use check::{JUNCTION_SIDES, MAX_CELLS, MAX_SPEED_LIMIT, MIN_CORNER_DEG};
 pub(crate) mod polygon;
+mod regions;
 mod route;
 mod space;
 mod way;
 mod zones;
+pub use regions::{NetworkRegion, RoadRange};
 pub use route::{CRUISE_MPS, Route};
 pub use space::{CELL_NEAR_M, NetworkWalls};
 pub use way::{GateRule, Hold, Way};
 pub use zones::{Conflict, ConflictZone, Movement};
+#[cfg(test)]
+mod regions_tests;
 #[cfg(test)]
 mod tests;
 
@@ -40,6 +44,11 @@ pub struct NetworkLayout {
     /// The junctions (none: the roads join end to end or side to end).
     #[serde(default)]
     pub junctions: Vec<Junction>,
+    /// Its regions (`airroads serve --region`): named sets of cells that cover every cell exactly
+    /// once; absent: the network is not divided.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    #[schemars(with = "Option<crate::schema::NetworkRegions>")]
+    pub regions: Option<Vec<NetworkRegion>>,
 }
 
 /// One road of a network: a chain of quadrilateral segments `[p1, p2, p3, p4]` (p1, p3 of segment
@@ -83,7 +92,7 @@ impl From<&RoadLayout> for NetworkLayout {
             one_way: false,
             speed_limit: None,
         };
-        Self { roads: vec![road], junctions: Vec::new() }
+        Self { roads: vec![road], junctions: Vec::new(), regions: None }
     }
 }
 
@@ -139,6 +148,8 @@ pub struct Network {
     passage_index: route::PassageIndex,
     /// Per cell, its speed limit if it is a junction ([`Network::speed_limit`]).
     junction_limits: Vec<Option<f64>>,
+    /// Per cell, its region ([`Network::region_of`]).
+    cell_regions: regions::CellRegions,
     /// Unique per built network (clones share it), from the same counter as a road's.
     id: u64,
 }
@@ -150,6 +161,7 @@ impl Network {
     /// it: 2·D_s + D_c and margins).
     pub fn new(layout: NetworkLayout, min_passage_m: f64) -> Result<Self, RoadError> {
         let cells = check::cells(&layout)?;
+        let cell_regions = regions::check(&layout, &cells)?;
         let passages = check::passages(&cells)?;
         check::overlaps(&cells)?;
         check::connected(&cells, &passages)?;
@@ -165,7 +177,7 @@ impl Network {
         let passage_index = route::PassageIndex::new(&passages);
         let junction_limits = Self::junction_limits(&layout, &cells, &passages);
         let id = crate::road::next_id();
-        Ok(Self { layout, cells, passages, walls, space, passage_index, junction_limits, id })
+        Ok(Self { layout, cells, passages, walls, space, passage_index, junction_limits, cell_regions, id })
     }
 
     /// A number unique to this network among the roads and networks built by the process (its

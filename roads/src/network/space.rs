@@ -173,6 +173,14 @@ impl Network {
         inside.filter(|&c| within(&self.cells[c].vertices, x, CONTAINS_TOL_M)).min()
     }
 
+    /// The cells whose bounding box comes within `radius` of `x` (none for a point or radius that
+    /// is not finite); from the tree, O(log n + found).
+    pub fn cells_near(&self, x: &Vec2, radius: f64) -> impl Iterator<Item = usize> + '_ {
+        let finite = x.x.is_finite() && x.y.is_finite() && radius.is_finite();
+        let near = finite.then(|| self.space.cell_tree.locate_within_distance([x.x, x.y], radius * radius));
+        near.into_iter().flatten().map(|b| b.data)
+    }
+
     /// True when `x` is in the network.
     pub fn contains(&self, x: &Vec2) -> bool {
         self.locate(x).is_some()

@@ -39,7 +39,11 @@ pub(super) fn crossing() -> NetworkLayout {
     let west = straight("west", -8.0, -2.0, 0.0, 3, 4.0);
     let north = turned(straight("north", 2.0, 8.0, 0.0, 3, 4.0));
     let south = turned(straight("south", -8.0, -2.0, 0.0, 3, 4.0));
-    NetworkLayout { roads: vec![east, west, north, south], junctions: vec![square("x", 0.0, 0.0, 2.0)] }
+    NetworkLayout {
+        roads: vec![east, west, north, south],
+        junctions: vec![square("x", 0.0, 0.0, 2.0)],
+        regions: None,
+    }
 }
 
 fn rule(layout: NetworkLayout) -> (RoadRule, String) {
@@ -152,7 +156,7 @@ fn an_edge_of_three_cells_is_refused() {
 /// A street grid: `nx` × `ny` junctions `pitch` apart, each `2·half` wide, joined by roads of
 /// `pieces` segments.
 pub(super) fn grid(nx: usize, ny: usize, pitch: f64, half: f64, pieces: usize) -> NetworkLayout {
-    let mut layout = NetworkLayout { roads: Vec::new(), junctions: Vec::new() };
+    let mut layout = NetworkLayout { roads: Vec::new(), junctions: Vec::new(), regions: None };
     for i in 0..nx {
         for j in 0..ny {
             let (x, y) = (pitch * i as f64, pitch * j as f64);
@@ -374,6 +378,7 @@ fn walls_meeting_at_less_than_90_degrees_are_refused() {
     let layout = NetworkLayout {
         roads: vec![west],
         junctions: vec![Junction { name: "tip".into(), polygon: vec![a, c, b] }],
+        regions: None,
     };
     let (rule, field) = rule(layout);
     assert_eq!((rule, field.as_str()), (RoadRule::SharpCorner, "junctions[0].polygon"));
@@ -381,6 +386,7 @@ fn walls_meeting_at_less_than_90_degrees_are_refused() {
     let square_end = NetworkLayout {
         roads: vec![straight("west", -6.0, -2.0, 0.0, 2, 4.0)],
         junctions: vec![square("end", 0.0, 0.0, 2.0)],
+        regions: None,
     };
     assert!(Network::new(square_end, 0.5).is_ok());
 }

@@ -138,6 +138,7 @@ mod tests {
                 name: "x".into(),
                 polygon: vec![[-2.0, -2.0], [2.0, -2.0], [2.0, 2.0], [-2.0, 2.0]],
             }],
+            regions: None,
         };
         Network::new(layout, 0.6).expect("a valid crossing")
     }
