@@ -18,7 +18,7 @@ const STREAM: usize = 26;
 
 #[test]
 fn a_stream_merging_into_a_group_s_road_zips_and_everyone_gets_home() {
-    let net = ladder(None, false);
+    let net = ladder(None, false, 100.0);
     let mut fleet = pd_fleet(net.clone(), &traffic(15.0, STREAM));
     let dt = fleet.config.params.dt;
     let n = fleet.uavs().len();

@@ -43,10 +43,11 @@ pub fn road(name: &str, from: [[f64; 2]; 2], to: [[f64; 2]; 2]) -> NetworkRoad {
 /// merges with the short branch (a zip: one UAV from each arm in turn), and leaves the main road at
 /// `y` southwards into `drain`. Roads and junctions are 4 m wide. `shared_limit` is the speed
 /// limit (m/s) of `main1`, the part between `x` and `y` that the group and the stream share; with
-/// `exit`, a road `east` goes on from `j3` (to x = 160), where the two branches join again.
-pub fn ladder(shared_limit: Option<f64>, exit: bool) -> Network {
+/// `exit`, a road `east` goes on from `j3` (to x = 160), where the two branches join again. The west
+/// road starts `west` m west of `j1` (100 for the merge tests).
+pub fn ladder(shared_limit: Option<f64>, exit: bool, west: f64) -> Network {
     let mut roads = vec![
-        road("west", [[-100.0, -2.0], [-100.0, 2.0]], [[-2.0, -2.0], [-2.0, 2.0]]),
+        road("west", [[-west, -2.0], [-west, 2.0]], [[-2.0, -2.0], [-2.0, 2.0]]),
         road("short", [[2.0, -2.0], [2.0, 2.0]], [[8.0, -2.0], [8.0, 2.0]]),
         road("main1", [[12.0, -2.0], [12.0, 2.0]], [[22.0, -2.0], [22.0, 2.0]]),
         road("main2", [[26.0, -2.0], [26.0, 2.0]], [[58.0, -2.0], [58.0, 2.0]]),
