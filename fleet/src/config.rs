@@ -60,6 +60,10 @@ pub struct FleetConfig {
     /// How long (s) a lost UAV may keep moving: the Crazyflie's setpoint watchdog cuts its motors
     /// 2 s after the last setpoint, so its reach stops growing after that.
     pub lost_reach_horizon: f64,
+    /// On a network with `traffic` navigation: a UAV coming to a conflict zone takes another way
+    /// when that costs at least this many seconds less than its own, counting the queues measured
+    /// ahead ([`crate::traffic::congestion`]); None: every UAV keeps the fastest way by travel time.
+    pub reroute_margin_s: Option<f64>,
 }
 
 impl Default for FleetConfig {
@@ -72,6 +76,7 @@ impl Default for FleetConfig {
             share: CollisionShare::default(),
             stale_after: 0.3,
             lost_reach_horizon: 2.0,
+            reroute_margin_s: Some(crate::traffic::congestion::REROUTE_MARGIN_S),
         }
     }
 }

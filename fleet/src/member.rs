@@ -134,6 +134,18 @@ pub struct UavTraffic {
     /// into a narrower part: `fleet::following`), which also lowers its speed limit in a dense
     /// crowd ([`crate::traffic::speed::crowd_limit`]).
     pub in_traffic: bool,
+    /// On a network: its standing with the congestion-aware route choice.
+    pub choice: RouteChoice,
+}
+
+/// One UAV's standing with the congestion-aware route choice on a network
+/// (`crate::traffic::congestion`).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RouteChoice {
+    /// The cell it was in at the last tick (so that each crossing into a conflict zone counts once).
+    pub cell: Option<usize>,
+    /// The conflict zone (its cell) at which it last chose its way: it chooses once per zone.
+    pub chosen_at: Option<usize>,
 }
 
 /// Sets each UAV's `front_since` from `front` (whether it waits at the head of its line this tick,

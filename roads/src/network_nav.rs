@@ -77,6 +77,42 @@ impl<'a> NetworkNavigator<'a> {
         state.target
     }
 
+    /// Plans the way of a UAV at `p` afresh with `extra` added per passage ([`Network::route`]: the
+    /// queues ahead, say) and takes it when it keeps the next `keep` cells of its current way (the
+    /// way to the branch point: no turning back) and costs at least `margin_s` less than the rest of
+    /// its current way at the same costs. True when it took the new way.
+    pub fn reroute(
+        &self,
+        state: &mut NavState,
+        p: Vec2,
+        keep: usize,
+        extra: impl Fn(usize, usize) -> f64,
+        margin_s: f64,
+    ) -> bool {
+        let (Some(way), Some(goal)) = (state.way.as_ref(), state.goal.map(|g| g.p)) else {
+            return false;
+        };
+        if state.arrived {
+            return false;
+        }
+        let ahead = &way.cells()[way.at()..];
+        let Some(current) = self.net.route_cost(ahead, p, goal, &extra) else { return false };
+        let Some(start) = self.net.locate(&p) else { return false };
+        let Some(goal_cell) = self.net.locate(&goal) else { return false };
+        let Some(best) = self.net.route((start, p), (goal_cell, goal), &extra) else { return false };
+        let kept = best.cells.get(..keep).is_some_and(|c| Some(c) == ahead.get(..keep));
+        if !kept || best.cells.as_slice() == ahead || best.cost + margin_s > current {
+            return false;
+        }
+        match self.net.way(p, goal, self.gates, &extra) {
+            Some(new) => {
+                state.way = Some(new);
+                true
+            }
+            None => false,
+        }
+    }
+
     /// What is left for a UAV at `p` to fly along its way (m); None without a way or once arrived.
     pub fn remaining(&self, state: &NavState, p: Vec2) -> Option<f64> {
         state.way.as_ref().filter(|_| !state.arrived).map(|w| w.remaining(p))

@@ -205,8 +205,17 @@ impl TickPipeline {
         };
         for_each_uav(fleet.uavs, |_, uav| follow(uav));
         if fleet.config.nav == NavMode::Traffic {
+            // Congestion-aware route choice (`crate::traffic::congestion`) before the junctions are
+            // asked for the movements of the ways chosen, and what they did observed after.
+            let reroute = fleet.config.reroute_margin_s;
+            if let Some(margin) = reroute {
+                fleet.traffic.congestion.choose(&nav, margin, (now, params.dt), fleet.uavs, tracked);
+            }
             let rules = &mut fleet.traffic.junctions;
             rules.plan(net, (nav.gates, &params), now, (fleet.uavs, fleet.foreign), tracked);
+            if reroute.is_some() {
+                fleet.traffic.congestion.observe(net, params.dt, fleet.uavs);
+            }
             let waits = (&self.neighbours.lists, rules.waits_for());
             fleet.traffic.cycles.resolve(net, &params, now, fleet.uavs, waits, tracked);
         } else {

@@ -9,6 +9,7 @@
 //!   ([`crate::traffic::deadlocks`]);
 //! - foreign UAVs (other regions') are seen too ([`crate::traffic::foreign`]).
 
+pub mod congestion;
 pub mod cycles;
 pub(crate) mod deadlocks;
 pub mod following;
@@ -20,7 +21,7 @@ pub mod speed;
 pub(crate) mod yielding;
 pub mod zones;
 
-pub use crate::member::{UavTraffic, WaitReason};
+pub use crate::member::{RouteChoice, UavTraffic, WaitReason};
 
 use crate::member::Uav;
 use crate::ragged::Ragged;
@@ -85,6 +86,9 @@ pub struct TrafficRules {
     along: crate::traffic::following::TrafficAlong,
     /// On a network: the junctions and merges (`crate::traffic::junctions`).
     pub(crate) junctions: crate::traffic::junctions::JunctionRules,
+    /// On a network: the queues at the conflict zones and the route choice they drive
+    /// (`crate::traffic::congestion`).
+    pub(crate) congestion: crate::traffic::congestion::CongestionCosts,
     /// On a network: the cycles of waits found and broken (`crate::traffic::cycles`).
     pub(crate) cycles: crate::traffic::cycles::WaitCycles,
 }

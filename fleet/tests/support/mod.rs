@@ -8,9 +8,16 @@ use uav::{Params, UavState, Vec2};
 
 /// A fleet of `pd` UAVs with the default parameters flying `airspace`, UAV k (`u00`, `u01`, ...)
 /// from its start to its goal.
+#[allow(dead_code)] // Not every test that shares this module uses the default configuration.
 pub fn pd_fleet(airspace: impl Into<Airspace>, uavs: &[(Vec2, Vec2)]) -> Fleet {
-    let params = Params::default();
-    let config = FleetConfig { params, ..FleetConfig::default() };
+    let config = FleetConfig { params: Params::default(), ..FleetConfig::default() };
+    pd_fleet_with(config, airspace, uavs)
+}
+
+/// [`pd_fleet`] with `config` (its parameters for the UAVs too).
+#[allow(dead_code)] // Not every test that shares this module sets a configuration.
+pub fn pd_fleet_with(config: FleetConfig, airspace: impl Into<Airspace>, uavs: &[(Vec2, Vec2)]) -> Fleet {
+    let params = config.params;
     let mut fleet = Fleet::new(config, airspace, PolicyRegistry::with_pd(params.delta));
     for (k, &(start, goal)) in uavs.iter().enumerate() {
         let state = UavState::at_rest(start);

@@ -159,6 +159,26 @@ impl Network {
         self.route_with(start, goal, extra, false)
     }
 
+    /// The cost of flying through `cells` (a route's cells in order, `from` in the first, `to` in
+    /// the last) as [`Network::route`] counts it, `extra` included; None when two cells in a row
+    /// share no passage.
+    pub fn route_cost(
+        &self,
+        cells: &[usize],
+        from: Vec2,
+        to: Vec2,
+        extra: impl Fn(usize, usize) -> f64,
+    ) -> Option<f64> {
+        let (mut cost, mut at) = (0.0, from);
+        for pair in cells.windows(2) {
+            let edge = self.passages.get(pair[0])?.iter().find(|p| p.other == pair[1])?.edge;
+            let next = self.edge_middle(pair[0], edge);
+            cost += self.time_in(pair[0], (next - at).norm()) + extra(pair[0], edge);
+            at = next;
+        }
+        Some(cost + self.time_in(*cells.last()?, (to - at).norm()))
+    }
+
     fn route_with(
         &self,
         (start, from): (usize, Vec2),

@@ -316,6 +316,12 @@ proptest! {
         let length: f64 = route.waypoints.windows(2).map(|w| (w[1] - w[0]).norm()).sum();
         prop_assert!((route.cost - length / CRUISE_MPS).abs() < 1e-9);
         prop_assert!(length >= (to - from).norm() - 1e-9);
+        // `route_cost` prices a route's cells as the search did, and with costs added per passage no
+        // other route (the free one) is cheaper.
+        let extra = |cell: usize, edge: usize| ((cell * 7 + edge) % 5) as f64;
+        let priced = net.route((start, from), (goal, to), extra).unwrap();
+        prop_assert!((net.route_cost(&priced.cells, from, to, extra).unwrap() - priced.cost).abs() < 1e-9);
+        prop_assert!(net.route_cost(&route.cells, from, to, extra).unwrap() >= priced.cost - 1e-9);
     }
 }
 
