@@ -107,8 +107,8 @@ impl ForeignViews {
             let along = v.dot(&line.tangent_at(s));
             let hovers = v.norm() < HOVER_SPEED_MPS;
             let flies_along = along.abs() >= ALONG_SPEED_MPS && along.abs() >= 0.5 * v.norm();
-            let last = self.by_id.get(uav.id.as_str()).copied();
-            let memory = Remembered {
+            let updates = self.updates;
+            let remember = |last: Option<Remembered>| Remembered {
                 hovering_since: hovers.then(|| last.and_then(|m| m.hovering_since).unwrap_or(now)),
                 // The direction it flies along the road now; else the last one; else a first guess.
                 direction: match last.map_or(0.0, |m| m.direction) {
@@ -116,15 +116,20 @@ impl ForeignViews {
                     0.0 if along.abs() >= HOVER_SPEED_MPS => along.signum(),
                     last => last,
                 },
-                seen: self.updates,
+                seen: updates,
             };
-            // An id is stored once, when first seen.
-            match self.by_id.get_mut(uav.id.as_str()) {
-                Some(slot) => *slot = memory,
-                None => {
-                    self.by_id.insert(uav.id.clone(), memory);
+            // One lookup per UAV; an id is stored once, when first seen.
+            let memory = match self.by_id.get_mut(uav.id.as_str()) {
+                Some(slot) => {
+                    *slot = remember(Some(*slot));
+                    *slot
                 }
-            }
+                None => {
+                    let memory = remember(None);
+                    self.by_id.insert(uav.id.clone(), memory);
+                    memory
+                }
+            };
             let direction = memory.direction;
             let route = (direction != 0.0).then(|| {
                 let lateral = line.lateral(segment, &p);
