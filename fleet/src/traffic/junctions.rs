@@ -10,8 +10,11 @@
 //!   the same arm) pass together;
 //! - **a merge zips in order**: two arms into one go one UAV at a time in the order they came;
 //! - **maximum wait**: a request that has waited [`JUNCTION_MAX_WAIT_S`] blocks every later request
-//!   whose movement crosses it, so the zone drains of those and it goes next: no UAV starves, at
-//!   any fleet size, given that granted UAVs leave the zone;
+//!   whose movement crosses it; and an arm whose line's head has waited that long at the head goes
+//!   before every other arm (the earliest such head first), while the grants of UAVs that can still
+//!   stop before the gate are decided again each tick, before other requests, and given back when
+//!   they conflict with it: only UAVs in the zone or too close to stop keep it waiting, so the
+//!   head's wait is bounded at any fleet size (docs/traffic.md, 6.);
 //! - a UAV already in the zone (pushed in, or starting there) is granted at once: it cannot wait
 //!   inside; one that can no longer stop before the zone (braking at δ) goes when no holder
 //!   conflicts with it; one past its hold point that can still stop goes back to it.
@@ -24,7 +27,8 @@ use crate::traffic::FOLLOW_GAP_IN_DC;
 use roads::network::{Conflict, ConflictZone, GateRule, Hold, Movement, Network, Way};
 use uav::Params;
 
-/// Longest wait (s) before a junction or merge after which no later crossing movement is granted.
+/// Longest wait (s) before a junction or merge after which no later crossing movement is granted,
+/// and the head of a line that has waited it there goes before every conflicting movement.
 pub const JUNCTION_MAX_WAIT_S: f64 = 15.0;
 
 /// Distance (m) before a zone's gate at which UAVs wait for their turn.
@@ -54,7 +58,7 @@ const FOREIGN: usize = usize::MAX;
 struct Request {
     zone: usize,
     movement: Movement,
-    /// When the UAV started waiting (s).
+    /// When the UAV started waiting (s); -∞ for one that holds a grant and can still stop.
     since: f64,
     /// Who asks (index of the UAV, id order: the tie break).
     who: usize,
@@ -64,6 +68,9 @@ struct Request {
     distance: f64,
     /// It can still stop before the gate (braking at δ).
     can_stop: bool,
+    /// Since when (s) the head of its arm's line has waited there, once that is
+    /// [`JUNCTION_MAX_WAIT_S`] or more (infinite otherwise): such arms go first.
+    overdue: f64,
 }
 
 /// The junction rules' state between ticks.
@@ -139,21 +146,44 @@ impl JunctionRules {
             let asked = u.traffic.waiting_since.is_some() || u.traffic.junction.is_some();
             let ask = if asked { ask.max(params.r_s) } else { ask };
             let ahead = self.zone_ahead(way, p, ask);
+            let stops_in = u.state.v.norm_squared() / (2.0 * delta);
             if let Some((zone, movement)) = u.traffic.junction {
                 let crossing = ahead.is_some_and(|(z, m, ..)| (z, m) == (zone, movement));
-                if crossing || just_left(way, self.zones[zone].cell, p, LEAVE_IN_DC * d_c) {
-                    self.held[zone].push((movement, k));
-                    continue;
+                match ahead {
+                    // One that can still stop before the gate is decided again, before every request
+                    // that has not waited the maximum: it gives its grant back to such a one.
+                    Some((_, _, cell, distance)) if crossing && distance - STOP_MARGIN_M >= stops_in => {
+                        let (since, overdue) = (f64::NEG_INFINITY, f64::INFINITY);
+                        let request = Request {
+                            zone,
+                            movement,
+                            since,
+                            who: k,
+                            cell,
+                            distance,
+                            can_stop: true,
+                            overdue,
+                        };
+                        self.requests.push(request);
+                        continue;
+                    }
+                    _ if crossing || just_left(way, self.zones[zone].cell, p, LEAVE_IN_DC * d_c) => {
+                        self.held[zone].push((movement, k));
+                        continue;
+                    }
+                    _ => u.traffic.junction = None,
                 }
-                u.traffic.junction = None;
             }
             let Some((zone, movement, cell, distance)) = ahead else {
                 u.traffic.waiting_since = None;
                 continue;
             };
             let since = *u.traffic.waiting_since.get_or_insert(now);
-            let can_stop = distance - STOP_MARGIN_M >= u.state.v.norm_squared() / (2.0 * delta);
-            self.requests.push(Request { zone, movement, since, who: k, cell, distance, can_stop });
+            let can_stop = distance - STOP_MARGIN_M >= stops_in;
+            // (front_since is the last tick's: whether it waited at the head of its line.)
+            let overdue =
+                u.traffic.front_since.filter(|s| now - s >= JUNCTION_MAX_WAIT_S).unwrap_or(f64::INFINITY);
+            self.requests.push(Request { zone, movement, since, who: k, cell, distance, can_stop, overdue });
         }
         self.heads.clear();
         self.heads.resize(uavs.len(), false);
@@ -177,17 +207,24 @@ impl JunctionRules {
                 .cmp(&(b.zone, b.movement.entry))
                 .then(b.distance.total_cmp(&a.distance))
         });
-        let mut behind = (usize::MAX, usize::MAX, f64::INFINITY);
-        for r in requests.iter_mut() {
-            if (r.zone, r.movement.entry) != (behind.0, behind.1) {
-                behind = (r.zone, r.movement.entry, f64::INFINITY);
+        // An arm whose line's head has waited the maximum there goes before every other arm (the
+        // earliest such head first), the whole arm in its order.
+        let mut start = 0;
+        while start < requests.len() {
+            let arm = (requests[start].zone, requests[start].movement.entry);
+            let same = requests[start..].iter().take_while(|r| (r.zone, r.movement.entry) == arm).count();
+            let group = &mut requests[start..start + same];
+            let overdue = group.iter().map(|r| r.overdue).fold(f64::INFINITY, f64::min);
+            let mut since = f64::INFINITY;
+            for r in group.iter_mut() {
+                since = since.min(r.since);
+                (r.since, r.overdue) = (since, overdue);
             }
-            behind.2 = behind.2.min(r.since);
-            r.since = behind.2;
+            start += same;
         }
         requests.sort_by(|a, b| {
-            (a.zone, a.since, a.movement.entry)
-                .partial_cmp(&(b.zone, b.since, b.movement.entry))
+            (a.zone, a.overdue, a.since, a.movement.entry)
+                .partial_cmp(&(b.zone, b.overdue, b.since, b.movement.entry))
                 .unwrap_or(std::cmp::Ordering::Equal)
                 .then(a.distance.total_cmp(&b.distance))
         });
@@ -229,7 +266,10 @@ impl JunctionRules {
                 self.held[zone].push((r.movement, r.who));
                 continue;
             };
-            self.refused.push((r.movement, r.since, r.who));
+            // One that gives its grant back waits from now.
+            let asked = *u.traffic.waiting_since.get_or_insert(now);
+            u.traffic.junction = None;
+            self.refused.push((r.movement, if r.since.is_finite() { r.since } else { asked }, r.who));
             self.waits_for[r.who] = (waits_for != FOREIGN).then_some(waits_for);
             // Its place in the line of its arm: FOLLOW_GAP_IN_DC·D_c behind the one ahead of it.
             let place = match line {
