@@ -15,17 +15,16 @@ use crate::tick::{StageTimes, parallel};
 use crate::traffic::cycles::back_off_target;
 use crate::traffic::foreign::{ForeignNear, ForeignViews};
 use crate::traffic::passing::{FOREIGN_PASS, pass_point, pass_point_with};
-use crate::traffic::speed::{crowd_limit, govern, keep_distance};
 use crate::traffic::yielding::{Flying, YIELD_RADIUS_IN_DC, make_way};
 use links::LinkPhase;
-use policies::{Observation, observation};
+use policies::Observation;
 use rayon::prelude::*;
 use roads::network::Network;
 use roads::{Airspace, NavMode, Navigator, NetworkNavigator, Road};
 use safety::barrier::Clearance;
 use safety::{ReachDisk, activation_radius};
 use std::time::Instant;
-use uav::{Vec2, braking_input};
+use uav::Vec2;
 
 /// What a tick computes and keeps for the next one; every buffer is reused.
 #[derive(Debug, Default)]
@@ -305,104 +304,10 @@ impl TickPipeline {
             }
         }
     }
-
-    /// Evaluates each policy once on the batch of UAVs that use it.
-    fn run_policies(&mut self, fleet: &mut TickState<'_>) {
-        let (delta, dt) = (fleet.config.params.delta, fleet.config.params.dt);
-        // Every UAV brakes unless its policy gives a finite action; a fallback is counted only for
-        // a UAV whose policy ran and gave none (one that is not flying runs no policy).
-        for uav in fleet.uavs.iter_mut() {
-            uav.last.u_ref = braking_input(uav.state.v, delta, dt);
-            uav.last.policy_fallback = false;
-        }
-        if fleet.paused {
-            return;
-        }
-        for (name, policy) in fleet.policies.iter_mut() {
-            self.batch.clear();
-            self.observations.clear();
-            for (k, uav) in
-                fleet.uavs.iter_mut().enumerate().filter(|(_, u)| u.policy == name && u.condition.flying())
-            {
-                uav.last.policy_fallback = true;
-                self.batch.push(k);
-                self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
-            }
-            if self.batch.is_empty() || policy.act(&self.observations, &mut self.actions).is_err() {
-                continue;
-            }
-            for (&k, u) in self.batch.iter().zip(&self.actions) {
-                if uav::is_finite(u) {
-                    fleet.uavs[k].last.u_ref = uav::saturate(*u, delta);
-                    fleet.uavs[k].last.policy_fallback = false;
-                }
-            }
-        }
-        match fleet.road {
-            Airspace::Road(_) if fleet.config.nav == NavMode::Traffic => self.limit_speeds(fleet),
-            Airspace::Road(_) => {}
-            Airspace::Network(net) => self.limit_network_speeds(net, fleet),
-        }
-    }
-
-    /// On a network: each flying UAV keeps to the speed limit of the road it is on ([`govern`])
-    /// and, with `traffic` navigation, the distance to every neighbour ([`keep_distance`]). Per UAV
-    /// from plain copies, as [`TickPipeline::limit_speeds`].
-    fn limit_network_speeds(&mut self, net: &Network, fleet: &mut TickState<'_>) {
-        let params = &fleet.config.params;
-        let (d_c, delta, dt) = (params.kept_d_c(), params.delta, params.dt);
-        let keep = fleet.config.nav == NavMode::Traffic;
-        let (positions, velocities, lists) = (&self.positions, &self.velocities, &self.neighbours.lists);
-        let limit = |(k, me): (usize, &mut Uav)| {
-            if !me.condition.flying() || me.nav.arrived || me.nav.goal().is_none() {
-                return;
-            }
-            let (p, v) = (me.state.p, me.state.v);
-            let mut u = me.last.u_ref;
-            if let Some(limit) = me.nav.way().and_then(|w| net.speed_limit(w.cell())) {
-                u = govern(v, u, limit, delta, dt);
-            }
-            for &d in lists[k].iter().filter(|_| keep) {
-                u = keep_distance(v, u, positions[d] - p, velocities[d], d_c, delta, dt);
-            }
-            me.last.u_ref = u;
-        };
-        for_each_uav(fleet.uavs, |k, uav| limit((k, uav)));
-    }
-
-    /// The traffic rules' speed limit (narrower road, slower flight; slower still in dense traffic)
-    /// and the distance kept to every neighbour, own or foreign (`fleet::speed`), applied to each
-    /// flying UAV's nominal input. Per UAV, reading its neighbours' states from plain copies (a link
-    /// is not shared across threads): in parallel for large fleets, the same on any number of threads.
-    fn limit_speeds(&mut self, fleet: &mut TickState<'_>) {
-        let params = &fleet.config.params;
-        let (d_c, delta, dt) = (params.kept_d_c(), params.delta, params.dt);
-        let (positions, velocities) = (&self.positions, &self.velocities);
-        let (traffic, lists) = (&fleet.traffic, &self.neighbours.lists);
-        let foreign = ForeignNear::new(&self.neighbours.foreign, &self.foreign_views.views, fleet.foreign);
-        let limit = |(k, me): (usize, &mut Uav)| {
-            let Some(pos) = me.nav.position.filter(|_| !me.nav.arrived && me.condition.flying()) else {
-                return;
-            };
-            let (p, v) = (me.state.p, me.state.v);
-            let mut limit = traffic.speed_limit(pos.s, pos.direction());
-            if me.traffic.in_traffic {
-                let foreign_positions = foreign.of(k).map(|f| f.p);
-                limit =
-                    crowd_limit(limit, p, lists[k].iter().map(|&d| positions[d]).chain(foreign_positions));
-            }
-            let mut u = govern(v, me.last.u_ref, limit, delta, dt);
-            for &d in &lists[k] {
-                u = keep_distance(v, u, positions[d] - p, velocities[d], d_c, delta, dt);
-            }
-            for f in foreign.of(k) {
-                u = keep_distance(v, u, f.p - p, f.v, d_c, delta, dt);
-            }
-            me.last.u_ref = u;
-        };
-        for_each_uav(fleet.uavs, |k, uav| limit((k, uav)));
-    }
 }
+
+#[path = "policy_stage.rs"]
+mod policy_stage;
 
 /// Calls `f` with each UAV and its index: in parallel for large fleets ([`parallel`]), with the same
 /// result on any number of threads (each call reads only its own UAV and shared plain data).
