@@ -29,7 +29,7 @@ pub struct BenchArgs {
     pub crazyflies: Vec<usize>,
     /// Fleet sizes to measure, comma-separated (`fleet`: default 1000,10000; `scale`: default
     /// 1000,3000,10000).
-    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u64).range(2..=30_000))]
+    #[arg(long, value_delimiter = ',', value_parser = clap::value_parser!(u64).range(2..=200_000))]
     pub uavs: Vec<u64>,
     /// Ticks measured per fleet size (`fleet`, `scale`).
     #[arg(long, default_value_t = 40)]
@@ -93,8 +93,9 @@ pub enum BenchTarget {
     /// UAVs in real time: how the firmware kept up, arrivals, true margins.
     Firmware,
     /// Tick p50/p99 and each stage's time for UAVs flying both ways along a long winding trunk road
-    /// (1.2 km per 1,000 UAVs; `--road city`: across a street grid), for each `--uavs` size, and how
-    /// the per-UAV cost grows.
+    /// (1.2 km per 1,000 UAVs; `--road city`: across a street grid), for each `--uavs` size (up to
+    /// 200,000), resident memory, how the per-UAV cost grows, and each stage's roofline (its time over
+    /// its floor at this machine's measured GEMM rate or memory bandwidth).
     Scale,
 }
 

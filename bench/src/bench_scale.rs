@@ -3,7 +3,9 @@
 //! (`fleet::trunk::trunk_scenario`: 12 m wide, 1.2 km per 1,000 UAVs, goals 60–150 m away) on
 //! in-process simulated links; after two warm-up ticks, `--ticks` ticks are timed, each with the
 //! metrics a headless run records. Prints tick p50/p99 and the mean time of each stage per tick and
-//! per UAV, then how the per-UAV cost of the largest fleet compares with the smallest's. With `--road
+//! per UAV and the process's resident memory, then how the per-UAV cost of the largest fleet compares
+//! with the smallest's, then the roofline: each stage's time over its floor on this machine
+//! ([`crate::roofline`]). With `--road
 //! city` the UAVs fly across a street grid instead (`fleet::city::city_scenario`: B × B blocks,
 //! square junctions, two-way streets 6 m wide limited to 3 m/s, about 17 UAVs per block, goals 1.5–4
 //! blocks away).
@@ -12,6 +14,7 @@ use flights::say;
 
 use crate::BenchArgs;
 use crate::bench_fleet::sim_fleet;
+use crate::roofline::{Point, gemm_flops_per_s, triad_bytes_per_s};
 use engine::stats::percentiles;
 use fleet::city::city_scenario;
 use fleet::trunk::trunk_scenario;
@@ -80,8 +83,10 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
     for name in STAGES {
         header.push_str(&format!(" {name:>17}"));
     }
+    header.push_str(&format!(" {:>7}", "rss MB"));
     say!("{header}");
     let mut per_uav = Vec::new();
+    let mut measured = Vec::new();
     for &n in &sizes {
         let scenario = if city {
             city_scenario(n, 1).map_err(|e| format!("city grid for {n} UAVs: {e}"))
@@ -132,13 +137,64 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
             let us = total / ticks as f64;
             line.push_str(&format!(" {:>8.2} ({:>6.2})", us / 1e3, us / n as f64));
         }
+        line.push_str(&resident_mb().map_or_else(|| format!(" {:>7}", "n/a"), |mb| format!(" {mb:>7.0}")));
         say!("{line}");
         per_uav.push((n, mean_us / n as f64));
+        measured.push((n, sums.map(|total| total / ticks as f64 * 1e-6)));
+        drop(fleet);
     }
     if let (Some((small, a)), Some((large, b))) = (per_uav.first(), per_uav.last())
         && per_uav.len() > 1
     {
         say!("per-UAV cost: {a:.2} µs at {small}, {b:.2} µs at {large}: ×{:.2}", b / a);
     }
+    print_roofline(args, &measured);
     ExitCode::SUCCESS
+}
+
+/// The process's resident memory now (MB), from `/proc/self/statm` (Linux; `None` elsewhere).
+fn resident_mb() -> Option<f64> {
+    let statm = std::fs::read_to_string("/proc/self/statm").ok()?;
+    let pages: f64 = statm.split_whitespace().nth(1)?.parse().ok()?;
+    // Linux pages are 4 KiB on the machines this runs on (x86-64, and aarch64's default).
+    Some(pages * 4096.0 / 1e6)
+}
+
+/// Prints each stage's place on the roofline ([`crate::roofline`]) for each fleet size, from the
+/// mean seconds per tick of each stage in [`STAGES`] order.
+fn print_roofline(args: &BenchArgs, measured: &[(usize, [f64; 8])]) {
+    let record = std::mem::size_of::<fleet::Uav>() as f64;
+    let flops = (args.policy == policies::SHIPPED_MODEL)
+        .then(|| policies::flops_per_observation("rl", policies::SHIPPED_MODEL_ONNX).ok())
+        .flatten();
+    let gemm = flops.map(|_| gemm_flops_per_s());
+    say!(
+        "roofline: each stage's time over its floor; policies{}, the others: each UAV's record ({record:.0} B) streamed once at the triad bandwidth over the fleet's records",
+        match (flops, gemm) {
+            (Some(f), Some(g)) =>
+                format!(" {f:.0} FLOP per UAV against an f32 GEMM at {:.1} GFLOP/s", g / 1e9),
+            _ => " (pd: not floating-point bound) as the others".to_string(),
+        }
+    );
+    let mut header = format!("{:>7} {:>12} {:>12}", "uavs", "triad GB/s", "policy GF/s");
+    for name in STAGES {
+        header.push_str(&format!(" {name:>10}"));
+    }
+    say!("{header}");
+    for &(n, seconds) in measured {
+        let bandwidth = triad_bytes_per_s(n * record as usize);
+        let mut line = format!("{n:>7} {:>12.1}", bandwidth / 1e9);
+        let policy = flops.zip(gemm).map(|(f, g)| Point::of(f, n, seconds[3], g));
+        line.push_str(
+            &policy.map_or_else(|| format!(" {:>12}", "-"), |p| format!(" {:>12.1}", p.achieved / 1e9)),
+        );
+        for (k, &s) in seconds.iter().enumerate() {
+            let point = match policy {
+                Some(p) if k == 3 => p,
+                _ => Point::of(record, n, s, bandwidth),
+            };
+            line.push_str(&format!(" {:>9.1}x", point.times_floor()));
+        }
+        say!("{line}");
+    }
 }

@@ -14,6 +14,7 @@ mod bench_regions;
 mod bench_scale;
 mod bench_server;
 mod bench_solver;
+mod roofline;
 
 pub use args::{BenchArgs, BenchTarget};
 use rand::rngs::StdRng;

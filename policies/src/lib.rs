@@ -4,11 +4,13 @@
 //!
 //! Knows nothing of roads, barriers or fleets: a policy maps observations to nominal accelerations.
 
+mod cost;
 mod onnx;
 mod pd;
 mod registry;
 mod reward;
 
+pub use cost::flops_per_observation;
 pub use onnx::{LoadError, OnnxPolicy};
 pub use pd::PdPolicy;
 pub use registry::{PolicyRegistry, UnknownPolicy};

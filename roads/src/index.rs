@@ -1,6 +1,6 @@
 //! Spatial index of a road, built once in [`crate::Road::new`]: R*-trees over the quads' bounding
 //! boxes and over the walls, so that point-in-road, segment location and nearest-wall queries visit
-//! the few quads and walls near the point instead of all of them (a road may have 2,000 segments).
+//! the few quads and walls near the point instead of all of them (a road may have 10,000 segments).
 //!
 //! The index only selects candidates; every answer is still computed by the same expression as the
 //! linear scans it replaces ([`Quad::margin`], [`Wall::nearest`]), over a candidate set proven to

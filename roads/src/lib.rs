@@ -43,4 +43,4 @@ pub use network_nav::NetworkNavigator;
 pub use regions::{MAX_REGION_NAME, Region};
 pub use road::{Road, SegmentTracker};
 pub use traffic_nav::{CLEARANCE_MARGIN_M, LANE_GAP_MARGIN_M, MIN_CLEARANCE_MARGIN_M};
-pub use validate::{MAX_COORDINATE_M, RoadError, RoadRule};
+pub use validate::{MAX_COORDINATE_M, MAX_SEGMENTS, RoadError, RoadRule};

@@ -58,7 +58,7 @@ impl JsonSchema for Segments {
             "items": generator.subschema_for::<Quad>(),
             "minItems": 1,
             "maxItems": MAX_SEGMENTS,
-            "description": "the road's segments in order, 1 to 2000. Beyond the schema a layout is refused with 422 (`rule` naming the rule in `PUT /api/road`) when a quad is not strictly convex or has an edge shorter than 1 mm, consecutive segments do not join seamlessly (p1, p3 of segment i are p2, p4 of segment i+1) or fold back, or two non-adjacent segments overlap"
+            "description": "the road's segments in order, 1 to 10000. Beyond the schema a layout is refused with 422 (`rule` naming the rule in `PUT /api/road`) when a quad is not strictly convex or has an edge shorter than 1 mm, consecutive segments do not join seamlessly (p1, p3 of segment i are p2, p4 of segment i+1) or fold back, or two non-adjacent segments overlap"
         })
     }
 }

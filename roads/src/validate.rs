@@ -9,7 +9,7 @@ pub const MAX_COORDINATE_M: f64 = 1.0e6;
 /// Edges shorter than this (m) are degenerate.
 pub const MIN_EDGE_M: f64 = 1.0e-3;
 /// Largest number of segments accepted in one layout.
-pub const MAX_SEGMENTS: usize = 2000;
+pub const MAX_SEGMENTS: usize = 10_000;
 /// Smallest |sin| of an interior angle of a strictly convex quad.
 const MIN_SIN_ANGLE: f64 = 1.0e-6;
 

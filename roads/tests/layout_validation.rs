@@ -130,3 +130,15 @@ fn halfplane_rule_adds_only_convex_corner_neighbours() {
         "the exit cap bounds segment 0 too"
     );
 }
+
+/// A road of [`roads::MAX_SEGMENTS`] segments (200 km in 20 m pieces: the trunk of `bench scale` for
+/// 100,000 UAVs needs 6,000) is accepted; one more is refused with `too_many_segments`.
+#[test]
+fn the_longest_road_accepted_has_max_segments() {
+    let longest = RoadLayout::straight(0.0, 20.0 * roads::MAX_SEGMENTS as f64, 12.0, roads::MAX_SEGMENTS);
+    let road = Road::new(longest).expect("a road of MAX_SEGMENTS segments is valid");
+    assert_eq!(road.quads().len(), roads::MAX_SEGMENTS);
+    let too_long =
+        RoadLayout::straight(0.0, 20.0 * (roads::MAX_SEGMENTS + 1) as f64, 12.0, roads::MAX_SEGMENTS + 1);
+    assert_eq!(rule_of(too_long), (None, RoadRule::TooManySegments));
+}

@@ -16,7 +16,7 @@ pub const TRUNK_SEGMENT_M: f64 = 20.0;
 pub const TRUNK_M_PER_UAV: f64 = 1.2;
 
 /// The trunk scenario with `n` UAVs (at least 2), reproducible from `seed`; an error when its road
-/// would exceed the segment limit (beyond about 33,000 UAVs).
+/// would exceed the segment limit (beyond about 166,000 UAVs).
 pub fn trunk_scenario(n: usize, seed: u64) -> Result<Scenario, RoadError> {
     let n = n.max(2);
     let mut rng = StdRng::seed_from_u64(seed);
