@@ -38,7 +38,7 @@ pub struct BinaryFrame {
     /// The roster frame of that version.
     pub roster: Bytes,
     /// Each id of that roster with its index (`GET /api/uavs/{id}` without a scan of the fleet).
-    pub index: Arc<HashMap<String, usize>>,
+    pub index: Arc<HashMap<Arc<str>, usize>>,
     /// The tick frame with every UAV.
     pub body: Bytes,
     /// Changes whenever the reservations frame does.
@@ -52,11 +52,16 @@ pub struct BinaryFrame {
 pub struct Encoder {
     roster_version: u32,
     roster: Bytes,
-    index: Arc<HashMap<String, usize>>,
+    index: Arc<HashMap<Arc<str>, usize>>,
     /// (id, policy, goal, link) of the roster, in snapshot order.
-    last: Vec<(String, String, Option<[f64; 2]>, String)>,
+    last: Vec<(Arc<str>, Arc<str>, Option<[f64; 2]>, Arc<str>)>,
     reservations_version: u32,
     reservations: Bytes,
+}
+
+/// The same text: the same shared string, or equal strings.
+fn same_text(a: &Arc<str>, b: &Arc<str>) -> bool {
+    Arc::ptr_eq(a, b) || a == b
 }
 
 fn f32_of(x: Option<f64>) -> f32 {
@@ -71,12 +76,16 @@ impl Encoder {
         let same = self.roster_version > 0
             && self.last.len() == uavs.len()
             && self.last.iter().zip(uavs).all(|((id, policy, goal, link), u)| {
-                *id == u.id && *policy == u.policy && *goal == u.goal && *link == u.link
+                // The snapshot shares unchanged names with the previous one: mostly a pointer test.
+                same_text(id, &u.id)
+                    && same_text(policy, &u.policy)
+                    && *goal == u.goal
+                    && same_text(link, &u.link)
             });
         if !same {
             // The index depends on the ids alone (a new goal or policy keeps it).
-            let ids_changed =
-                self.last.len() != uavs.len() || self.last.iter().zip(uavs).any(|(l, u)| l.0 != u.id);
+            let ids_changed = self.last.len() != uavs.len()
+                || self.last.iter().zip(uavs).any(|(l, u)| !same_text(&l.0, &u.id));
             if ids_changed {
                 self.index = Arc::new(uavs.iter().enumerate().map(|(k, u)| (u.id.clone(), k)).collect());
             }

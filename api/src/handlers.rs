@@ -147,8 +147,8 @@ pub(crate) fn position_of(app: &AppState, snapshot: &Snapshot, id: &str) -> Opti
         return indexed;
     }
     match indexed {
-        Some(k) if snapshot.uavs.get(k).is_some_and(|u| u.id == id) => Some(k),
-        _ => snapshot.uavs.iter().position(|u| u.id == id),
+        Some(k) if snapshot.uavs.get(k).is_some_and(|u| *u.id == *id) => Some(k),
+        _ => snapshot.uavs.iter().position(|u| *u.id == *id),
     }
 }
 
@@ -376,7 +376,7 @@ pub(crate) async fn put_rerun_selection(
     // One pass over the fleet, whatever its size.
     let mut unseen: std::collections::HashSet<&str> = ids.iter().map(String::as_str).collect();
     for u in &app.engine.snapshots.borrow().uavs {
-        unseen.remove(u.id.as_str());
+        unseen.remove(&*u.id);
     }
     if let Some(id) = ids.iter().find(|id| unseen.contains(id.as_str())) {
         return Err(ApiError::invalid("ids", format!("no UAV `{id}`")));

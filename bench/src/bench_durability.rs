@@ -127,7 +127,7 @@ async fn serve_and_change(
     let addr = listener.local_addr()?;
     let server = Server::start(config)?;
     let state = server.state().clone();
-    let ids: Vec<String> = state.engine.snapshots.borrow().uavs.iter().map(|u| u.id.clone()).collect();
+    let ids: Vec<String> = state.engine.snapshots.borrow().uavs.iter().map(|u| u.id.to_string()).collect();
     let goals: Vec<Option<[f64; 2]>> = state.engine.snapshots.borrow().uavs.iter().map(|u| u.goal).collect();
     let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
     let http = tokio::spawn(airroads_server::serve::serve(listener, server, async move {

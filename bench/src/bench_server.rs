@@ -111,7 +111,7 @@ async fn bench(args: &BenchArgs) -> anyhow::Result<()> {
     phases.push(take(ws_name.clone(), Default::default()));
 
     let running = Arc::new(AtomicBool::new(true));
-    let ids: Vec<String> = state.engine.snapshots.borrow().uavs.iter().map(|u| u.id.clone()).collect();
+    let ids: Vec<String> = state.engine.snapshots.borrow().uavs.iter().map(|u| u.id.to_string()).collect();
     let mut workers = Vec::new();
     for w in 0..REST_WORKERS {
         workers.push(tokio::spawn(rest_worker(addr, ids.clone(), w, running.clone())));

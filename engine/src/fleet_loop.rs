@@ -284,7 +284,10 @@ impl Engine {
         }
         self.ticks += 1;
         self.time += self.fleet.config.params.dt;
-        let snapshot = Snapshot::of(&self.fleet, self.ticks, self.time, self.road_version);
+        let previous = Arc::clone(&self.channels.snapshots.borrow());
+        let snapshot =
+            Snapshot::after(Some(&previous), &self.fleet, self.ticks, self.time, self.road_version);
+        drop(previous);
         let duration_us = started.elapsed().as_secs_f64() * 1e6;
         self.stats.record(duration_us, &self.fleet, &snapshot);
         let snapshot = Arc::new(snapshot);

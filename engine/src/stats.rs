@@ -77,7 +77,7 @@ impl LinkCounters {
     pub fn list_errors(&mut self, snapshot: &Snapshot) {
         let failing = snapshot.uavs.iter().filter_map(|u| {
             let error = u.link_error.clone()?;
-            Some(LinkError { id: u.id.clone(), link: u.link.clone(), error })
+            Some(LinkError { id: u.id.to_string(), link: u.link.to_string(), error })
         });
         self.errors = failing.take(LISTED_LINK_ERRORS).collect();
     }
@@ -195,7 +195,7 @@ impl TickStats {
         // The snapshot already read each link's description and error this tick (an error is a
         // string behind the session's lock: read it once per tick, not twice).
         for u in &snapshot.uavs {
-            m.links.crazyflies += u64::from(u.link != links::SIM_LINK);
+            m.links.crazyflies += u64::from(*u.link != *links::SIM_LINK);
             m.links.with_error += u64::from(u.link_error.is_some());
             if let Some(f) = &u.firmware {
                 m.links.locked += u64::from(f.locked);

@@ -97,8 +97,9 @@ impl LinkPhase {
 }
 
 /// The connection to one UAV. Implementations never block the caller: the fleet loop calls them
-/// every tick and must not wait on a radio or a socket.
-pub trait Link: Send {
+/// every tick and must not wait on a radio or a socket. `Sync` so that the fleet's read-only passes
+/// (the published snapshot) can read links from several threads; its `&self` methods only read.
+pub trait Link: Send + Sync {
     /// The newest state received since the previous call, or None when none arrived (link slow,
     /// lost, or not connected yet). The fleet counts how long a UAV has gone without one.
     fn state(&mut self) -> Option<UavState>;

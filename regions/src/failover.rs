@@ -141,7 +141,7 @@ impl Mirror {
         let uavs = snapshot
             .uavs
             .iter()
-            .map(|u| MirrorUav { id: u.id.clone(), uav: UavRecord::of_snapshot(u) })
+            .map(|u| MirrorUav { id: u.id.to_string(), uav: UavRecord::of_snapshot(u) })
             .chain(leaving.iter().cloned())
             .collect();
         Self { region: region.into(), epoch, tick: snapshot.tick, road_version: snapshot.road_version, uavs }

@@ -31,8 +31,8 @@ impl UavRecord {
             p: u.p,
             v: u.v,
             goal: u.goal,
-            policy: u.policy.clone(),
-            link: (u.link != links::SIM_LINK).then(|| u.link.clone()),
+            policy: u.policy.to_string(),
+            link: (*u.link != *links::SIM_LINK).then(|| u.link.to_string()),
             airborne: u.lost || u.phase.airborne(),
         }
     }

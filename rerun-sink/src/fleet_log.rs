@@ -42,13 +42,13 @@ impl FleetLog {
         self.colors.clear();
         self.colors.extend(uavs.iter().map(|u| color(u.status)));
         let same_roster =
-            self.roster.len() == uavs.len() && self.roster.iter().zip(uavs).all(|(id, u)| *id == u.id);
+            self.roster.len() == uavs.len() && self.roster.iter().zip(uavs).all(|(id, u)| **id == *u.id);
         let mut points = Points2D::update_fields()
             .with_positions(self.positions.iter().copied())
             .with_colors(self.colors.iter().copied());
         if !same_roster || !self.logged {
             self.roster.clear();
-            self.roster.extend(uavs.iter().map(|u| u.id.clone()));
+            self.roster.extend(uavs.iter().map(|u| u.id.to_string()));
             // Thousands of labels would cover the view: they show on hover and in the selection panel.
             points = points
                 .with_labels(self.roster.iter().map(String::as_str))

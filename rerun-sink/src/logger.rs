@@ -174,13 +174,13 @@ impl Logger {
             self.fleet.clear(rec)?;
         }
         for u in &snapshot.uavs {
-            if batched && !selection.contains(&u.id) {
+            if batched && !selection.contains(&*u.id) {
                 continue; // Cleared below if it had its own entities.
             }
-            if !self.uavs.contains_key(&u.id) {
-                self.uavs.insert(u.id.clone(), UavLog::new(&u.id));
+            if !self.uavs.contains_key(&*u.id) {
+                self.uavs.insert(u.id.to_string(), UavLog::new(&u.id));
             }
-            if let Some(log) = self.uavs.get_mut(&u.id) {
+            if let Some(log) = self.uavs.get_mut(&*u.id) {
                 log_uav(rec, log, u, snapshot.tick, radius)?;
             }
         }
@@ -233,7 +233,7 @@ fn log_uav(
 ) -> RecordingStreamResult<()> {
     log.seen_tick = tick;
     let p = xy(u.p);
-    let point = Points2D::new([p]).with_labels([u.id.as_str()]).with_colors([color(u.status)]);
+    let point = Points2D::new([p]).with_labels([&*u.id]).with_colors([color(u.status)]);
     rec.log(log.root.clone(), &point.with_radii([radius]))?;
     rec.log(log.velocity.clone(), &Arrows2D::from_vectors([xy(u.v)]).with_origins([p]))?;
     rec.log(log.target.clone(), &Points2D::new([xy(u.target)]).with_radii([Radius::new_ui_points(3.0)]))?;

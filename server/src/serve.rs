@@ -222,8 +222,8 @@ pub async fn land_crazyflies(state: &AppState) {
     let airborne = |s: &Snapshot| -> Vec<String> {
         s.uavs
             .iter()
-            .filter(|u| u.link != links::SIM_LINK && u.phase.airborne())
-            .map(|u| u.id.clone())
+            .filter(|u| *u.link != *links::SIM_LINK && u.phase.airborne())
+            .map(|u| u.id.to_string())
             .collect()
     };
     let ids = airborne(&state.engine.snapshots.borrow());
