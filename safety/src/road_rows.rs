@@ -77,7 +77,7 @@ pub fn road_rows(
     let line = |k: usize, n: Vec2, s: f64| wall_row(s, n, v, params, k);
     match rule {
         RoadRule::Walls => {
-            walls_rows(road, p, v, segment, radius, 0.0, params, out);
+            walls_rows(road, p, v, segment, radius, None, params, out);
         }
         RoadRule::Halfplanes => {
             for &k in road.halfplane_walls(segment) {
@@ -103,23 +103,34 @@ pub fn road_rows(
 /// Appends the road rows of a UAV at `p`, `v` in cell `cell` of a network: the walls rule (R2),
 /// the only one defined on a network (docs/safety.md §5.1).
 pub fn network_rows(net: &Network, p: Vec2, v: Vec2, cell: usize, params: &Params, out: &mut Vec<Row>) {
-    walls_rows_and_margin(net, p, v, cell, params, 0.0, out);
+    walls_rows_and_margin(net, p, v, cell, params, None, out);
+}
+
+/// What rule R2's pass over the walls saw around a UAV inside the road.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WallsSeen {
+    /// The radius of the walls' query: every wall within it of the UAV was looked at.
+    pub reach: f64,
+    /// The smallest squared distance from the UAV to a wall looked at (to its nearest point).
+    pub nearest_d2: f64,
+    /// The smallest [`wall_braking_margin`] of a wall looked at.
+    pub margin: f64,
 }
 
 /// Appends the rows of rule R2 (`walls`, as [`road_rows`] with [`RoadRule::Walls`] and
-/// [`network_rows`]) of a UAV at `p`, `v` in segment or cell `segment`, and returns, when the UAV is
-/// in the road, the smallest [`wall_braking_margin`] over a set of walls that holds every wall within
-/// `reach` of `p` (the run's road margin, in the same pass over the walls, when `reach` is the
-/// distance beyond which no wall can hold it); None outside the road or for a `reach` not positive.
+/// [`network_rows`]) of a UAV at `p`, `v` in segment or cell `segment`; with `reach` given, looks at
+/// least at every wall within `reach` too (the same rows) and returns what it saw when the UAV is in
+/// the road (None outside or without `reach`): a run's road margin and boundary distance in the same
+/// pass over the walls.
 pub fn walls_rows_and_margin<B: Boundary>(
     road: &B,
     p: Vec2,
     v: Vec2,
     segment: usize,
     params: &Params,
-    reach: f64,
+    reach: Option<f64>,
     out: &mut Vec<Row>,
-) -> Option<f64> {
+) -> Option<WallsSeen> {
     let wall = Clearance::one(params.d_s, params);
     let radius = activation_radius(wall.boundary(), v.norm() + wall.eta_v, params.delta);
     walls_rows(road, p, v, segment, radius, reach, params, out)
@@ -128,6 +139,7 @@ pub fn walls_rows_and_margin<B: Boundary>(
 /// The braking margin `dist − min(ḋist, 0)²/(2δ)` of finite wall `w` for a UAV at `p`, `v`, given the
 /// wall's point nearest to `p` and its parameter along the wall (`w.nearest(&p)`), as rule R2
 /// enforces the wall: its line distance in its slab (from either side), its end points as points.
+#[inline]
 pub fn wall_braking_margin(w: &Wall, nearest: (Vec2, f64), p: Vec2, v: Vec2, delta: f64) -> f64 {
     let (c, t) = nearest;
     let (dist, rate) = if t > 0.0 && t < 1.0 {
@@ -153,8 +165,8 @@ pub fn wall_braking_margin(w: &Wall, nearest: (Vec2, f64), p: Vec2, v: Vec2, del
 /// The unsigned distance is the true distance to that wall, so it is positive and C¹-continuous with
 /// V's end-point barrier where the foot reaches V.
 ///
-/// Inside the road and for a positive `reach`, returns the smallest [`wall_braking_margin`] over the
-/// walls it looked at: every wall within `radius` and within `reach` of `p` (None otherwise).
+/// With `reach` given, also looks at every wall within it and returns, inside the road, what it saw
+/// of the walls it looked at (None otherwise).
 #[allow(clippy::too_many_arguments)] // The rows' inputs, and the margin's reach.
 fn walls_rows<B: Boundary>(
     road: &B,
@@ -162,10 +174,10 @@ fn walls_rows<B: Boundary>(
     v: Vec2,
     segment: usize,
     radius: f64,
-    reach: f64,
+    reach: Option<f64>,
     params: &Params,
     out: &mut Vec<Row>,
-) -> Option<f64> {
+) -> Option<WallsSeen> {
     let walls = road.wall_list();
     if !road.inside_in(segment, &p) {
         let nearest = (walls[road.nearest_wall_to(&p)].nearest(&p).0 - p).norm();
@@ -180,15 +192,18 @@ fn walls_rows<B: Boundary>(
     // index order: the same rows, in the same order, as a loop over every wall.
     let mut seen = [Vec2::zeros(); 16];
     let mut n_seen = 0;
-    let (wanted, mut margin) = (reach > 0.0, f64::INFINITY);
+    let query = reach.map_or(radius, |reach| radius.max(reach));
+    let mut seen_walls = WallsSeen { reach: query, nearest_d2: f64::INFINITY, margin: f64::INFINITY };
     // A larger query gives the same rows (the same walls within `radius`, in the same order).
-    for k in road.walls_within(segment, &p, radius.max(reach)) {
+    for k in road.walls_within(segment, &p, query) {
         let w = &walls[k];
         let (c, t) = w.nearest(&p);
-        if wanted {
-            margin = margin.min(wall_braking_margin(w, (c, t), p, v, params.delta));
+        let d2 = (c - p).norm_squared();
+        if reach.is_some() {
+            seen_walls.nearest_d2 = seen_walls.nearest_d2.min(d2);
+            seen_walls.margin = seen_walls.margin.min(wall_braking_margin(w, (c, t), p, v, params.delta));
         }
-        if (c - p).norm() > radius {
+        if d2.sqrt() > radius {
             continue;
         }
         if t > 0.0 && t < 1.0 {
@@ -206,7 +221,7 @@ fn walls_rows<B: Boundary>(
             out.push(corner_row(p, v, c, params, k));
         }
     }
-    wanted.then_some(margin)
+    reach.map(|_| seen_walls)
 }
 
 /// The line row of wall `k` at signed distance `s` along normal `n`, held for one tick (§4.4).

@@ -21,7 +21,7 @@ use crate::ragged::Ragged;
 use crate::runs::margins::{UavMargins, closest_pair, road_margin_at, road_margin_reach};
 use crate::tick::parallel;
 use rayon::prelude::*;
-use roads::{Airspace, Boundary};
+use roads::{Airspace, Boundary, SEGMENT_NEAR_M};
 use safety::{
     Neighbour, ReachDisk, RoadRule, Row, RowKind, neighbour_rows, road_rows, walls_rows_and_margin,
 };
@@ -198,24 +198,32 @@ fn rows_of_one(
     out: &mut Vec<Row>,
 ) -> Option<(f64, f64)> {
     let state = me.state;
+    let (v, delta) = (state.v, p.delta);
     let margins = match (road, rule) {
         (Airspace::Road(road), RoadRule::Halfplanes | RoadRule::Paper) => {
-            road_rows(road, rule, state.p, state.v, me.segment, p, out);
+            road_rows(road, rule, state.p, v, me.segment, p, out);
             None
         }
-        (airspace, _) => {
-            // The margin's reach is known only inside (at a positive distance to the boundary).
-            let wall = airspace.signed_distance_in(me.segment, &state.p);
-            let reach = if wall > 0.0 { road_margin_reach(&state, p.delta, wall) } else { 0.0 };
-            let margin = match airspace {
-                Airspace::Road(road) => {
-                    walls_rows_and_margin(road, state.p, state.v, me.segment, p, reach, out)
-                }
-                Airspace::Network(net) => {
-                    walls_rows_and_margin(net, state.p, state.v, me.segment, p, reach, out)
-                }
-            };
-            margin.map(|margin| (wall, margin))
+        (Airspace::Road(road), RoadRule::Walls) => {
+            // The boundary distance and the road margin from the rows' own walls when those settle
+            // them: the nearest wall looked at is the nearest of all when it is within the query's
+            // reach, and a wall beyond the reach has a margin above reach − v²/(2δ). The query
+            // reaches as far as the tracked segment's list of walls (which it reads whole anyway).
+            let reach = Some(SEGMENT_NEAR_M);
+            let seen = walls_rows_and_margin(road, state.p, v, me.segment, p, reach, out);
+            seen.and_then(|seen| {
+                let (wall, room) = (seen.nearest_d2.sqrt(), seen.reach - 1e-9 * (1.0 + seen.reach));
+                (wall <= room && seen.margin + v.norm_squared() / (2.0 * delta) <= room)
+                    .then_some((wall, seen.margin))
+            })
+        }
+        (Airspace::Network(net), _) => {
+            // On a network the boundary distance is the cells' own (another formula): the margin's
+            // reach from it, known only inside (at a positive distance to the boundary).
+            let wall = net.signed_distance_in(me.segment, &state.p);
+            let reach = (wall > 0.0).then(|| road_margin_reach(&state, delta, wall));
+            let seen = walls_rows_and_margin(net, state.p, v, me.segment, p, reach, out);
+            seen.map(|seen| (wall, seen.margin))
         }
     };
     let what = |d: usize| {
