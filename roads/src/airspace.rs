@@ -162,7 +162,7 @@ impl Boundary for Airspace {
 
     fn inside_in(&self, hint: usize, x: &Vec2) -> bool {
         match self {
-            Airspace::Road(road) => road.contains(x),
+            Airspace::Road(road) => road.contains_in(hint, x),
             Airspace::Network(net) => net.contains_in(hint, x),
         }
     }

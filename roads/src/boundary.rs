@@ -33,6 +33,10 @@ impl Boundary for crate::Road {
         self.contains(x)
     }
 
+    fn inside_in(&self, hint: usize, x: &Vec2) -> bool {
+        self.contains_in(hint, x)
+    }
+
     fn nearest_wall_to(&self, x: &Vec2) -> usize {
         self.nearest_wall(x)
     }

@@ -96,17 +96,20 @@ impl Wall {
     }
 
     /// Signed distance `s = n̂_inᵀ(x − a)` to the wall's infinite line, positive on the road side.
+    #[inline]
     pub fn signed_distance(&self, x: &Vec2) -> f64 {
         self.n_in.dot(&(x - self.a))
     }
 
     /// Nearest point of the finite wall to `x` and the segment parameter t ∈ [0, 1] (0 at a, 1 at b).
+    #[inline]
     pub fn nearest(&self, x: &Vec2) -> (Vec2, f64) {
         nearest_on_segment(&self.a, &self.b, x)
     }
 }
 
 /// Nearest point to `x` on the segment `[a, b]`, with its parameter t ∈ [0, 1].
+#[inline]
 pub fn nearest_on_segment(a: &Vec2, b: &Vec2, x: &Vec2) -> (Vec2, f64) {
     let e = b - a;
     let len2 = e.norm_squared();

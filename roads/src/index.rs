@@ -176,7 +176,7 @@ const NEAR_CAPACITY: usize = 32;
 
 /// Radius (m) of each segment's list of nearby walls: queries from inside a segment within this
 /// radius read the list instead of the tree.
-pub(crate) const SEGMENT_NEAR_M: f64 = 8.0;
+pub const SEGMENT_NEAR_M: f64 = 8.0;
 
 /// Segments with more walls than this within [`SEGMENT_NEAR_M`] keep no list (the tree answers).
 const SEGMENT_NEAR_CAPACITY: usize = 64;

@@ -94,6 +94,15 @@ fn same_answers(road: &Road, x: &Vec2) -> Result<(), TestCaseError> {
         let (got, want) = (road.boundary_distance_in(hint, x), reference);
         prop_assert_eq!(got.to_bits(), want.to_bits(), "boundary distance with hint {} at {:?}", hint, x);
     }
+    for hint in hints.into_iter().chain([road.quads().len()]) {
+        prop_assert_eq!(
+            road.contains_in(hint, x),
+            road.contains_scan(x),
+            "contains with hint {} at {:?}",
+            hint,
+            x
+        );
+    }
     let some = [0, walls.len() / 3, walls.len() / 2, walls.len() - 1];
     for w in some.iter().map(|&k| &walls[k]) {
         for y in [w.a, (w.a + w.b) / 2.0, road.quads()[w.segment].centroid()] {

@@ -35,7 +35,7 @@ pub use airspace_layout::AirspaceLayout;
 pub use boundary::Boundary;
 pub use centerline::CenterLine;
 pub use geometry::{Quad, Wall, WallKind, nearest_on_segment, segments_intersect};
-pub use index::NearWalls;
+pub use index::{NearWalls, SEGMENT_NEAR_M};
 pub use lanes::{ClearanceProfile, PROFILE_STEP_M, segment_distance};
 pub use layout::RoadLayout;
 pub use nav::{NavMode, NavState, Navigator, Restriction, RoutePosition};

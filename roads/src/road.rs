@@ -137,6 +137,12 @@ impl Road {
         if RoadIndex::covers(x) { self.index.contains(&self.quads, x) } else { self.contains_scan(x) }
     }
 
+    /// [`Road::contains`] for a point believed to be in segment `hint`: that segment answers when
+    /// it holds `x` (no tree query), else the index. The same answer either way.
+    pub fn contains_in(&self, hint: usize, x: &Vec2) -> bool {
+        self.quads.get(hint).is_some_and(|q| q.contains(x, CONTAINS_TOL_M)) || self.contains(x)
+    }
+
     /// The segment `x` is in, preferring `previous` while `x` is still inside it (hysteresis); if `x`
     /// is in no segment, the one with the largest (least negative) margin.
     pub fn locate(&self, x: &Vec2, previous: Option<usize>) -> usize {

@@ -25,4 +25,7 @@ pub use neighbour_rows::{
     reach_disk,
 };
 pub use qp::{CLARABEL_TOL, ConstraintRow, QpSolution, QpSolver};
-pub use road_rows::{ACTIVATION_BARRIER, RoadRule, activation_radius, network_rows, road_rows};
+pub use road_rows::{
+    ACTIVATION_BARRIER, RoadRule, WallsSeen, activation_radius, network_rows, road_rows, wall_braking_margin,
+    walls_rows_and_margin,
+};

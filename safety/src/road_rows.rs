@@ -1,9 +1,11 @@
 //! Which walls a UAV enforces, and their rows: rule R2 `walls` (default), R3 `halfplanes`, R1 `paper`
 //! (docs/safety.md §5, amended by §10.1).
 
-use crate::barrier::{Clearance, MIN_DISTANCE_M, Row, RowKind, held_for, line_row, vertex_row};
+use crate::barrier::{
+    Clearance, MIN_DISTANCE_M, Row, RowKind, braking_margin, held_for, line_row, vertex_row,
+};
 use roads::network::Network;
-use roads::{Boundary, Road};
+use roads::{Boundary, Road, Wall};
 use uav::{Params, Vec2};
 
 /// Barrier value B (m/s) below which every row is present: walls and neighbours are searched within
@@ -74,7 +76,9 @@ pub fn road_rows(
     let walls = road.walls();
     let line = |k: usize, n: Vec2, s: f64| wall_row(s, n, v, params, k);
     match rule {
-        RoadRule::Walls => walls_rows(road, p, v, segment, radius, params, out),
+        RoadRule::Walls => {
+            walls_rows(road, p, v, segment, radius, None, params, out);
+        }
         RoadRule::Halfplanes => {
             for &k in road.halfplane_walls(segment) {
                 let s = walls[k].signed_distance(&p);
@@ -99,9 +103,54 @@ pub fn road_rows(
 /// Appends the road rows of a UAV at `p`, `v` in cell `cell` of a network: the walls rule (R2),
 /// the only one defined on a network (docs/safety.md §5.1).
 pub fn network_rows(net: &Network, p: Vec2, v: Vec2, cell: usize, params: &Params, out: &mut Vec<Row>) {
+    walls_rows_and_margin(net, p, v, cell, params, None, out);
+}
+
+/// What rule R2's pass over the walls saw around a UAV inside the road.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WallsSeen {
+    /// The radius of the walls' query: every wall within it of the UAV was looked at.
+    pub reach: f64,
+    /// The smallest squared distance from the UAV to a wall looked at (to its nearest point).
+    pub nearest_d2: f64,
+    /// The smallest [`wall_braking_margin`] of a wall looked at.
+    pub margin: f64,
+}
+
+/// Appends the rows of rule R2 (`walls`, as [`road_rows`] with [`RoadRule::Walls`] and
+/// [`network_rows`]) of a UAV at `p`, `v` in segment or cell `segment`; with `reach` given, looks at
+/// least at every wall within `reach` too (the same rows) and returns what it saw when the UAV is in
+/// the road (None outside or without `reach`): a run's road margin and boundary distance in the same
+/// pass over the walls.
+pub fn walls_rows_and_margin<B: Boundary>(
+    road: &B,
+    p: Vec2,
+    v: Vec2,
+    segment: usize,
+    params: &Params,
+    reach: Option<f64>,
+    out: &mut Vec<Row>,
+) -> Option<WallsSeen> {
     let wall = Clearance::one(params.d_s, params);
     let radius = activation_radius(wall.boundary(), v.norm() + wall.eta_v, params.delta);
-    walls_rows(net, p, v, cell, radius, params, out);
+    walls_rows(road, p, v, segment, radius, reach, params, out)
+}
+
+/// The braking margin `dist − min(ḋist, 0)²/(2δ)` of finite wall `w` for a UAV at `p`, `v`, given the
+/// wall's point nearest to `p` and its parameter along the wall (`w.nearest(&p)`), as rule R2
+/// enforces the wall: its line distance in its slab (from either side), its end points as points.
+#[inline]
+pub fn wall_braking_margin(w: &Wall, nearest: (Vec2, f64), p: Vec2, v: Vec2, delta: f64) -> f64 {
+    let (c, t) = nearest;
+    let (dist, rate) = if t > 0.0 && t < 1.0 {
+        let d = w.signed_distance(&p);
+        (d.abs(), d.signum() * w.n_in.dot(&v))
+    } else {
+        let e: Vec2 = p - c;
+        let n = e.norm();
+        (n, if n > 0.0 { e.dot(&v) / n } else { 0.0 })
+    };
+    braking_margin(dist, rate, delta)
 }
 
 /// Rule R2: for a UAV inside the road, the barrier of each finite wall on the distance to that wall
@@ -115,15 +164,20 @@ pub fn network_rows(net: &Network, p: Vec2, v: Vec2, cell: usize, params: &Param
 /// barrier only when its foot left the slab, already at b ≈ 0 (stress seed 225, rl: S = 0.088 m < D_s).
 /// The unsigned distance is the true distance to that wall, so it is positive and C¹-continuous with
 /// V's end-point barrier where the foot reaches V.
+///
+/// With `reach` given, also looks at every wall within it and returns, inside the road, what it saw
+/// of the walls it looked at (None otherwise).
+#[allow(clippy::too_many_arguments)] // The rows' inputs, and the margin's reach.
 fn walls_rows<B: Boundary>(
     road: &B,
     p: Vec2,
     v: Vec2,
     segment: usize,
     radius: f64,
+    reach: Option<f64>,
     params: &Params,
     out: &mut Vec<Row>,
-) {
+) -> Option<WallsSeen> {
     let walls = road.wall_list();
     if !road.inside_in(segment, &p) {
         let nearest = (walls[road.nearest_wall_to(&p)].nearest(&p).0 - p).norm();
@@ -132,16 +186,24 @@ fn walls_rows<B: Boundary>(
                 out.push(wall_row(w.signed_distance(&p), w.n_in, v, params, k));
             }
         }
-        return;
+        return None;
     }
     // The index (or the tracked segment's list) gives a superset of the walls within the radius, in
     // index order: the same rows, in the same order, as a loop over every wall.
     let mut seen = [Vec2::zeros(); 16];
     let mut n_seen = 0;
-    for k in road.walls_within(segment, &p, radius) {
+    let query = reach.map_or(radius, |reach| radius.max(reach));
+    let mut seen_walls = WallsSeen { reach: query, nearest_d2: f64::INFINITY, margin: f64::INFINITY };
+    // A larger query gives the same rows (the same walls within `radius`, in the same order).
+    for k in road.walls_within(segment, &p, query) {
         let w = &walls[k];
         let (c, t) = w.nearest(&p);
-        if (c - p).norm() > radius {
+        let d2 = (c - p).norm_squared();
+        if reach.is_some() {
+            seen_walls.nearest_d2 = seen_walls.nearest_d2.min(d2);
+            seen_walls.margin = seen_walls.margin.min(wall_braking_margin(w, (c, t), p, v, params.delta));
+        }
+        if d2.sqrt() > radius {
             continue;
         }
         if t > 0.0 && t < 1.0 {
@@ -159,6 +221,7 @@ fn walls_rows<B: Boundary>(
             out.push(corner_row(p, v, c, params, k));
         }
     }
+    reach.map(|_| seen_walls)
 }
 
 /// The line row of wall `k` at signed distance `s` along normal `n`, held for one tick (§4.4).

@@ -2,7 +2,8 @@
 
 use roads::{Boundary, Wall};
 use safety::barrier::braking_margin;
-use uav::{UavState, Vec2};
+use safety::wall_braking_margin;
+use uav::UavState;
 
 /// S_kd = ‖p_kd‖ − min(v̄_kd, 0)²/(2(δ_k+δ_d)): the closest two UAVs get if both brake now.
 pub fn collision_margin(k: &UavState, d: &UavState, delta_sum: f64) -> f64 {
@@ -41,10 +42,9 @@ pub fn road_margin_at(
     if !inside {
         return boundary;
     }
-    // A wall at distance d has a margin of at least d − v²/(2δ), and the nearest wall's is at most
-    // its distance: walls farther than that distance plus v²/(2δ) cannot hold the minimum.
+    // Walls farther than the reach cannot hold the minimum.
     let walls = road.wall_list();
-    let radius = boundary + s.v.norm_squared() / (2.0 * delta) + 1e-9 * (1.0 + boundary);
+    let radius = road_margin_reach(s, delta, boundary);
     let mut best = f64::INFINITY;
     for k in road.walls_within(hint.unwrap_or(0), &s.p, radius) {
         best = best.min(wall_margin(&walls[k], s, delta));
@@ -55,16 +55,58 @@ pub fn road_margin_at(
 /// The braking margin of one finite wall as rule R2 enforces it: its line distance in its slab (from
 /// either side), its end points as points.
 fn wall_margin(w: &Wall, s: &UavState, delta: f64) -> f64 {
-    let (c, t) = w.nearest(&s.p);
-    let (dist, rate) = if t > 0.0 && t < 1.0 {
-        let d = w.signed_distance(&s.p);
-        (d.abs(), d.signum() * w.n_in.dot(&s.v))
-    } else {
-        let e: Vec2 = s.p - c;
-        let n = e.norm();
-        (n, if n > 0.0 { e.dot(&s.v) / n } else { 0.0 })
-    };
-    braking_margin(dist, rate, delta)
+    wall_braking_margin(w, w.nearest(&s.p), s.p, s.v, delta)
+}
+
+/// One UAV's margins in one tick, as the metrics count them.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct UavMargins {
+    /// Distance to the nearest wall (negative outside).
+    pub wall: f64,
+    /// Its road margin S_kij.
+    pub road_margin: f64,
+    /// The smallest S_kd and distance to a later neighbour (a higher index), if it has one.
+    pub closest: Option<(f64, f64)>,
+}
+
+impl UavMargins {
+    /// The margins of a UAV with no state (none: every minimum ignores it).
+    pub const NONE: UavMargins =
+        UavMargins { wall: f64::INFINITY, road_margin: f64::INFINITY, closest: None };
+
+    /// The margins of a UAV at `state` tracked in segment or cell `hint` (any hint gives the same),
+    /// against `later`, its neighbours of higher index, in their list's order.
+    pub fn of<'a>(
+        road: &impl Boundary,
+        hint: Option<usize>,
+        state: &UavState,
+        delta: f64,
+        later: impl Iterator<Item = &'a UavState>,
+    ) -> UavMargins {
+        let wall = road.signed_distance_in(hint.unwrap_or(0), &state.p);
+        let road_margin = road_margin_at(road, hint, state, delta, wall);
+        UavMargins { wall, road_margin, closest: closest_pair(state, delta, later) }
+    }
+}
+
+/// The smallest S_kd and the smallest distance between `state` and the UAVs `others` (None when there
+/// are none), the pair margin with braking capability `delta` each.
+pub(crate) fn closest_pair<'a>(
+    state: &UavState,
+    delta: f64,
+    others: impl Iterator<Item = &'a UavState>,
+) -> Option<(f64, f64)> {
+    others.fold(None, |closest: Option<(f64, f64)>, other| {
+        let (m, sep) = (collision_margin(state, other, 2.0 * delta), (state.p - other.p).norm());
+        Some(closest.map_or((m, sep), |(a, b)| (a.min(m), b.min(sep))))
+    })
+}
+
+/// The radius beyond which no wall holds the road margin of a UAV at `s` at distance `boundary` > 0
+/// from the road's boundary: a wall at distance d has a margin of at least d − v²/(2δ), and the
+/// nearest wall's is at most its distance (with room for rounding).
+pub(crate) fn road_margin_reach(s: &UavState, delta: f64, boundary: f64) -> f64 {
+    boundary + s.v.norm_squared() / (2.0 * delta) + 1e-9 * (1.0 + boundary)
 }
 
 #[cfg(test)]
@@ -72,6 +114,7 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
     use roads::Road;
+    use uav::Vec2;
 
     /// `road_margin` as a loop over every wall.
     fn road_margin_scan(road: &Road, s: &UavState, delta: f64) -> f64 {

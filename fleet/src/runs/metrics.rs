@@ -3,10 +3,9 @@
 use crate::fleet::Fleet;
 use crate::progress::stall_time_added;
 use crate::runs::histogram::DurationHistogram;
-use crate::runs::margins::{collision_margin, road_margin_at};
+use crate::runs::margins::UavMargins;
 use crate::tick::parallel;
 use rayon::prelude::*;
-use roads::Boundary;
 use serde::Serialize;
 use std::collections::BTreeMap;
 use uav::UavState;
@@ -117,17 +116,6 @@ pub struct MetricsRecorder {
     margins: Vec<UavMargins>,
 }
 
-/// One UAV's margins in one tick.
-#[derive(Debug, Clone, Copy, Default)]
-struct UavMargins {
-    /// Distance to the nearest wall (negative outside).
-    wall: f64,
-    /// Its road margin S_kij.
-    road_margin: f64,
-    /// The smallest S_kd and distance to a later neighbour, if it has one.
-    closest: Option<(f64, f64)>,
-}
-
 fn min_opt(a: Option<f64>, b: f64) -> Option<f64> {
     Some(a.map_or(b, |a| a.min(b)))
 }
@@ -166,29 +154,32 @@ impl MetricsRecorder {
             ),
         }
         let states = &self.states;
+        // The fleet's states: their margins as the tick's rows stage recorded them, if it still
+        // has those states (one pass over the walls and pairs per tick, not two).
+        let rows = &fleet.pipeline.rows;
+        let built = truth.is_none() && rows.margins_hold_for(uavs);
         // Each UAV's margins on its own (in parallel for large fleets; a minimum does not depend on
         // the order).
         let margins_of = |(k, &(state, hint)): (usize, &(Option<UavState>, Option<usize>))| {
-            let Some(state) = state else {
-                return UavMargins { wall: f64::INFINITY, road_margin: f64::INFINITY, closest: None };
-            };
-            let wall = road.signed_distance_in(hint.unwrap_or(0), &state.p);
-            let road_margin = road_margin_at(road, hint, &state, p.delta, wall);
+            let Some(state) = state else { return UavMargins::NONE };
+            if built && let Some(margins) = rows.margins(k) {
+                return margins;
+            }
             // The pairs of this tick's neighbour search: any other pair is farther apart than the
             // activation radius at twice the fleet's top speed, so its S_kd exceeds D_c.
-            let pairs = lists
+            let later = lists
                 .get(k)
                 .into_iter()
                 .flatten()
                 .filter(|&&d| d > k)
                 .filter_map(|&d| states.get(d)?.0.as_ref());
-            let closest = pairs.fold(None, |closest: Option<(f64, f64)>, other| {
-                let (m, sep) = (collision_margin(&state, other, 2.0 * p.delta), (state.p - other.p).norm());
-                Some(closest.map_or((m, sep), |(a, b)| (a.min(m), b.min(sep))))
-            });
-            UavMargins { wall, road_margin, closest }
+            UavMargins::of(road, hint, &state, p.delta, later)
         };
-        if parallel(states.len()) {
+        if built {
+            // A copy per UAV: not worth the threads.
+            self.margins.clear();
+            self.margins.extend(states.iter().enumerate().map(margins_of));
+        } else if parallel(states.len()) {
             states.par_iter().enumerate().map(margins_of).collect_into_vec(&mut self.margins);
         } else {
             self.margins.clear();

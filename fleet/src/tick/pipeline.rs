@@ -42,7 +42,7 @@ pub(crate) struct TickPipeline {
     /// Each UAV's tracked segment this tick.
     segments: Vec<usize>,
     /// Every UAV's rows this tick.
-    rows: RowBuilder,
+    pub rows: RowBuilder,
     /// The filter's order, workers and solvers.
     filter: FilterStage,
     /// Per UAV this tick: arrived, and its way-making point lacks a path's clearance (it cannot

@@ -11,13 +11,20 @@
 //! The rows of each block of [`UAVS_PER_BLOCK`] consecutive UAVs share one buffer ([`Ragged`]), one
 //! block per parallel task: a block's total varies far less from tick to tick than one UAV's row
 //! count, so the buffers stop growing after the first ticks (no allocation in steady state).
+//!
+//! The same pass records each UAV's margins as the run's metrics count them ([`UavMargins`]): its
+//! road margin from the walls its rows look at (the query widened to the margin's reach), its
+//! closest pair from its neighbour list, so that the metrics need no second pass over the walls.
 
 use crate::member::Uav;
 use crate::ragged::Ragged;
+use crate::runs::margins::{UavMargins, closest_pair, road_margin_at, road_margin_reach};
 use crate::tick::parallel;
 use rayon::prelude::*;
-use roads::Airspace;
-use safety::{Neighbour, ReachDisk, RoadRule, Row, RowKind, neighbour_rows, network_rows, road_rows};
+use roads::{Airspace, Boundary, SEGMENT_NEAR_M};
+use safety::{
+    Neighbour, ReachDisk, RoadRule, Row, RowKind, neighbour_rows, road_rows, walls_rows_and_margin,
+};
 use uav::{Params, UavState, Vec2};
 
 /// What the rows of other UAVs need to know about one UAV this tick (plain data, shared by threads).
@@ -50,12 +57,21 @@ pub(crate) struct NeighbourLists<'a> {
 /// UAVs whose rows share one buffer and one parallel task.
 const UAVS_PER_BLOCK: usize = 64;
 
+/// The rows and margins of [`UAVS_PER_BLOCK`] consecutive UAVs.
+#[derive(Debug, Default)]
+struct RowBlock {
+    /// `rows[i]`: the rows of the block's UAV i.
+    rows: Ragged<Row>,
+    /// `margins[i]`: the margins of the block's UAV i.
+    margins: Vec<UavMargins>,
+}
+
 /// Row buffers, reused from tick to tick.
 #[derive(Debug, Default)]
 pub(crate) struct RowBuilder {
     views: Vec<RowView>,
-    /// `blocks[b][i]`: the rows of UAV `b·UAVS_PER_BLOCK + i`.
-    blocks: Vec<Ragged<Row>>,
+    /// `blocks[b]`: the rows and margins of UAVs `b·UAVS_PER_BLOCK..`.
+    blocks: Vec<RowBlock>,
 }
 
 impl RowBuilder {
@@ -88,19 +104,31 @@ impl RowBuilder {
             segment: 0,
         }));
         let n = uavs.len();
-        self.blocks.resize_with(n.div_ceil(UAVS_PER_BLOCK), Ragged::default);
+        self.blocks.resize_with(n.div_ceil(UAVS_PER_BLOCK), RowBlock::default);
         self.blocks.truncate(n.div_ceil(UAVS_PER_BLOCK));
         let views = &self.views;
-        let build = |(b, block): (usize, &mut Ragged<Row>)| {
+        let build = |(b, block): (usize, &mut RowBlock)| {
             let first = b * UAVS_PER_BLOCK;
             let uavs = first..(first + UAVS_PER_BLOCK).min(n);
-            block.reset(uavs.len());
+            block.rows.reset(uavs.len());
+            block.margins.clear();
             for (i, k) in uavs.enumerate() {
                 let me = views[k];
+                let later = lists[k].iter().filter(|&&d| d > k).map(|&d| &views[d].state);
+                let closest = closest_pair(&me.state, params.delta, later);
+                let mut road_margins = None;
                 if me.flying {
                     let neighbours = lists[k].iter().copied().chain(foreign_lists[k].iter().map(|&f| n + f));
-                    block.fill(i, |rows| rows_of_one(road, rule, params, me, neighbours, views, rows));
+                    block.rows.fill(i, |rows| {
+                        road_margins = rows_of_one(road, rule, params, me, neighbours, views, rows);
+                    });
                 }
+                // Where the rows' pass could not give the road margin, today's query for this UAV only.
+                let (wall, road_margin) = road_margins.unwrap_or_else(|| {
+                    let wall = road.signed_distance_in(me.segment, &me.state.p);
+                    (wall, road_margin_at(road, Some(me.segment), &me.state, params.delta, wall))
+                });
+                block.margins.push(UavMargins { wall, road_margin, closest });
             }
         };
         if parallel(n) {
@@ -117,7 +145,19 @@ impl RowBuilder {
 
     /// UAV k's rows as built, each pair row with its share only (empty when it does not fly).
     pub fn built(&self, k: usize) -> &[Row] {
-        self.blocks.get(k / UAVS_PER_BLOCK).map_or(&[], |block| &block[k % UAVS_PER_BLOCK])
+        self.blocks.get(k / UAVS_PER_BLOCK).map_or(&[], |block| &block.rows[k % UAVS_PER_BLOCK])
+    }
+
+    /// UAV k's margins at the states read this tick (None when there is no UAV k).
+    pub fn margins(&self, k: usize) -> Option<UavMargins> {
+        self.blocks.get(k / UAVS_PER_BLOCK)?.margins.get(k % UAVS_PER_BLOCK).copied()
+    }
+
+    /// True when [`RowBuilder::margins`] are those of `uavs` now: built for as many UAVs, each
+    /// still at the state read this tick.
+    pub fn margins_hold_for(&self, uavs: &[Uav]) -> bool {
+        let built: usize = self.blocks.iter().map(|block| block.margins.len()).sum();
+        built == uavs.len() && uavs.iter().zip(&self.views).all(|(u, view)| u.state == view.state)
     }
 
     /// UAV k's rows into `out`, with the whole pair row against each cooperating neighbour d filtered
@@ -146,7 +186,8 @@ impl RowBuilder {
 }
 
 /// The road rows (on a network: its walls, rule R2 whatever `rule` says, docs/safety.md §5.1) and
-/// neighbour rows of one flying UAV `me` (see the module doc).
+/// neighbour rows of one flying UAV `me` (see the module doc); returns its distance to the road's
+/// boundary and road margin when rule R2's pass over the walls gave them (inside the road).
 fn rows_of_one(
     road: &Airspace,
     rule: RoadRule,
@@ -155,12 +196,36 @@ fn rows_of_one(
     neighbours: impl Iterator<Item = usize>,
     views: &[RowView],
     out: &mut Vec<Row>,
-) {
+) -> Option<(f64, f64)> {
     let state = me.state;
-    match road {
-        Airspace::Road(road) => road_rows(road, rule, state.p, state.v, me.segment, p, out),
-        Airspace::Network(net) => network_rows(net, state.p, state.v, me.segment, p, out),
-    }
+    let (v, delta) = (state.v, p.delta);
+    let margins = match (road, rule) {
+        (Airspace::Road(road), RoadRule::Halfplanes | RoadRule::Paper) => {
+            road_rows(road, rule, state.p, v, me.segment, p, out);
+            None
+        }
+        (Airspace::Road(road), RoadRule::Walls) => {
+            // The boundary distance and the road margin from the rows' own walls when those settle
+            // them: the nearest wall looked at is the nearest of all when it is within the query's
+            // reach, and a wall beyond the reach has a margin above reach − v²/(2δ). The query
+            // reaches as far as the tracked segment's list of walls (which it reads whole anyway).
+            let reach = Some(SEGMENT_NEAR_M);
+            let seen = walls_rows_and_margin(road, state.p, v, me.segment, p, reach, out);
+            seen.and_then(|seen| {
+                let (wall, room) = (seen.nearest_d2.sqrt(), seen.reach - 1e-9 * (1.0 + seen.reach));
+                (wall <= room && seen.margin + v.norm_squared() / (2.0 * delta) <= room)
+                    .then_some((wall, seen.margin))
+            })
+        }
+        (Airspace::Network(net), _) => {
+            // On a network the boundary distance is the cells' own (another formula): the margin's
+            // reach from it, known only inside (at a positive distance to the boundary).
+            let wall = net.signed_distance_in(me.segment, &state.p);
+            let reach = (wall > 0.0).then(|| road_margin_reach(&state, delta, wall));
+            let seen = walls_rows_and_margin(net, state.p, v, me.segment, p, reach, out);
+            seen.map(|seen| (wall, seen.margin))
+        }
+    };
     let what = |d: usize| {
         let other = views[d];
         let seen = match (other.cooperates, other.obstacle) {
@@ -171,4 +236,5 @@ fn rows_of_one(
         (d, seen)
     };
     neighbour_rows(state, neighbours.map(what), p, out);
+    margins
 }
