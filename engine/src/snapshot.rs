@@ -292,6 +292,8 @@ impl Snapshot {
         let all = fleet.uavs();
         let paused = fleet.paused();
         let before = previous.map_or(&[][..], |s| &s.uavs[..]);
+        // The road margins the tick's rows stage measured, while the fleet holds the states it read.
+        let tick_margins = fleet.tick_road_margins();
         // Each UAV's entry on its own, from plain copies of the states (in parallel for large
         // fleets; a UAV's link is only read through `&self` methods that lock what they share).
         let states: Vec<(UavState, bool, Option<usize>)> =
@@ -306,7 +308,10 @@ impl Snapshot {
                     .map(|d| collision_margin(&state, &d.0, 2.0 * p.delta))
                     .min_by(f64::total_cmp)
             });
-            let road_margin = road_margin_in(road, hint, &state, p.delta);
+            let road_margin = match &tick_margins {
+                Some(margin_of) => margin_of(k),
+                None => road_margin_in(road, hint, &state, p.delta),
+            };
             let was = before.get(k);
             let l = &u.last;
             UavSnapshot {

@@ -61,6 +61,15 @@ impl Fleet {
         &self.pipeline.neighbours.lists
     }
 
+    /// Each UAV's road margin (eq. 6, `road_margin_in`'s value) as the last tick's rows stage
+    /// measured it, `[k]` for UAV k; None when the fleet no longer holds the states that tick read
+    /// (a UAV added, removed or moved since): measure them again then. One pass over the fleet.
+    pub fn tick_road_margins(&self) -> Option<impl Fn(usize) -> f64 + Sync + '_> {
+        let rows = &self.pipeline.rows;
+        rows.margins_hold_for(&self.uavs)
+            .then_some(move |k| rows.margins(k).map_or(f64::INFINITY, |m| m.road_margin))
+    }
+
     /// Pause (every UAV brakes to a hover; the filter still runs) or fly the policies again.
     pub(crate) fn set_paused(&mut self, paused: bool) {
         self.paused = paused;
