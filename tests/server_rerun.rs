@@ -220,7 +220,7 @@ async fn save_mode_records_road_uavs_and_series_readable_by_rerun() {
     }
     // `a` flew towards its goal; its last logged position is where the server left it.
     let a = rec.points("world/uavs/a");
-    let final_a = last.uavs.iter().find(|u| u.id == "a").unwrap().p;
+    let final_a = last.uavs.iter().find(|u| &*u.id == "a").unwrap().p;
     assert!(a.last().unwrap().1[0] > a[0].1[0] + 0.2, "a did not move: {a:?}");
     assert!((f64::from(a.last().unwrap().1[0]) - final_a[0]).abs() < 0.2, "{a:?} vs {final_a:?}");
 

@@ -54,10 +54,13 @@ pub struct Encoder {
     roster: Bytes,
     index: Arc<HashMap<Arc<str>, usize>>,
     /// (id, policy, goal, link) of the roster, in snapshot order.
-    last: Vec<(Arc<str>, Arc<str>, Option<[f64; 2]>, Arc<str>)>,
+    last: Vec<RosterEntry>,
     reservations_version: u32,
     reservations: Bytes,
 }
+
+/// What the roster frame says of one UAV: id, policy, goal, link.
+type RosterEntry = (Arc<str>, Arc<str>, Option<[f64; 2]>, Arc<str>);
 
 /// The same text: the same shared string, or equal strings.
 fn same_text(a: &Arc<str>, b: &Arc<str>) -> bool {
