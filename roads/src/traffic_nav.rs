@@ -194,7 +194,7 @@ impl Navigator<'_> {
         let arc_at = |k: usize, count: usize| pos.s + direction * ahead * (k as f64 / count as f64);
         let candidate = |k: usize, count: usize| {
             let s = arc_at(k, count);
-            (line.point_beside(s, self.lane_offset(s, direction, pos.lateral)), line.piece_at(s))
+            line.point_beside_near(s, self.lane_offset(s, direction, pos.lateral), route.segment)
         };
         let clear = |k: usize, count: usize, need: f64| {
             let (c, segment) = candidate(k, count);
