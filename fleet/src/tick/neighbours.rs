@@ -5,7 +5,8 @@
 //! O(N log N) for the sort plus O(N + candidates) at bounded density, whichever way the road runs (a
 //! sweep along x alone degenerated on roads running north–south), and each UAV's list comes out
 //! ordered by x, then index (a merge of three sorted windows), with no sort per list. The lists share
-//! one buffer ([`Ragged`]) reused every tick.
+//! one buffer ([`Ragged`]) reused every tick. Large fleets sort on both cores and search the two
+//! halves of the bands at once.
 //!
 //! Foreign UAVs (flown by another region, [`crate::ForeignUav`]) go into the same sort: points from
 //! index `own` on get no list of their own, and each own UAV's foreign neighbours come out in a
@@ -102,14 +103,16 @@ impl NeighbourSearch {
         }
         self.lists.reset(own);
         self.foreign.reset(own);
+        // Each half's lists copied in one piece (its UAVs' lists follow one another).
         for half in &self.halves {
-            let (mut own_start, mut foreign_start) = (0, 0);
-            for &(a, own_end, foreign_end) in &half.ends {
-                self.lists.fill(a, |list| list.extend_from_slice(&half.own[own_start..own_end]));
-                self.foreign
-                    .fill(a, |list| list.extend_from_slice(&half.foreign[foreign_start..foreign_end]));
-                (own_start, foreign_start) = (own_end, foreign_end);
-            }
+            let starts =
+                std::iter::once((0, 0)).chain(half.ends.iter().map(|&(_, own, foreign)| (own, foreign)));
+            let spans = half.ends.iter().zip(starts);
+            let own_spans = spans.clone().map(|(&(a, own_end, _), (own_start, _))| (a, own_start, own_end));
+            self.lists.extend_lists(&half.own, own_spans);
+            let foreign_spans =
+                spans.map(|(&(a, _, foreign_end), (_, foreign_start))| (a, foreign_start, foreign_end));
+            self.foreign.extend_lists(&half.foreign, foreign_spans);
         }
     }
 }
