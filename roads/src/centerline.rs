@@ -148,6 +148,32 @@ impl CenterLine {
         k
     }
 
+    /// The number of vertices whose arc length satisfies `before` (a predicate true on a prefix of
+    /// the vertices, such as `a <= s`): `arc().partition_point(before)`, found by walking from vertex
+    /// `hint` when the answer is near it (a few steps), else by the binary search.
+    pub fn vertices_near(&self, hint: usize, before: impl Fn(f64) -> bool) -> usize {
+        /// Beyond this many vertices from the hint, the binary search is cheaper.
+        const MAX_WALK: usize = 16;
+        let arc = &self.arc;
+        let mut i = hint.min(arc.len());
+        for _ in 0..MAX_WALK {
+            if i > 0 && !before(arc[i - 1]) {
+                i -= 1;
+            } else if i < arc.len() && before(arc[i]) {
+                i += 1;
+            } else {
+                return i;
+            }
+        }
+        arc.partition_point(|&a| before(a))
+    }
+
+    /// [`CenterLine::tangent_at`] with the piece found from piece `hint` ([`CenterLine::piece_near`]).
+    pub fn tangent_near(&self, s: f64, hint: usize) -> Vec2 {
+        let k = self.piece_near(s, hint);
+        (self.points[k + 1] - self.points[k]).normalize()
+    }
+
     /// Where the lines at lateral offset `lateral` beside the two pieces meeting at interior vertex
     /// `k` cross (the corner of a lane through that bend); `None` at the ends and at turns sharper
     /// than [`MAX_LANE_CORNER_TURN_COS`] allows.
@@ -213,6 +239,12 @@ mod tests {
                 let expected = line.point_at(s) + line.normal_at(s) * lateral;
                 proptest::prop_assert!(p == expected || (p.x.is_nan() && expected.x.is_nan()), "{p:?} {expected:?}");
                 proptest::prop_assert!(line.point_beside(s, lateral) == p || p.x.is_nan());
+                let t = line.tangent_near(s, hint);
+                proptest::prop_assert!(t == line.tangent_at(s) || t.x.is_nan());
+                for before in [|a: f64, s: f64| a <= s, |a: f64, s: f64| a < s] {
+                    let expected = line.arc().partition_point(|&a| before(a, s));
+                    proptest::prop_assert_eq!(line.vertices_near(hint, |a| before(a, s)), expected);
+                }
             }
         }
     }

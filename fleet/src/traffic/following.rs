@@ -85,7 +85,9 @@ pub fn follow(
         });
         let leader = own.chain(foreign_leaders).min_by(|a, b| a.0.total_cmp(&b.0));
         uav.traffic.restriction.follow_at = leader.map(|(ahead, v)| {
-            let tangent = nav.road.centerline().tangent_at(me.s) * direction;
+            // The UAV's tracked segment is its piece, or next to it: a walk of a step or two.
+            let hint = uav.nav.tracker.current.unwrap_or(0);
+            let tangent = nav.road.centerline().tangent_near(me.s, hint) * direction;
             let lead = LEAD_TIME_S * v.dot(&tangent).max(0.0);
             me.s + direction * (ahead - gap + lead).min(ahead - keep)
         });
