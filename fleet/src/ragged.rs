@@ -34,6 +34,20 @@ impl<T> Ragged<T> {
         self.spans[k] = (start, self.items.len());
     }
 
+    /// Makes each list `k` of `lists`, given as `(k, start, end)`, the items `start..end` of
+    /// `items`, all of them copied at once to the end of the buffer (each `k < len()`, once per
+    /// [`Ragged::reset`], as [`Ragged::fill`]).
+    pub(crate) fn extend_lists(&mut self, items: &[T], lists: impl Iterator<Item = (usize, usize, usize)>)
+    where
+        T: Clone,
+    {
+        let offset = self.items.len();
+        self.items.extend_from_slice(items);
+        for (k, start, end) in lists {
+            self.spans[k] = (offset + start, offset + end);
+        }
+    }
+
     /// The number of lists.
     pub fn len(&self) -> usize {
         self.spans.len()

@@ -94,12 +94,84 @@ impl CenterLine {
 
     /// The point at arc length `s` and lateral offset `lateral` (road coordinates to the plane).
     pub fn point_beside(&self, s: f64, lateral: f64) -> Vec2 {
-        self.point_at(s) + self.normal_at(s) * lateral
+        self.beside_on(self.piece_at(s), s, lateral)
+    }
+
+    /// [`CenterLine::point_beside`] with the piece it lies on, found from piece `hint` (a UAV's
+    /// tracked segment: piece i runs through segment i) by [`CenterLine::piece_near`].
+    pub fn point_beside_near(&self, s: f64, lateral: f64, hint: usize) -> (Vec2, usize) {
+        let k = self.piece_near(s, hint);
+        (self.beside_on(k, s, lateral), k)
+    }
+
+    /// The point at arc length `s` and lateral offset `lateral` when `k` is `piece_at(s)`: the
+    /// same arithmetic as [`CenterLine::point_at`] plus [`CenterLine::normal_at`] times `lateral`.
+    fn beside_on(&self, k: usize, s: f64, lateral: f64) -> Vec2 {
+        let t = (self.points[k + 1] - self.points[k]).normalize();
+        // `point_at` looks the piece up at s clamped to the line: the same piece on it.
+        let on_line = (0.0..=self.length()).contains(&s);
+        let at = if on_line { k } else { self.piece_at(s.clamp(0.0, self.length())) };
+        self.point_on(at, s) + Vec2::new(-t.y, t.x) * lateral
     }
 
     /// Index of the piece containing arc length `s` (clamped).
     pub fn piece_at(&self, s: f64) -> usize {
         self.arc.partition_point(|&a| a <= s).saturating_sub(1).min(self.points.len().saturating_sub(2))
+    }
+
+    /// [`CenterLine::piece_at`], found by walking from piece `hint` (a few steps when `s` lies near
+    /// it, as a UAV's candidate targets do its tracked piece) instead of a binary search over the
+    /// whole line; the same piece for any hint.
+    pub fn piece_near(&self, s: f64, hint: usize) -> usize {
+        /// Beyond this many pieces from the hint, the binary search is cheaper.
+        const MAX_WALK: usize = 16;
+        let last = self.points.len().saturating_sub(2);
+        if s.is_nan() {
+            return self.piece_at(s);
+        }
+        let mut k = hint.min(last);
+        let mut steps = 0;
+        while k > 0 && self.arc[k] > s {
+            k -= 1;
+            steps += 1;
+            if steps > MAX_WALK {
+                return self.piece_at(s);
+            }
+        }
+        while k < last && self.arc[k + 1] <= s {
+            k += 1;
+            steps += 1;
+            if steps > MAX_WALK {
+                return self.piece_at(s);
+            }
+        }
+        k
+    }
+
+    /// The number of vertices whose arc length satisfies `before` (a predicate true on a prefix of
+    /// the vertices, such as `a <= s`): `arc().partition_point(before)`, found by walking from vertex
+    /// `hint` when the answer is near it (a few steps), else by the binary search.
+    pub fn vertices_near(&self, hint: usize, before: impl Fn(f64) -> bool) -> usize {
+        /// Beyond this many vertices from the hint, the binary search is cheaper.
+        const MAX_WALK: usize = 16;
+        let arc = &self.arc;
+        let mut i = hint.min(arc.len());
+        for _ in 0..MAX_WALK {
+            if i > 0 && !before(arc[i - 1]) {
+                i -= 1;
+            } else if i < arc.len() && before(arc[i]) {
+                i += 1;
+            } else {
+                return i;
+            }
+        }
+        arc.partition_point(|&a| before(a))
+    }
+
+    /// [`CenterLine::tangent_at`] with the piece found from piece `hint` ([`CenterLine::piece_near`]).
+    pub fn tangent_near(&self, s: f64, hint: usize) -> Vec2 {
+        let k = self.piece_near(s, hint);
+        (self.points[k + 1] - self.points[k]).normalize()
     }
 
     /// Where the lines at lateral offset `lateral` beside the two pieces meeting at interior vertex
@@ -116,8 +188,12 @@ impl CenterLine {
 
     /// The point at arc length `s` (clamped to the line).
     pub fn point_at(&self, s: f64) -> Vec2 {
+        self.point_on(self.piece_at(s.clamp(0.0, self.length())), s)
+    }
+
+    /// The point at arc length `s` (clamped to the line) on piece `k`, `piece_at(s)`.
+    fn point_on(&self, k: usize, s: f64) -> Vec2 {
         let s = s.clamp(0.0, self.length());
-        let k = self.piece_at(s);
         let (a, b) = (self.points[k], self.points[k + 1]);
         let len = self.arc[k + 1] - self.arc[k];
         if len <= 0.0 { a } else { a + (b - a) * ((s - self.arc[k]) / len) }
@@ -132,6 +208,45 @@ mod tests {
     /// Distance of `x` from the infinite line through `a` and `b`.
     fn line_distance(a: Vec2, b: Vec2, x: Vec2) -> f64 {
         uav::cross(&(b - a).normalize(), &(x - a)).abs()
+    }
+
+    proptest::proptest! {
+        /// The walk from any hint finds the piece of the binary search, and the point beside the line
+        /// found with it is the one `point_beside` gives, at arc lengths on, before and past the line.
+        #[test]
+        fn the_hinted_piece_and_point_are_the_binary_searchs(
+            lengths in proptest::collection::vec(0.5f64..4.0, 1..40),
+            turns in proptest::collection::vec(-0.3f64..0.3, 40),
+            s_share in -0.2f64..1.2,
+            hint in 0usize..50,
+            lateral in -1.0f64..1.0,
+        ) {
+            let (mut points, mut heading, mut at) = (vec![[0.0, 0.0]], 0.0f64, Vec2::zeros());
+            for (len, turn) in lengths.iter().zip(&turns) {
+                heading += turn;
+                at += Vec2::new(heading.cos(), heading.sin()) * *len;
+                points.push([at.x, at.y]);
+            }
+            let widths = vec![1.0; points.len()];
+            let road = Road::new(RoadLayout::from_centerline(&points, &widths));
+            proptest::prop_assume!(road.is_ok(), "a valid road");
+            let road = road.expect("assumed valid");
+            let line = road.centerline();
+            for s in [s_share * line.length(), line.arc()[hint.min(line.arc().len() - 1)], f64::NAN] {
+                proptest::prop_assert_eq!(line.piece_near(s, hint), line.piece_at(s));
+                let (p, piece) = line.point_beside_near(s, lateral, hint);
+                proptest::prop_assert_eq!(piece, line.piece_at(s));
+                let expected = line.point_at(s) + line.normal_at(s) * lateral;
+                proptest::prop_assert!(p == expected || (p.x.is_nan() && expected.x.is_nan()), "{p:?} {expected:?}");
+                proptest::prop_assert!(line.point_beside(s, lateral) == p || p.x.is_nan());
+                let t = line.tangent_near(s, hint);
+                proptest::prop_assert!(t == line.tangent_at(s) || t.x.is_nan());
+                for before in [|a: f64, s: f64| a <= s, |a: f64, s: f64| a < s] {
+                    let expected = line.arc().partition_point(|&a| before(a, s));
+                    proptest::prop_assert_eq!(line.vertices_near(hint, |a| before(a, s)), expected);
+                }
+            }
+        }
     }
 
     #[test]

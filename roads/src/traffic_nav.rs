@@ -89,17 +89,20 @@ impl Navigator<'_> {
     /// left, where the road is two-way there: it does not cut the bend's inside corner through the
     /// oncoming lane.
     pub fn keeps_lane(&self, p: Vec2, c: Vec2, s0: f64, s1: f64, direction: f64) -> bool {
-        self.cut_bend(p, c, s0, s1, direction).is_none()
+        let hint = self.road.centerline().piece_at(s0);
+        self.cut_bend(p, c, (s0, s1, hint), direction).is_none()
     }
 
     /// The first centre-line vertex between arc lengths `s0` and `s1` of a sharp left bend (for
     /// `direction`) in a two-way part that the straight path p→c passes on its right, if any.
-    fn cut_bend(&self, p: Vec2, c: Vec2, s0: f64, s1: f64, direction: f64) -> Option<usize> {
+    /// The vertices between are found by walking from piece `hint` (any piece gives the same
+    /// answer; the UAV's tracked segment is near).
+    fn cut_bend(&self, p: Vec2, c: Vec2, (s0, s1, hint): (f64, f64, usize), direction: f64) -> Option<usize> {
         let line = self.road.centerline();
         let (points, arc, turns) = (line.points(), line.arc(), line.turns());
         let (lo, hi) = (s0.min(s1), s0.max(s1));
         let path = c - p;
-        let mut between = arc.partition_point(|&a| a <= lo)..arc.partition_point(|&a| a < hi);
+        let mut between = line.vertices_near(hint, |a| a <= lo)..line.vertices_near(hint, |a| a < hi);
         let cut = |&k: &usize| {
             direction * turns[k] >= SHARP_BEND_SIN
                 && self.two_way_at(arc[k])
@@ -194,12 +197,15 @@ impl Navigator<'_> {
         let arc_at = |k: usize, count: usize| pos.s + direction * ahead * (k as f64 / count as f64);
         let candidate = |k: usize, count: usize| {
             let s = arc_at(k, count);
-            (line.point_beside(s, self.lane_offset(s, direction, pos.lateral)), line.piece_at(s))
+            line.point_beside_near(s, self.lane_offset(s, direction, pos.lateral), route.segment)
         };
         let clear = |k: usize, count: usize, need: f64| {
             let (c, segment) = candidate(k, count);
             self.road.path_clear(&route.p, route.segment, &c, segment, need)
-                && (!restriction.keep_lane || self.keeps_lane(route.p, c, pos.s, arc_at(k, count), direction))
+                && (!restriction.keep_lane
+                    || self
+                        .cut_bend(route.p, c, (pos.s, arc_at(k, count), route.segment), direction)
+                        .is_none())
         };
         // The farthest clear candidate, by bisection: a candidate behind an occluding vertex hides the
         // ones beyond it too, so "clear" holds for a prefix of the candidates (up to the rare exception).
@@ -237,7 +243,8 @@ impl Navigator<'_> {
         if restriction.keep_lane && lo < count {
             let (c, segment) = candidate(lo + 1, count);
             if self.road.path_clear(&route.p, route.segment, &c, segment, need)
-                && let Some(k) = self.cut_bend(route.p, c, pos.s, arc_at(lo + 1, count), direction)
+                && let Some(k) =
+                    self.cut_bend(route.p, c, (pos.s, arc_at(lo + 1, count), route.segment), direction)
                 && let Some(corner) = self.lane_corner(route, k, need)
             {
                 return corner;

@@ -5,7 +5,8 @@
 //! O(N log N) for the sort plus O(N + candidates) at bounded density, whichever way the road runs (a
 //! sweep along x alone degenerated on roads running north–south), and each UAV's list comes out
 //! ordered by x, then index (a merge of three sorted windows), with no sort per list. The lists share
-//! one buffer ([`Ragged`]) reused every tick.
+//! one buffer ([`Ragged`]) reused every tick. Large fleets sort on both cores and search the two
+//! halves of the bands at once.
 //!
 //! Foreign UAVs (flown by another region, [`crate::ForeignUav`]) go into the same sort: points from
 //! index `own` on get no list of their own, and each own UAV's foreign neighbours come out in a
@@ -13,6 +14,7 @@
 //! bounded by the same windows whatever their number.
 
 use crate::ragged::Ragged;
+use rayon::prelude::*;
 use uav::Vec2;
 
 /// Band numbers are clamped to ±this, so that a neighbour band's number never overflows; points
@@ -29,8 +31,19 @@ pub struct NeighbourSearch {
     /// `foreign[k]`: indices (from 0, i.e. point `own + f` is `f`) of the foreign points within the
     /// radius of UAV k, by x, then index.
     pub foreign: Ragged<usize>,
-    /// The foreign neighbours of the UAV being listed.
-    scratch: Vec<usize>,
+    /// The lists found by each half of the bands (searched on both cores for large fleets).
+    halves: [Found; 2],
+}
+
+/// The lists one run of bands gives, end to end, before they go into the [`Ragged`]s.
+#[derive(Debug, Default)]
+struct Found {
+    /// Own neighbours of every UAV searched, one list after the other.
+    own: Vec<usize>,
+    /// Foreign neighbours likewise.
+    foreign: Vec<usize>,
+    /// Per UAV searched: its index and the ends of its two lists in `own` and `foreign`.
+    ends: Vec<(usize, usize, usize)>,
 }
 
 /// The order of the sorted entries: band, then x, then index.
@@ -49,12 +62,11 @@ impl NeighbourSearch {
     /// Recomputes `lists` for `positions` and `radius` (m), where `positions[own..]` are foreign
     /// points: they get no list, and appear in the own UAVs' [`NeighbourSearch::foreign`] lists
     /// instead. Non-finite positions get no neighbours; a radius that is not a positive finite number
-    /// puts every point in one band.
+    /// puts every point in one band. Large fleets are sorted and searched on all cores (two halves
+    /// of the bands), with the same lists as one thread.
     pub fn update_with_foreign(&mut self, positions: &[Vec2], own: usize, radius: f64) {
         let n = positions.len();
         let own = own.min(n);
-        self.lists.reset(own);
-        self.foreign.reset(own);
         let finite_radius = radius.is_finite() && radius > 0.0;
         let band =
             |y: f64| if finite_radius { ((y / radius).floor() as i64).clamp(-MAX_BAND, MAX_BAND) } else { 0 };
@@ -65,58 +77,101 @@ impl NeighbourSearch {
                 // Fleets are far below 2³² UAVs (the server admits at most a few hundred thousand).
                 .map(|k| (band(positions[k].y), positions[k].x, k as u32)),
         );
-        self.by_band.sort_unstable_by(order);
-        let entries = &self.by_band;
-        let r2 = radius * radius;
-        let mut start = 0;
-        while start < entries.len() {
-            let b = entries[start].0;
-            let end = start + entries[start..].partition_point(|e| e.0 == b);
-            // The runs of bands b − 1, b and b + 1 (empty where no UAV is), with window pointers.
-            let run = |band: i64| {
-                let lo = entries.partition_point(|e| e.0 < band);
-                (lo, lo + entries[lo..].partition_point(|e| e.0 == band))
-            };
-            let runs = [run(b - 1), (start, end), run(b + 1)];
-            let mut from = runs.map(|(lo, _)| lo);
-            for i in start..end {
-                let (_, x, a) = entries[i];
-                let (a, p) = (a as usize, positions[a as usize]);
-                if a >= own {
-                    continue;
-                }
-                // Each window: the entries of a run with x in [x − r, x + r].
-                let mut heads = [0; 3];
-                let mut ends = [0; 3];
-                for w in 0..3 {
-                    while from[w] < runs[w].1 && entries[from[w]].1 < x - radius {
-                        from[w] += 1;
-                    }
-                    heads[w] = from[w];
-                    ends[w] = heads[w] + entries[heads[w]..runs[w].1].partition_point(|e| e.1 <= x + radius);
-                }
-                // Merge the three windows by (x, index).
-                self.lists.fill(a, |list| {
-                    loop {
-                        let next = (0..3).filter(|&w| heads[w] < ends[w]).min_by(|&v, &w| {
-                            entries[heads[v]]
-                                .1
-                                .total_cmp(&entries[heads[w]].1)
-                                .then(entries[heads[v]].2.cmp(&entries[heads[w]].2))
-                        });
-                        let Some(w) = next else { break };
-                        let d = entries[heads[w]].2 as usize;
-                        heads[w] += 1;
-                        if d != a && (positions[d] - p).norm_squared() <= r2 {
-                            if d < own { list.push(d) } else { self.scratch.push(d - own) }
-                        }
-                    }
-                });
-                let scratch = &mut self.scratch;
-                self.foreign.fill(a, |list| list.append(scratch));
-            }
-            start = end;
+        // A total order (the index breaks ties): the same sorted entries on any number of threads.
+        let wide = crate::tick::parallel(n);
+        if wide {
+            self.by_band.par_sort_unstable_by(order)
+        } else {
+            self.by_band.sort_unstable_by(order)
         }
+        let entries = &self.by_band;
+        // The halves split at a band's start, so that each band is searched by one of them.
+        let split = match entries.get(entries.len() / 2) {
+            Some(&(middle, _, _)) if wide => entries.partition_point(|e| e.0 < middle),
+            _ => entries.len(),
+        };
+        let [first, second] = &mut self.halves;
+        let search = (positions, own, radius);
+        if wide {
+            rayon::join(
+                || find(entries, 0..split, search, first),
+                || find(entries, split..entries.len(), search, second),
+            );
+        } else {
+            find(entries, 0..split, search, first);
+            second.ends.clear();
+        }
+        self.lists.reset(own);
+        self.foreign.reset(own);
+        // Each half's lists copied in one piece (its UAVs' lists follow one another).
+        for half in &self.halves {
+            let starts =
+                std::iter::once((0, 0)).chain(half.ends.iter().map(|&(_, own, foreign)| (own, foreign)));
+            let spans = half.ends.iter().zip(starts);
+            let own_spans = spans.clone().map(|(&(a, own_end, _), (own_start, _))| (a, own_start, own_end));
+            self.lists.extend_lists(&half.own, own_spans);
+            let foreign_spans =
+                spans.map(|(&(a, _, foreign_end), (_, foreign_start))| (a, foreign_start, foreign_end));
+            self.foreign.extend_lists(&half.foreign, foreign_spans);
+        }
+    }
+}
+
+/// The neighbour lists of the own UAVs among `entries[range]` (whole bands), into `out`.
+fn find(
+    entries: &[(i64, f64, u32)],
+    range: std::ops::Range<usize>,
+    (positions, own, radius): (&[Vec2], usize, f64),
+    out: &mut Found,
+) {
+    out.own.clear();
+    out.foreign.clear();
+    out.ends.clear();
+    let r2 = radius * radius;
+    let mut start = range.start;
+    while start < range.end {
+        let b = entries[start].0;
+        let end = start + entries[start..].partition_point(|e| e.0 == b);
+        // The runs of bands b − 1, b and b + 1 (empty where no UAV is), with window pointers.
+        let run = |band: i64| {
+            let lo = entries.partition_point(|e| e.0 < band);
+            (lo, lo + entries[lo..].partition_point(|e| e.0 == band))
+        };
+        let runs = [run(b - 1), (start, end), run(b + 1)];
+        let mut from = runs.map(|(lo, _)| lo);
+        for &(_, x, a) in &entries[start..end] {
+            let (a, p) = (a as usize, positions[a as usize]);
+            if a >= own {
+                continue;
+            }
+            // Each window: the entries of a run with x in [x − r, x + r].
+            let mut heads = [0; 3];
+            let mut ends = [0; 3];
+            for w in 0..3 {
+                while from[w] < runs[w].1 && entries[from[w]].1 < x - radius {
+                    from[w] += 1;
+                }
+                heads[w] = from[w];
+                ends[w] = heads[w] + entries[heads[w]..runs[w].1].partition_point(|e| e.1 <= x + radius);
+            }
+            // Merge the three windows by (x, index).
+            loop {
+                let next = (0..3).filter(|&w| heads[w] < ends[w]).min_by(|&v, &w| {
+                    entries[heads[v]]
+                        .1
+                        .total_cmp(&entries[heads[w]].1)
+                        .then(entries[heads[v]].2.cmp(&entries[heads[w]].2))
+                });
+                let Some(w) = next else { break };
+                let d = entries[heads[w]].2 as usize;
+                heads[w] += 1;
+                if d != a && (positions[d] - p).norm_squared() <= r2 {
+                    if d < own { out.own.push(d) } else { out.foreign.push(d - own) }
+                }
+            }
+            out.ends.push((a, out.own.len(), out.foreign.len()));
+        }
+        start = end;
     }
 }
 

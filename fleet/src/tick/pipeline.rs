@@ -48,6 +48,9 @@ pub(crate) struct TickPipeline {
     /// Per UAV this tick: arrived, and its way-making point lacks a path's clearance (it cannot
     /// step aside, so those behind it pass it).
     cannot_step_aside: Vec<bool>,
+    /// Per UAV this tick: its target while it flies to its goal (None once arrived or without one),
+    /// a plain copy the way-making UAVs read from any thread.
+    flying_targets: Vec<Option<Vec2>>,
     /// One policy's batch: observations, UAV indices, actions.
     observations: Vec<Observation>,
     batch: Vec<usize>,
@@ -229,59 +232,68 @@ impl TickPipeline {
     }
 
     /// Arrived UAVs standing in a flying neighbour's way step aside ([`crate::traffic::yielding`]);
-    /// a moving foreign UAV's way is its velocity.
+    /// a moving foreign UAV's way is its velocity. Per arrived UAV, reading its flying neighbours'
+    /// targets from a plain copy (only arrived UAVs' targets change here): in parallel for large
+    /// fleets, the same on any number of threads.
     fn make_way(&mut self, fleet: &mut TickState<'_>) {
         let d_c = fleet.config.params.kept_d_c();
         let foreign = ForeignNear::new(&self.neighbours.foreign, &self.foreign_views.views, fleet.foreign);
-        for k in 0..fleet.uavs.len() {
-            let me = &fleet.uavs[k];
-            let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { continue };
-            let flying = self.neighbours.lists[k].iter().map(|&d| &fleet.uavs[d]).filter_map(|u| {
-                (u.nav.goal().is_some() && !u.nav.arrived)
-                    .then_some(Flying { p: u.state.p, target: u.last.target })
-            });
+        self.flying_targets.clear();
+        self.flying_targets.extend(
+            fleet.uavs.iter().map(|u| (u.nav.goal().is_some() && !u.nav.arrived).then_some(u.last.target)),
+        );
+        let (positions, targets, lists) = (&self.positions, &self.flying_targets, &self.neighbours.lists);
+        for_each_uav(fleet.uavs, |k, me| {
+            let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { return };
+            let flying =
+                lists[k].iter().filter_map(|&d| targets[d].map(|target| Flying { p: positions[d], target }));
             let foreign_flying =
                 foreign.of(k).filter(|f| f.moving()).map(|f| Flying { p: f.p, target: f.p + f.v });
-            let flying = flying.chain(foreign_flying);
-            fleet.uavs[k].last.target = make_way(me.state.p, goal, flying, d_c);
-        }
+            me.last.target = make_way(me.state.p, goal, flying.chain(foreign_flying), d_c);
+        });
     }
 
     /// UAVs flying to their goal aim beside an arrived UAV that blocks their way, or a parked foreign
-    /// one ([`crate::traffic::passing`]).
+    /// one ([`crate::traffic::passing`]). Per UAV (each changes only its own target, reading its
+    /// neighbours' positions from the plain copies): in parallel for large fleets.
     fn pass_parked(&mut self, road: &Road, fleet: &mut TickState<'_>) {
         let params = fleet.config.params;
         let nav = Navigator::new(road, fleet.config.nav, &params);
         let need = nav.clearance_at(0.0);
         let foreign = ForeignNear::new(&self.neighbours.foreign, &self.foreign_views.views, fleet.foreign);
         // One wall query per arrived UAV, not one per flying neighbour of it.
-        let stuck = &mut self.cannot_step_aside;
-        stuck.clear();
-        stuck.extend(fleet.uavs.iter().zip(&self.segments).map(|(u, &segment)| {
+        let cannot_step_aside = |(u, &segment): (&mut Uav, &usize)| {
             u.nav.arrived
                 && u.nav.goal().is_some()
                 && road.boundary_distance_in(segment, &u.last.target) < need
-        }));
-        for k in 0..fleet.uavs.len() {
-            let me = &fleet.uavs[k];
+        };
+        let stuck = &mut self.cannot_step_aside;
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter_mut().zip(&self.segments).map(cannot_step_aside).collect_into_vec(stuck);
+        } else {
+            stuck.clear();
+            stuck.extend(fleet.uavs.iter_mut().zip(&self.segments).map(cannot_step_aside));
+        }
+        let (stuck, segments) = (&self.cannot_step_aside, &self.segments);
+        let (positions, lists) = (&self.positions, &self.neighbours.lists);
+        for_each_uav(fleet.uavs, |k, me| {
             if me.traffic.route.is_none() || me.traffic.waiting.is_some() || me.traffic.back_off.is_some() {
-                continue;
+                return;
             }
-            let segment = self.segments[k];
+            let segment = segments[k];
             let clear = |a: Vec2, b: Vec2| {
                 let (seg_a, seg_b) = (road.locate(&a, Some(segment)), road.locate(&b, Some(segment)));
                 road.boundary_distance_in(seg_b, &b) >= need && road.path_clear(&a, seg_a, &b, seg_b, need)
             };
-            let parked =
-                self.neighbours.lists[k].iter().filter(|&&d| stuck[d]).map(|&d| fleet.uavs[d].state.p);
+            let parked = lists[k].iter().filter(|&&d| stuck[d]).map(|&d| positions[d]);
             let (d_c, foreign_parked) = (params.kept_d_c(), foreign.of(k).filter(|f| f.parked).map(|f| f.p));
             let c = pass_point(me.state.p, me.last.target, parked, d_c, clear).or_else(|| {
                 pass_point_with(me.state.p, me.last.target, foreign_parked, d_c, FOREIGN_PASS, clear)
             });
             if let Some(c) = c {
-                fleet.uavs[k].last.target = c;
+                me.last.target = c;
             }
-        }
+        });
     }
 
     fn read_states(&mut self, fleet: &mut TickState<'_>) {

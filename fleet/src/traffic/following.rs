@@ -20,7 +20,9 @@ use crate::traffic::FOLLOW_GAP_IN_DC;
 use crate::traffic::foreign::ForeignViews;
 use crate::traffic::foreign::{ForeignNear, ForeignView};
 use crate::traffic::speed::KEEP_MARGIN_M;
+use rayon::prelude::*;
 use roads::{Navigator, RoutePosition};
+use uav::Vec2;
 
 /// Lateral distance (m) beyond D_c under which the UAV ahead counts as in the same lane.
 pub const SAME_LANE_MARGIN_M: f64 = 0.15;
@@ -55,22 +57,26 @@ pub fn follow(
     let gap = FOLLOW_GAP_IN_DC * nav.d_c;
     let keep = nav.d_c + KEEP_MARGIN_M;
     traffic.update(uavs, foreign.all());
-    for k in 0..uavs.len() {
-        uavs[k].traffic.restriction.follow_at = None;
-        uavs[k].traffic.restriction.keep_lane = false;
-        uavs[k].traffic.in_traffic = false;
-        let Some(me) = uavs[k].traffic.route else { continue };
-        let Some(oncoming) = applies(nav, uavs, k, &me, (&neighbours[k], foreign), traffic) else {
-            continue;
+    let traffic = &*traffic;
+    // Per UAV, reading the others from the plain copies (`TrafficAlong::seen`) and writing only its
+    // own restriction: in parallel for large fleets, the same on any number of threads.
+    let follow_one = |(k, uav): (usize, &mut Uav)| {
+        uav.traffic.restriction.follow_at = None;
+        uav.traffic.restriction.keep_lane = false;
+        uav.traffic.in_traffic = false;
+        let Some(me) = uav.traffic.route else { return };
+        let seen = &traffic.seen;
+        let Some(oncoming) = applies(nav, seen, k, &me, (&neighbours[k], foreign), traffic) else {
+            return;
         };
-        uavs[k].traffic.restriction.keep_lane = oncoming;
-        uavs[k].traffic.in_traffic = true;
+        uav.traffic.restriction.keep_lane = oncoming;
+        uav.traffic.in_traffic = true;
         let direction = me.direction();
         let own = neighbours[k].iter().filter_map(|&d| {
-            let other = uavs[d].traffic.route?;
+            let other = seen[d].route?;
             let ahead = direction * (other.s - me.s);
             (leads(nav, &me, &other) && (ahead > 0.0 || (ahead == 0.0 && d < k)))
-                .then_some((ahead, uavs[d].state.v))
+                .then_some((ahead, seen[d].v))
         });
         let foreign_leaders = foreign.of(k).filter_map(|f| {
             let other = f.flying_along()?;
@@ -78,12 +84,31 @@ pub fn follow(
             (leads(nav, &me, &other) && ahead > 0.0).then_some((ahead, f.v))
         });
         let leader = own.chain(foreign_leaders).min_by(|a, b| a.0.total_cmp(&b.0));
-        uavs[k].traffic.restriction.follow_at = leader.map(|(ahead, v)| {
-            let tangent = nav.road.centerline().tangent_at(me.s) * direction;
+        uav.traffic.restriction.follow_at = leader.map(|(ahead, v)| {
+            // The UAV's tracked segment is its piece, or next to it: a walk of a step or two.
+            let hint = uav.nav.tracker.current.unwrap_or(0);
+            let tangent = nav.road.centerline().tangent_near(me.s, hint) * direction;
             let lead = LEAD_TIME_S * v.dot(&tangent).max(0.0);
             me.s + direction * (ahead - gap + lead).min(ahead - keep)
         });
+    };
+    if crate::tick::parallel(uavs.len()) {
+        uavs.par_iter_mut().enumerate().for_each(follow_one);
+    } else {
+        uavs.iter_mut().enumerate().for_each(follow_one);
     }
+}
+
+/// What [`follow`] reads of every UAV, copied once per tick (a UAV's link is not shared across
+/// threads, so the UAVs themselves are not).
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    /// Where it is on its route (None off one).
+    route: Option<RoutePosition>,
+    /// Position.
+    p: Vec2,
+    /// Velocity.
+    v: Vec2,
 }
 
 /// Where the UAVs on a route are along the road, by direction of travel (sorted arc lengths,
@@ -94,6 +119,8 @@ pub struct TrafficAlong {
     forward: Vec<f64>,
     /// Towards decreasing s.
     backward: Vec<f64>,
+    /// Every UAV as [`follow`] reads it, by index.
+    seen: Vec<Seen>,
 }
 
 impl TrafficAlong {
@@ -101,6 +128,8 @@ impl TrafficAlong {
     fn update(&mut self, uavs: &[Uav], foreign: &[ForeignView]) {
         self.forward.clear();
         self.backward.clear();
+        self.seen.clear();
+        self.seen.extend(uavs.iter().map(|u| Seen { route: u.traffic.route, p: u.state.p, v: u.state.v }));
         let routes = uavs
             .iter()
             .filter_map(|u| u.traffic.route)
@@ -132,7 +161,7 @@ impl TrafficAlong {
 /// follow.
 fn applies(
     nav: &Navigator,
-    uavs: &[Uav],
+    uavs: &[Seen],
     k: usize,
     me: &RoutePosition,
     (neighbours, foreign): (&[usize], ForeignNear<'_>),
@@ -143,11 +172,11 @@ fn applies(
     }
     let other_way = |o: Option<RoutePosition>| o.is_some_and(|o| o.direction() != me.direction());
     let oncoming = traffic.oncoming_within(me, nav.r_s)
-        || neighbours.iter().any(|&d| other_way(uavs[d].traffic.route))
+        || neighbours.iter().any(|&d| other_way(uavs[d].route))
         || foreign.of(k).any(|f| other_way(f.flying_along()));
-    let p = uavs[k].state.p;
+    let p = uavs[k].p;
     let close = || {
-        let own = neighbours.iter().filter(|&&d| (uavs[d].state.p - p).norm() < CROWD_RADIUS_M).count();
+        let own = neighbours.iter().filter(|&&d| (uavs[d].p - p).norm() < CROWD_RADIUS_M).count();
         own + foreign.of(k).filter(|f| (f.p - p).norm() < CROWD_RADIUS_M).count()
     };
     (oncoming || (narrows_ahead(nav, me) && close() >= CROWD_NEIGHBOURS)).then_some(oncoming)
