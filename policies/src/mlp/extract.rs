@@ -73,7 +73,7 @@ impl Mlp {
         }
         let op = node.op_as::<TypedBinOp>()?;
         let columns = self.columns_padded(constant)?;
-        let op = match op.0.name().as_ref() {
+        let op = match op.0.name() {
             "Add" => ColumnOp::Add(columns),
             "Mul" => ColumnOp::Mul(columns),
             "Max" => ColumnOp::Max(columns),

@@ -95,7 +95,8 @@ fn columns<S: Simd, const M: usize, const NR: usize>(
 
 /// The `M × N` vectors tile of rows `r0..`, columns `col0..`: products, column operations, store.
 #[inline(always)]
-#[allow(clippy::needless_range_loop)]
+// Index loops on purpose: a slice copy or iterator borrow of `acc` puts it in memory.
+#[allow(clippy::needless_range_loop, clippy::manual_memcpy)]
 fn tile<S: Simd, const M: usize, const N: usize>(
     simd: S,
     layer: &Dense,
