@@ -10,7 +10,7 @@ use crate::Observation;
 use rayon::prelude::*;
 use std::cell::RefCell;
 
-/// Rows of a block: its two activation buffers (`BLOCK_ROWS × 128` f32, 32 KiB each for the
+/// Rows of a block: its two activation buffers (`BLOCK_ROWS × 128` f32, 24 KiB each for the
 /// shipped model) stay in L1/L2 while the block goes through every layer.
 pub const BLOCK_ROWS: usize = 48;
 
