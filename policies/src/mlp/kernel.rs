@@ -121,36 +121,38 @@ fn tile<S: Simd, const M: usize, const N: usize>(
             }
         }
     }
-    // No closures nor function pointers below: one not inlined would make each SIMD operation a call.
-    macro_rules! each_column {
-        ($constants:expr, $op:ident) => {{
-            let (c, _) = S::as_simd_f32s(&$constants[col0..][..N * lanes]);
-            for i in 0..M {
-                for j in 0..N {
-                    acc[i][j] = $op(simd, acc[i][j], c[j]);
-                }
-            }
-        }};
-    }
-    for op in &layer.epilogue {
-        match op {
-            ColumnOp::Tanh => {
-                for i in 0..M {
-                    for j in 0..N {
-                        acc[i][j] = tanh(simd, acc[i][j]);
-                    }
-                }
-            }
-            ColumnOp::Add(v) => each_column!(v, add),
-            ColumnOp::Mul(v) => each_column!(v, mul),
-            ColumnOp::Max(v) => each_column!(v, max),
-            ColumnOp::Min(v) => each_column!(v, min),
-        }
-    }
     for i in 0..M {
         let (out, _) = S::as_mut_simd_f32s(&mut dst[(r0 + i) * width + col0..][..N * lanes]);
         for j in 0..N {
             out[j] = acc[i][j];
+        }
+    }
+    // The column operations on the stored tile (in L1), not on `acc`: their loops index
+    // dynamically (tanh is long, they do not unroll), which would keep `acc` in memory and store it
+    // at every `k` above. No closures nor function pointers: one not inlined would make each SIMD
+    // operation a call.
+    macro_rules! each_column {
+        ($out:expr, $constants:expr, $op:ident) => {{
+            let (c, _) = S::as_simd_f32s(&$constants[col0..][..N * lanes]);
+            for (x, &c) in $out.iter_mut().zip(c) {
+                *x = $op(simd, *x, c);
+            }
+        }};
+    }
+    for i in 0..M {
+        let (out, _) = S::as_mut_simd_f32s(&mut dst[(r0 + i) * width + col0..][..N * lanes]);
+        for op in &layer.epilogue {
+            match op {
+                ColumnOp::Tanh => {
+                    for x in out.iter_mut() {
+                        *x = tanh(simd, *x);
+                    }
+                }
+                ColumnOp::Add(v) => each_column!(out, v, add),
+                ColumnOp::Mul(v) => each_column!(out, v, mul),
+                ColumnOp::Max(v) => each_column!(out, v, max),
+                ColumnOp::Min(v) => each_column!(out, v, min),
+            }
         }
     }
 }
