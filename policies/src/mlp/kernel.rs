@@ -1,6 +1,7 @@
 //! The SIMD kernel of [`Mlp`]: one block of rows through every layer, its activations kept in a
 //! per-thread scratch that stays in cache, each product a register-tiled GEMM over the weights
-//! packed at load, the layer's column operations (bias, tanh, clip, scale) applied to each tile just stored (in L1).
+//! packed at load, the layer's column operations (bias, tanh, clip, scale) applied to each tile
+//! just stored (in L1).
 //!
 //! Every output element is `Σ_k a[r][k] · w[k][j]` accumulated by fused multiply-adds from zero in
 //! ascending `k` (as tract's kernels do), then the column operations in order: the same bits
