@@ -14,7 +14,7 @@ use flights::say;
 
 use crate::BenchArgs;
 use crate::bench_fleet::sim_fleet;
-use crate::roofline::{Point, gemm_flops_per_s, triad_bytes_per_s};
+use crate::roofline::{Point, triad_bytes_per_s};
 use engine::stats::percentiles;
 use fleet::city::city_scenario;
 use fleet::trunk::trunk_scenario;
@@ -167,12 +167,17 @@ fn print_roofline(args: &BenchArgs, measured: &[(usize, [f64; 8])]) {
     let flops = (args.policy == policies::SHIPPED_MODEL)
         .then(|| policies::flops_per_observation("rl", policies::SHIPPED_MODEL_ONNX).ok())
         .flatten();
-    let gemm = flops.map(|_| gemm_flops_per_s());
+    // The GEMM of the policy's shape on this pool (10,000 rows, best of 7): the machine's rate, and
+    // the policies' own MLP kernel on the shipped net beside it.
+    let roof = flops.and_then(|_| policies::gemm_roofline(10_000, 7).ok());
+    let gemm = roof.map(|r| r.gemm_pool * 1e9);
     say!(
         "roofline: each stage's time over its floor; policies{}, the others: each UAV's record ({record:.0} B) streamed once at the triad bandwidth over the fleet's records",
-        match (flops, gemm) {
-            (Some(f), Some(g)) =>
-                format!(" {f:.0} FLOP per UAV against an f32 GEMM at {:.1} GFLOP/s", g / 1e9),
+        match (flops, roof) {
+            (Some(f), Some(r)) => format!(
+                " {f:.0} FLOP per UAV against an f32 GEMM (10000×128×128, ndarray) at {:.1} GFLOP/s (the MLP kernel alone: {:.1})",
+                r.gemm_pool, r.mlp_pool
+            ),
             _ => " (pd: not floating-point bound) as the others".to_string(),
         }
     );

@@ -1,19 +1,15 @@
 //! The roofline of `airroads bench scale`: each stage's achieved rate against a figure measured on
 //! this machine. The policy stage does floating-point work (tract's count of the model's FLOPs per
 //! observation, `policies::flops_per_observation`), held against the rate of an f32 GEMM of the
-//! policy's middle layer; every other stage is held against the time to stream each UAV's record
+//! policy's middle layer on the pool (`policies::gemm_roofline`: matrixmultiply through ndarray, 10,000
+//! rows); every other stage is held against the time to stream each UAV's record
 //! (`fleet::Uav`, as laid out) once at the memory bandwidth measured for the fleet's working set (a
 //! triad over as many bytes as the fleet's records: cache for small fleets, memory for large ones).
 //! Hardware counters (instructions, cycles) are not readable here (`perf stat` says "not
 //! supported" in this VM), so instructions per UAV are not reported.
 
-use ndarray::{Array2, Axis, linalg::general_mat_mul};
 use rayon::prelude::*;
 use std::time::Instant;
-
-/// The shape of the GEMM that stands for the machine: the policy's middle layer (128 → 128) on a batch
-/// of 10,000 observations.
-pub const GEMM_SHAPE: (usize, usize, usize) = (10_000, 128, 128);
 
 /// Repetitions of each machine measurement; the best is kept (the machine's capability).
 const REPEATS: usize = 7;
@@ -39,27 +35,6 @@ pub fn triad_bytes_per_s(bytes: usize) -> f64 {
     // The result is read so the passes cannot be optimised away.
     std::hint::black_box(a[n / 2]);
     24.0 * n as f64 / best
-}
-
-/// FLOP/s of an f32 GEMM of [`GEMM_SHAPE`] (rows × k times k × n, 2 FLOPs per multiply-add) by
-/// matrixmultiply (through ndarray's safe `general_mat_mul`, its kernels chosen for this CPU at run
-/// time), the rows split in one band per thread of the current rayon pool; the best of [`REPEATS`].
-pub fn gemm_flops_per_s() -> f64 {
-    let (rows, k, n) = GEMM_SHAPE;
-    let a = Array2::from_shape_fn((rows, k), |(i, j)| ((i * 7 + j * 3) % 13) as f32 * 0.1 - 0.6);
-    let b = Array2::from_shape_fn((k, n), |(i, j)| ((i * 5 + j * 11) % 17) as f32 * 0.05 - 0.4);
-    let mut c = Array2::<f32>::zeros((rows, n));
-    let band = rows.div_ceil(rayon::current_num_threads()).max(1);
-    let mut best = f64::INFINITY;
-    for _ in 0..REPEATS {
-        let started = Instant::now();
-        let bands: Vec<_> =
-            c.axis_chunks_iter_mut(Axis(0), band).zip(a.axis_chunks_iter(Axis(0), band)).collect();
-        bands.into_par_iter().for_each(|(mut c, a)| general_mat_mul(1.0, &a, &b, 0.0, &mut c));
-        best = best.min(started.elapsed().as_secs_f64());
-    }
-    std::hint::black_box(c[[rows / 2, n / 2]]);
-    2.0 * (rows * k * n) as f64 / best
 }
 
 /// One stage's place on the roofline: its achieved rate, the machine's, and how many times its
@@ -94,13 +69,6 @@ mod tests {
         let at = Point::of(1000.0, 10, 1e-6, 1e10);
         assert!((at.times_floor() - 1.0).abs() < 1e-12);
         assert!((Point::of(1000.0, 10, 4e-6, 1e10).times_floor() - 4.0).abs() < 1e-12);
-    }
-
-    #[test]
-    fn the_gemm_rate_is_finite_and_plausible() {
-        // Even a scalar kernel multiplies above 0.1 GFLOP/s; no CPU this runs on reaches 100 TFLOP/s.
-        let rate = gemm_flops_per_s();
-        assert!((1e8..1e14).contains(&rate), "{rate} FLOP/s");
     }
 
     #[test]

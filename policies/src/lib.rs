@@ -5,16 +5,20 @@
 //! Knows nothing of roads, barriers or fleets: a policy maps observations to nominal accelerations.
 
 mod cost;
+mod mlp;
 mod onnx;
 mod pd;
 mod registry;
 mod reward;
+mod roofline;
 
 pub use cost::flops_per_observation;
+pub use mlp::{BLOCK_ROWS, Mlp, PARALLEL_ROWS};
 pub use onnx::{LoadError, OnnxPolicy};
 pub use pd::PdPolicy;
 pub use registry::{PolicyRegistry, UnknownPolicy};
 pub use reward::{RewardWeights, tracking_reward};
+pub use roofline::{GemmRoofline, HIDDEN, gemm_roofline};
 use uav::{UavState, Vec2};
 
 /// Registry name of the shipped RL tracking policy.

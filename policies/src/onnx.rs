@@ -1,6 +1,8 @@
-//! ONNX policies run with tract: loaded and optimised once, checked against the contract
-//! (input `[N, 6]` f32 observations, output `[N, 2]` f32 accelerations), evaluated in batches.
+//! ONNX policies: loaded and checked against the contract by tract (input `[N, 6]` f32
+//! observations, output `[N, 2]` f32 accelerations), evaluated in batches by the policies' own MLP
+//! kernel ([`Mlp`]) when the model is an MLP, else by tract's optimised plan.
 
+use crate::mlp::Mlp;
 use crate::{Observation, Policy, PolicyError};
 use std::path::Path;
 use std::sync::Arc;
@@ -42,12 +44,17 @@ pub enum LoadError {
 /// (smaller ones cost less on one thread than the hand-over).
 pub const PARALLEL_BATCH: usize = 256;
 
-/// A tracking policy from an ONNX file, evaluated by tract on whole batches.
+/// A tracking policy from an ONNX file, evaluated on whole batches.
 pub struct OnnxPolicy {
     name: String,
-    /// The optimised plan's run state, kept between calls (no per-call set-up).
+    /// The model's MLP, evaluated by the policies' kernel (`None`: the model is not an MLP).
+    mlp: Option<Mlp>,
+    /// tract's optimised plan's run state, kept between calls (no per-call set-up): the runtime of
+    /// a model that is not an MLP, and the reference the MLP kernel is tested against.
     state: TypedSimpleState,
     input: Vec<f32>,
+    /// The kernel's outputs, kept between calls.
+    outputs: Vec<f32>,
 }
 
 impl std::fmt::Debug for OnnxPolicy {
@@ -80,10 +87,15 @@ impl OnnxPolicy {
         if declared.unify(&fact).is_err() {
             return Err(contract(format!("input is {declared:?}, expected f32 [N, 6] observations")));
         }
-        let typed = model
+        let decluttered = model
             .with_input_fact(0, fact)
-            .and_then(|m| m.into_optimized())
+            .and_then(|m| m.into_typed())
+            .and_then(|m| m.into_decluttered())
             .map_err(|e| contract(format!("cannot be typed for a [N, 6] f32 input: {e:#}")))?;
+        let mlp = Mlp::from_model(&decluttered, 6);
+        let typed = decluttered
+            .into_optimized()
+            .map_err(|e| contract(format!("cannot be optimised for a [N, 6] f32 input: {e:#}")))?;
         let out = typed.output_fact(0).map_err(model_err)?;
         let out_ok = out.datum_type == f32::datum_type()
             && out.rank() == 2
@@ -94,11 +106,28 @@ impl OnnxPolicy {
         }
         let plan: Arc<TypedRunnableModel> = typed.into_runnable().map_err(model_err)?;
         let state = plan.spawn().map_err(model_err)?;
-        Ok(Self { name: name.to_string(), state, input: Vec::new() })
+        Ok(Self { name: name.to_string(), mlp, state, input: Vec::new(), outputs: Vec::new() })
     }
 
-    /// Evaluates the network on a batch and returns its raw outputs, `2 × batch` f32 values.
+    /// The model as an MLP run by the policies' kernel, or `None` if tract's plan runs it.
+    pub fn mlp(&self) -> Option<&Mlp> {
+        self.mlp.as_ref()
+    }
+
+    /// Evaluates the network on a batch and returns its raw outputs, `2 × batch` f32 values (the
+    /// MLP kernel if the model is an MLP, else tract's plan).
     pub fn infer(&mut self, observations: &[Observation]) -> TractResult<Vec<f32>> {
+        let mut raw = Vec::with_capacity(2 * observations.len());
+        match &self.mlp {
+            Some(mlp) => mlp.forward(observations, &mut raw),
+            None => self.run(observations, |out| raw.extend_from_slice(out))?,
+        }
+        Ok(raw)
+    }
+
+    /// Evaluates the network on a batch with tract's optimised plan, whatever the model (the
+    /// reference for the MLP kernel), and returns its `2 × batch` outputs.
+    pub fn infer_with_tract(&mut self, observations: &[Observation]) -> TractResult<Vec<f32>> {
         let mut raw = Vec::with_capacity(2 * observations.len());
         self.run(observations, |out| raw.extend_from_slice(out))?;
         Ok(raw)
@@ -131,9 +160,14 @@ impl Policy for OnnxPolicy {
         if observations.is_empty() {
             return Ok(());
         }
-        let to_actions = |raw: &[f32]| {
+        let mut to_actions = |raw: &[f32]| {
             actions.extend(raw.chunks_exact(2).map(|u| Vec2::new(f64::from(u[0]), f64::from(u[1]))));
         };
+        if let Some(mlp) = &self.mlp {
+            mlp.forward(observations, &mut self.outputs);
+            to_actions(&self.outputs);
+            return Ok(());
+        }
         self.run(observations, to_actions)
             .map_err(|e| PolicyError { policy: self.name.clone(), reason: format!("{e:#}") })
     }
