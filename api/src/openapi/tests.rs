@@ -73,7 +73,7 @@ fn the_limits_the_validators_check_are_in_the_schemas() {
         assert_eq!(property["maximum"].as_f64(), Some(range.max), "{}", range.key);
     }
     assert_eq!(schemas["Point"]["items"]["maximum"].as_f64(), Some(roads::MAX_COORDINATE_M));
-    assert_eq!(schemas["Segments"]["maxItems"].as_u64(), Some(2000));
+    assert_eq!(schemas["Segments"]["maxItems"].as_u64(), Some(roads::MAX_SEGMENTS as u64));
     assert_eq!(schemas["RoadLayout"]["additionalProperties"], Value::Bool(false));
     assert_eq!(schemas["RoadLayout"]["required"], serde_json::json!(["segments"]));
     let new_uav = &schemas["NewUav"];
