@@ -5,7 +5,7 @@ use links::LinkPhase;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::sync::Arc;
-use uav::{UavState, Vec2};
+use uav::Vec2;
 
 /// Record flag of the binary stream and the regions' wire: within ε of its goal.
 pub const UAV_ARRIVED: u8 = 1;
@@ -294,23 +294,21 @@ impl Snapshot {
         let before = previous.map_or(&[][..], |s| &s.uavs[..]);
         // The road margins the tick's rows stage measured, while the fleet holds the states it read.
         let tick_margins = fleet.tick_road_margins();
-        // Each UAV's entry on its own, from plain copies of the states (in parallel for large
-        // fleets; a UAV's link is only read through `&self` methods that lock what they share).
-        let states: Vec<(UavState, bool, Option<usize>)> =
-            all.iter().map(|u| (u.state, u.condition.in_the_air(), u.nav.tracker.current)).collect();
+        // Each UAV's entry on its own (in parallel for large fleets: a UAV is `Sync`, its link only
+        // read through `&self` methods that lock what they share).
         let entry = |(k, u): (usize, &Uav)| {
-            let (state, in_the_air, hint) = states[k];
+            let state = u.state;
             // UAVs on the ground (landed, stopped, not yet up) are not in each other's airspace.
-            let collision = lists.get(k).filter(|_| in_the_air).and_then(|list| {
+            let collision = lists.get(k).filter(|_| u.condition.in_the_air()).and_then(|list| {
                 list.iter()
-                    .filter_map(|&d| states.get(d))
-                    .filter(|d| d.1)
-                    .map(|d| collision_margin(&state, &d.0, 2.0 * p.delta))
+                    .filter_map(|&d| all.get(d))
+                    .filter(|d| d.condition.in_the_air())
+                    .map(|d| collision_margin(&state, &d.state, 2.0 * p.delta))
                     .min_by(f64::total_cmp)
             });
             let road_margin = match &tick_margins {
                 Some(margin_of) => margin_of(k),
-                None => road_margin_in(road, hint, &state, p.delta),
+                None => road_margin_in(road, u.nav.tracker.current, &state, p.delta),
             };
             let was = before.get(k);
             let l = &u.last;
