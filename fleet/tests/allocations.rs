@@ -7,13 +7,12 @@
 //! Counted with a counting global allocator, so this file holds a single test (tests of one binary
 //! run concurrently and would count each other's allocations).
 
+use fleet::MetricsRecorder;
 use fleet::trunk::trunk_scenario;
-use fleet::{Fleet, FleetConfig, MetricsRecorder};
-use links::SimLink;
-use policies::PolicyRegistry;
 use stats_alloc::{INSTRUMENTED_SYSTEM, Region, StatsAlloc};
 use std::alloc::System;
-use uav::UavState;
+
+mod support;
 
 #[global_allocator]
 static GLOBAL: &StatsAlloc<System> = &INSTRUMENTED_SYSTEM;
@@ -24,15 +23,8 @@ const WARM_UP_TICKS: usize = 100;
 /// (new blocks, reallocations) of each tick (the fleet's and its metrics recorder's, on every thread) after
 /// the warm-up, 300 ticks of a trunk road's fleet of `uavs` flying `policy` on `threads` threads.
 fn allocations_per_tick(uavs: usize, policy: &str, threads: usize) -> Vec<(usize, usize)> {
-    let scenario = trunk_scenario(uavs, 3).expect("a trunk road").validate().expect("valid");
-    let policies = PolicyRegistry::standard(scenario.params.delta).expect("the shipped models load");
-    let config = FleetConfig { params: scenario.params, ..FleetConfig::default() };
-    let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
-    for u in &scenario.uavs {
-        let state = UavState::at_rest(u.start);
-        let link = Box::new(SimLink::new(state, scenario.params.dt));
-        fleet.add(u.id.clone(), policy.into(), link, state, Some(u.goal));
-    }
+    let scenario = trunk_scenario(uavs, 3).expect("a trunk road");
+    let mut fleet = support::scenario_fleet(&scenario, policy);
     let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().expect("a thread pool");
     pool.install(|| {
         let mut recorder = MetricsRecorder::new();

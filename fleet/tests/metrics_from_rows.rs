@@ -5,23 +5,10 @@
 
 use fleet::city::city_scenario;
 use fleet::trunk::trunk_scenario;
-use fleet::{Fleet, FleetConfig, MetricsRecorder, RunMetrics, Scenario};
-use links::SimLink;
-use policies::PolicyRegistry;
+use fleet::{MetricsRecorder, RunMetrics, Scenario};
 use uav::UavState;
 
-fn fleet_of(scenario: &Scenario, policy: &str) -> Fleet {
-    let scenario = scenario.validate().expect("generated scenarios are valid");
-    let policies = PolicyRegistry::standard(scenario.params.delta).expect("the shipped models load");
-    let config = FleetConfig { params: scenario.params, ..FleetConfig::default() };
-    let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
-    for u in &scenario.uavs {
-        let state = UavState::at_rest(u.start);
-        let link = Box::new(SimLink::new(state, scenario.params.dt));
-        fleet.add(u.id.clone(), policy.to_string(), link, state, Some(u.goal));
-    }
-    fleet
-}
+mod support;
 
 /// The margins of one tick's metrics, as bits.
 fn margins(m: &RunMetrics) -> [Option<u64>; 5] {
@@ -35,7 +22,7 @@ fn margins(m: &RunMetrics) -> [Option<u64>; 5] {
 }
 
 fn check(scenario: &Scenario, policy: &str, ticks: usize) {
-    let mut fleet = fleet_of(scenario, policy);
+    let mut fleet = support::scenario_fleet(scenario, policy);
     let mut met = 0;
     for tick in 0..ticks {
         fleet.tick();

@@ -1,6 +1,6 @@
 //! What the fleet's integration tests share: a fleet of `pd` UAVs on simulated links.
 
-use fleet::{Fleet, FleetConfig};
+use fleet::{Fleet, FleetConfig, Scenario};
 use links::SimLink;
 use policies::PolicyRegistry;
 use roads::Airspace;
@@ -23,6 +23,22 @@ pub fn pd_fleet_with(config: FleetConfig, airspace: impl Into<Airspace>, uavs: &
         let state = UavState::at_rest(start);
         let link = Box::new(SimLink::new(state, params.dt));
         fleet.add(format!("u{k:02}"), "pd".into(), link, state, Some(goal));
+    }
+    fleet
+}
+
+/// A fleet flying `scenario` (validated; its parameters, the standard policies), every UAV on a
+/// simulated link with `policy`, from its start to its goal.
+#[allow(dead_code)] // Not every test that shares this module flies a scenario.
+pub fn scenario_fleet(scenario: &Scenario, policy: &str) -> Fleet {
+    let scenario = scenario.validate().expect("generated scenarios are valid");
+    let policies = PolicyRegistry::standard(scenario.params.delta).expect("the shipped models load");
+    let config = FleetConfig { params: scenario.params, ..FleetConfig::default() };
+    let mut fleet = Fleet::new(config, scenario.road.clone(), policies);
+    for u in &scenario.uavs {
+        let state = UavState::at_rest(u.start);
+        let link = Box::new(SimLink::new(state, scenario.params.dt));
+        fleet.add(u.id.clone(), policy.to_string(), link, state, Some(u.goal));
     }
     fleet
 }
