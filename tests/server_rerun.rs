@@ -314,6 +314,9 @@ async fn a_fleet_above_the_threshold_is_one_batch_and_only_selected_uavs_have_th
     let many: Vec<String> = (0..=rerun_sink::MAX_SELECTED).map(|_| "a".to_string()).collect();
     let (status, body) = put(&serde_json::json!({ "ids": many }).to_string()).await;
     assert_eq!((status, body["error"]["field"].as_str()), (422, Some("ids")), "{body}");
+    // The fields as an array (serde's derive would read `[[]]` as `{"ids": []}`): refused.
+    let (status, body) = put("[[]]").await;
+    assert_eq!((status, body["error"]["code"].as_str()), (422, Some("invalid_body")), "{body}");
     let (status, body) = call("GET", "/api/rerun/selection", None).await;
     assert_eq!((status, body["ids"].clone()), (200, serde_json::json!(["b"])), "{body}");
     tokio::time::sleep(Duration::from_millis(800)).await;

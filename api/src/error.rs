@@ -260,11 +260,18 @@ pub fn no_body(bytes: &[u8]) -> Result<NoBody, ApiError> {
     }
 }
 
-/// Parses a JSON body, naming the field at fault on error.
+/// Parses a JSON body, naming the field at fault on error. Every body is a JSON object: serde's
+/// derived structs would also take their fields as an array (`[[]]` for `{"ids": []}`), which no
+/// schema of the API allows.
 pub fn parse<T: DeserializeOwned>(bytes: &[u8]) -> Result<T, ApiError> {
     let de = &mut serde_json::Deserializer::from_slice(bytes);
     match serde_path_to_error::deserialize(&mut *de) {
         Ok(value) => match de.end() {
+            Ok(()) if bytes.trim_ascii_start().first() != Some(&b'{') => Err(ApiError::new(
+                StatusCode::UNPROCESSABLE_ENTITY,
+                "invalid_body",
+                "the body must be a JSON object",
+            )),
             Ok(()) => Ok(value),
             Err(e) => Err(ApiError::new(
                 StatusCode::BAD_REQUEST,
@@ -316,5 +323,16 @@ mod tests {
         assert_eq!((e.status, e.code), (StatusCode::BAD_REQUEST, "malformed_json"));
         assert!(parse::<Body>(b"{\"goal\": [1, 0]} {}").is_err());
         assert!(parse::<Body>(b"{\"goal\": [1, 0]}\n ").is_ok());
+    }
+
+    #[test]
+    fn a_body_is_an_object_never_its_fields_as_an_array() {
+        // serde's derived struct would read `[[1, 0]]` as `{"goal": [1, 0]}`.
+        let e = parse::<Body>(b" [[1, 0]]").unwrap_err();
+        assert_eq!((e.status, e.code), (StatusCode::UNPROCESSABLE_ENTITY, "invalid_body"));
+        assert!(e.message.contains("JSON object"), "{}", e.message);
+        assert!(parse::<Body>(b" \n{\"goal\": [1, 0]}").is_ok());
+        // A malformed array stays a syntax error.
+        assert_eq!(parse::<Body>(b"[[1, 0]").unwrap_err().code, "malformed_json");
     }
 }
