@@ -26,6 +26,8 @@ const MAX_BAND: i64 = 1 << 52;
 pub struct NeighbourSearch {
     /// (band, x, UAV index) of every finite point, sorted.
     by_band: Vec<(i64, f64, u32)>,
+    /// How many points (finite or not) `by_band` was sorted for.
+    sorted_for: usize,
     /// `lists[k]`: indices of the UAVs within the radius of UAV k, by x, then index.
     pub lists: Ragged<usize>,
     /// `foreign[k]`: indices (from 0, i.e. point `own + f` is `f`) of the foreign points within the
@@ -44,6 +46,29 @@ struct Found {
     foreign: Vec<usize>,
     /// Per UAV searched: its index and the ends of its two lists in `own` and `foreign`.
     ends: Vec<(usize, usize, usize)>,
+    /// One UAV's neighbours as found, with their x (reused from UAV to UAV).
+    hits: Vec<(f64, u32)>,
+}
+
+/// Most moves an entry may take on average in the insertion sort of a nearly sorted order before
+/// the sort gives up (to a quicksort): a tick's order is some 1 % off the last one's.
+const SHIFTS_PER_ENTRY: usize = 8;
+
+/// Sorts `entries` by [`order`] with an insertion sort, unless that takes more than `budget`
+/// moves: then returns false, with `entries` a permutation of what they were.
+fn insertion_sort_within(entries: &mut [(i64, f64, u32)], mut budget: usize) -> bool {
+    for i in 1..entries.len() {
+        let mut j = i;
+        while j > 0 && order(&entries[j - 1], &entries[j]) == std::cmp::Ordering::Greater {
+            if budget == 0 {
+                return false;
+            }
+            budget -= 1;
+            entries.swap(j - 1, j);
+            j -= 1;
+        }
+    }
+    true
 }
 
 /// The order of the sorted entries: band, then x, then index.
@@ -70,19 +95,34 @@ impl NeighbourSearch {
         let finite_radius = radius.is_finite() && radius > 0.0;
         let band =
             |y: f64| if finite_radius { ((y / radius).floor() as i64).clamp(-MAX_BAND, MAX_BAND) } else { 0 };
-        self.by_band.clear();
-        self.by_band.extend(
-            (0..n)
-                .filter(|&k| uav::is_finite(&positions[k]))
-                // Fleets are far below 2³² UAVs (the server admits at most a few hundred thousand).
-                .map(|k| (band(positions[k].y), positions[k].x, k as u32)),
-        );
-        // A total order (the index breaks ties): the same sorted entries on any number of threads.
-        let wide = crate::tick::parallel(n);
-        if wide {
-            self.by_band.par_sort_unstable_by(order)
+        // The last call's order, when it holds the same points (the finite ones of as many): UAVs
+        // move little in a tick, so it is nearly sorted still and an insertion sort finishes it in
+        // about one pass (a UAV that changed band moves one band's length).
+        let finite = positions.iter().filter(|p| uav::is_finite(p)).count();
+        let same_points = self.sorted_for == n
+            && self.by_band.len() == finite
+            && self.by_band.iter().all(|e| uav::is_finite(&positions[e.2 as usize]));
+        if same_points {
+            for e in &mut self.by_band {
+                let p = positions[e.2 as usize];
+                *e = (band(p.y), p.x, e.2);
+            }
         } else {
-            self.by_band.sort_unstable_by(order)
+            self.by_band.clear();
+            self.by_band.extend(
+                (0..n)
+                    .filter(|&k| uav::is_finite(&positions[k]))
+                    // Fleets are far below 2³² UAVs (the server admits at most a few hundred thousand).
+                    .map(|k| (band(positions[k].y), positions[k].x, k as u32)),
+            );
+        }
+        self.sorted_for = n;
+        // A total order (the index breaks ties): the same sorted entries whatever the order they
+        // start in, on any number of threads.
+        let wide = crate::tick::parallel(n);
+        let budget = SHIFTS_PER_ENTRY * self.by_band.len();
+        if !(same_points && insertion_sort_within(&mut self.by_band, budget)) {
+            if wide { self.by_band.par_sort_unstable_by(order) } else { self.by_band.sort_unstable_by(order) }
         }
         let entries = &self.by_band;
         // The halves split at a band's start, so that each band is searched by one of them.
@@ -127,6 +167,7 @@ fn find(
     out.own.clear();
     out.foreign.clear();
     out.ends.clear();
+    let hits = &mut out.hits;
     let r2 = radius * radius;
     let mut start = range.start;
     while start < range.end {
@@ -144,30 +185,27 @@ fn find(
             if a >= own {
                 continue;
             }
-            // Each window: the entries of a run with x in [x − r, x + r].
-            let mut heads = [0; 3];
-            let mut ends = [0; 3];
+            // Each window: the entries of a run with x in [x − r, x + r]; its points within the
+            // radius are kept with their x, then the three windows' hits are put in (x, index)
+            // order (each window is in that order already: a sort of a few short runs).
+            hits.clear();
             for w in 0..3 {
                 while from[w] < runs[w].1 && entries[from[w]].1 < x - radius {
                     from[w] += 1;
                 }
-                heads[w] = from[w];
-                ends[w] = heads[w] + entries[heads[w]..runs[w].1].partition_point(|e| e.1 <= x + radius);
-            }
-            // Merge the three windows by (x, index).
-            loop {
-                let next = (0..3).filter(|&w| heads[w] < ends[w]).min_by(|&v, &w| {
-                    entries[heads[v]]
-                        .1
-                        .total_cmp(&entries[heads[w]].1)
-                        .then(entries[heads[v]].2.cmp(&entries[heads[w]].2))
-                });
-                let Some(w) = next else { break };
-                let d = entries[heads[w]].2 as usize;
-                heads[w] += 1;
-                if d != a && (positions[d] - p).norm_squared() <= r2 {
-                    if d < own { out.own.push(d) } else { out.foreign.push(d - own) }
+                for &(_, xd, d) in &entries[from[w]..runs[w].1] {
+                    if xd > x + radius {
+                        break;
+                    }
+                    if d as usize != a && (positions[d as usize] - p).norm_squared() <= r2 {
+                        hits.push((xd, d));
+                    }
                 }
+            }
+            hits.sort_unstable_by(|u, w| u.0.total_cmp(&w.0).then(u.1.cmp(&w.1)));
+            for &(_, d) in hits.iter() {
+                let d = d as usize;
+                if d < own { out.own.push(d) } else { out.foreign.push(d - own) }
             }
             out.ends.push((a, out.own.len(), out.foreign.len()));
         }
@@ -240,6 +278,22 @@ mod tests {
             let fewer = &pts[..pts.len() / 2];
             s.update(fewer, radius);
             prop_assert_eq!(lists(&s), brute(fewer, radius));
+            // As many points again, then moved a little (the last order is reused), then a finite
+            // point and a non-finite one swapped (the same count, other points: sorted afresh).
+            s.update(&pts, radius);
+            let step = |i: usize| Vec2::new((i % 5) as f64 * 0.37 - 0.7, (i % 3) as f64 * 0.45 - 0.45) * radius;
+            let moved: Vec<Vec2> = pts.iter().enumerate().map(|(i, p)| p + step(i)).collect();
+            s.update(&moved, radius);
+            prop_assert_eq!(lists(&s), brute(&moved, radius));
+            let mut swapped = moved.clone();
+            if let (Some(a), Some(b)) = (
+                swapped.iter().position(uav::is_finite),
+                swapped.iter().position(|p| !uav::is_finite(p)),
+            ) {
+                swapped.swap(a, b);
+            }
+            s.update(&swapped, radius);
+            prop_assert_eq!(lists(&s), brute(&swapped, radius));
         }
     }
 
@@ -266,6 +320,26 @@ mod tests {
                 let foreign: Vec<usize> = list.iter().filter(|&&d| d >= own).map(|&d| d - own).collect();
                 prop_assert_eq!(s.lists[k].to_vec(), mine);
                 prop_assert_eq!(s.foreign[k].to_vec(), foreign);
+            }
+        }
+    }
+
+    proptest! {
+        /// The insertion sort sorts within its budget, and otherwise says so and keeps every entry.
+        #[test]
+        fn the_insertion_sort_sorts_or_gives_up_keeping_the_entries(
+            raw in proptest::collection::vec((-3i64..3, -5i32..5), 0..60),
+            budget in 0usize..400,
+        ) {
+            let mut entries: Vec<(i64, f64, u32)> =
+                raw.iter().enumerate().map(|(i, &(b, x))| (b, x as f64 * 0.5, i as u32)).collect();
+            let mut sorted = entries.clone();
+            sorted.sort_unstable_by(order);
+            if insertion_sort_within(&mut entries, budget) {
+                prop_assert_eq!(&entries, &sorted);
+            } else {
+                entries.sort_unstable_by(order);
+                prop_assert_eq!(&entries, &sorted);
             }
         }
     }
