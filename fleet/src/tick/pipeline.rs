@@ -51,6 +51,8 @@ pub(crate) struct TickPipeline {
     /// Per UAV this tick: its target while it flies to its goal (None once arrived or without one),
     /// a plain copy the way-making UAVs read from any thread.
     flying_targets: Vec<Option<Vec2>>,
+    /// Each UAV's policy this tick, by its place among the registry's names (None: runs none).
+    slots: Vec<Option<usize>>,
     /// One policy's batch: observations, UAV indices, actions.
     observations: Vec<Observation>,
     batch: Vec<usize>,

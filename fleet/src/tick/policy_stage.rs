@@ -24,12 +24,27 @@ impl TickPipeline {
         if fleet.paused {
             return;
         }
-        for (name, policy) in fleet.policies.iter_mut() {
+        // Each flying UAV's policy by its place among the registry's names (the same order as
+        // `iter_mut`), in one pass: one string comparison per UAV where neighbours in the fleet
+        // share a policy (the previous UAV's is tried first), not one per UAV and policy.
+        self.slots.clear();
+        let mut last: Option<(usize, &str)> = None;
+        for uav in fleet.uavs.iter() {
+            let slot = if !uav.condition.flying() {
+                None
+            } else if let Some((i, _)) = last.filter(|(_, name)| *name == uav.policy) {
+                Some(i)
+            } else {
+                let found = fleet.policies.names().enumerate().find(|(_, name)| *name == uav.policy);
+                last = found.or(last);
+                found.map(|(i, _)| i)
+            };
+            self.slots.push(slot);
+        }
+        for (i, (_, policy)) in fleet.policies.iter_mut().enumerate() {
             self.batch.clear();
             self.observations.clear();
-            for (k, uav) in
-                fleet.uavs.iter_mut().enumerate().filter(|(_, u)| u.policy == name && u.condition.flying())
-            {
+            for (k, uav) in fleet.uavs.iter_mut().enumerate().filter(|(k, _)| self.slots[*k] == Some(i)) {
                 uav.last.policy_fallback = true;
                 self.batch.push(k);
                 self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
