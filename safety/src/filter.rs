@@ -181,14 +181,27 @@ impl SafetyFilter {
 
     /// Filters nominal input `u_ref` of a UAV with velocity `v` against `rows`, under ‖u‖ ≤ δ.
     pub fn filter(&mut self, u_ref: Vec2, v: Vec2, rows: &[Row], delta: f64, dt: f64) -> FilterOutcome {
+        self.filter_timed(u_ref, v, rows, delta, dt).0
+    }
+
+    /// [`SafetyFilter::filter`], with how long its QP took when it solved one (the clock is read
+    /// only then: a nominal input that is already safe costs no clock reads).
+    pub fn filter_timed(
+        &mut self,
+        u_ref: Vec2,
+        v: Vec2,
+        rows: &[Row],
+        delta: f64,
+        dt: f64,
+    ) -> (FilterOutcome, Option<std::time::Duration>) {
         let data_ok = uav::is_finite(&u_ref) && rows.iter().all(|r| uav::is_finite(&r.a) && r.c.is_finite());
         if !data_ok {
-            return self.brake(v, delta, dt);
+            return (self.brake(v, delta, dt), None);
         }
         let safe = |u: &Vec2| rows.iter().all(|r| r.a.dot(u) <= r.c);
         if u_ref.norm() <= delta && safe(&u_ref) {
             let active_rows = count_active(rows, &u_ref);
-            return FilterOutcome {
+            let kept = FilterOutcome {
                 u: u_ref,
                 solved: false,
                 closed_form: false,
@@ -197,7 +210,15 @@ impl SafetyFilter {
                 active_rows,
                 status: SolverStatus::Solved,
             };
+            return (kept, None);
         }
+        let started = std::time::Instant::now();
+        let out = self.solve(u_ref, v, rows, delta, dt);
+        (out, Some(started.elapsed()))
+    }
+
+    /// The QP of [`SafetyFilter::filter`] for a nominal input that is not safe as it is.
+    fn solve(&mut self, u_ref: Vec2, v: Vec2, rows: &[Row], delta: f64, dt: f64) -> FilterOutcome {
         self.scratch.clear();
         self.scratch.extend(self.settings.constraint_rows(rows, delta));
         if self.settings.solver == Solver::Exact {

@@ -19,7 +19,6 @@ use crate::tick::repair::Repair;
 use crate::tick::rows::RowBuilder;
 use rayon::prelude::*;
 use safety::{Row, RowKind, SafetyFilter};
-use std::time::Instant;
 use uav::{Params, Vec2};
 
 /// Levels of the filter's order; the tail (level `LEVELS`) filters one UAV at a time.
@@ -156,8 +155,7 @@ fn filter_one(
     // Index order (module doc): d filtered before k, whatever its level.
     let before = |d: usize| share_sequential && d < k;
     rows.rows_of(k, p.delta, before, |d| inputs[d], &mut worker.rows);
-    let started = Instant::now();
-    let out = worker.filter.filter(u_ref, me.state.v, &worker.rows, p.delta, p.dt);
+    let (out, took) = worker.filter.filter_timed(u_ref, me.state.v, &worker.rows, p.delta, p.dt);
     Filtered {
         u: out.u,
         rows: worker.rows.len(),
@@ -165,7 +163,7 @@ fn filter_one(
         max_slack: out.max_slack,
         solved: out.solved,
         failed: out.failed,
-        solve_us: if out.solved { started.elapsed().as_secs_f64() * 1e6 } else { 0.0 },
+        solve_us: if out.solved { took.map_or(0.0, |t| t.as_secs_f64() * 1e6) } else { 0.0 },
         min_barrier: worker.rows.iter().map(|r| r.b).fold(f64::INFINITY, f64::min),
     }
 }
