@@ -4,9 +4,10 @@
 //! pair closer than the radius is in such a window (its y differs by less than one band), the work is
 //! O(N log N) for the sort plus O(N + candidates) at bounded density, whichever way the road runs (a
 //! sweep along x alone degenerated on roads running north–south), and each UAV's list comes out
-//! ordered by x, then index (a merge of three sorted windows), with no sort per list. The lists share
-//! one buffer ([`Ragged`]) reused every tick. Large fleets sort on both cores and search the two
-//! halves of the bands at once.
+//! ordered by x, then index (the hits of three windows, each in that order, put together). Each
+//! sort starts from the last one's order: UAVs move little in a tick, and an insertion sort finishes
+//! it in about one pass. The lists share one buffer ([`Ragged`]) reused every tick. Large fleets
+//! search the two halves of the bands at once (and sort on both cores when the order is new).
 //!
 //! Foreign UAVs (flown by another region, [`crate::ForeignUav`]) go into the same sort: points from
 //! index `own` on get no list of their own, and each own UAV's foreign neighbours come out in a
