@@ -3,8 +3,8 @@
 //! (`fleet::trunk::trunk_scenario`: 12 m wide, 1.2 km per 1,000 UAVs, goals 60–150 m away) on
 //! in-process simulated links; after two warm-up ticks, `--ticks` ticks are timed, each with the
 //! metrics a headless run records. Prints tick p50/p99 and the mean time of each stage per tick and
-//! per UAV and the process's resident memory, then how the per-UAV cost of the largest fleet compares
-//! with the smallest's, then the roofline: each stage's time over its floor on this machine
+//! per UAV and the process's resident memory, then how the per-UAV cost of each fleet compares with
+//! the next smaller one's and the largest's with the smallest's, then the roofline: each stage's time over its floor on this machine
 //! ([`crate::roofline`]). With `--road
 //! city` the UAVs fly across a street grid instead (`fleet::city::city_scenario`: B × B blocks,
 //! square junctions, two-way streets 6 m wide limited to 3 m/s, about 17 UAVs per block, goals 1.5–4
@@ -143,13 +143,29 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
         measured.push((n, sums.map(|total| total / ticks as f64 * 1e-6)));
         drop(fleet);
     }
-    if let (Some((small, a)), Some((large, b))) = (per_uav.first(), per_uav.last())
-        && per_uav.len() > 1
-    {
-        say!("per-UAV cost: {a:.2} µs at {small}, {b:.2} µs at {large}: ×{:.2}", b / a);
+    if let Some(line) = per_uav_summary(&per_uav) {
+        say!("{line}");
     }
     print_roofline(args, &measured);
     ExitCode::SUCCESS
+}
+
+/// How the mean tick per UAV (µs) grows with the fleet, from (size, µs) in the order measured: each
+/// size against the one before it, then (for three or more) the largest against the smallest; None
+/// for one size.
+fn per_uav_summary(per_uav: &[(usize, f64)]) -> Option<String> {
+    let ((small, a), (large, b)) = (per_uav.first()?, per_uav.last()?);
+    if per_uav.len() < 2 {
+        return None;
+    }
+    let mut sizes = vec![format!("{a:.2} µs at {small}")];
+    for pair in per_uav.windows(2) {
+        let ((before, x), (n, y)) = (pair[0], pair[1]);
+        sizes.push(format!("{y:.2} µs at {n} (×{:.2} of {before})", y / x));
+    }
+    let ends =
+        if per_uav.len() > 2 { format!("; {large} against {small}: ×{:.2}", b / a) } else { String::new() };
+    Some(format!("per-UAV cost: {}{ends}", sizes.join(", ")))
 }
 
 /// The process's resident memory now (MB), from `/proc/self/statm` (Linux; `None` elsewhere).
@@ -201,5 +217,26 @@ fn print_roofline(args: &BenchArgs, measured: &[(usize, [f64; 8])]) {
             line.push_str(&format!(" {:>9.1}x", point.times_floor()));
         }
         say!("{line}");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::per_uav_summary;
+
+    #[test]
+    fn the_per_uav_summary_compares_each_size_with_the_one_before_and_the_ends() {
+        assert_eq!(per_uav_summary(&[(1000, 0.8)]), None);
+        assert_eq!(
+            per_uav_summary(&[(1000, 0.5), (10000, 0.6)]).as_deref(),
+            Some("per-UAV cost: 0.50 µs at 1000, 0.60 µs at 10000 (×1.20 of 1000)")
+        );
+        assert_eq!(
+            per_uav_summary(&[(1000, 0.5), (10000, 0.4), (100000, 0.6)]).as_deref(),
+            Some(
+                "per-UAV cost: 0.50 µs at 1000, 0.40 µs at 10000 (×0.80 of 1000), 0.60 µs at 100000 (×1.50 of \
+                 10000); 100000 against 1000: ×1.20"
+            )
+        );
     }
 }
