@@ -233,9 +233,9 @@ impl FilterStage {
                 &mut self.workers[0].filter,
             );
         }
-        // Written back in index order (each UAV's place in the order looked up), in parallel: in
-        // the order's level by level sweeps, each write was a cache miss once the fleet's records
-        // outgrow the cache (100,000 UAVs: 79 MB).
+        // Written back in index order (each UAV's place in the order looked up), in parallel, not
+        // in the order's level-by-level sweeps over the records (at 100,000 UAVs, 79 MB of them:
+        // the filter stage 16.6 -> 16.2 ms; at 10,000 no change).
         self.place_of.clear();
         self.place_of.resize(n, 0);
         for (place, &k) in self.order.order.iter().enumerate() {
