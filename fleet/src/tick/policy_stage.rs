@@ -44,7 +44,9 @@ impl TickPipeline {
         for (i, (_, policy)) in fleet.policies.iter_mut().enumerate() {
             self.batch.clear();
             self.observations.clear();
-            for (k, uav) in fleet.uavs.iter_mut().enumerate().filter(|(k, _)| self.slots[*k] == Some(i)) {
+            // Only this policy's UAVs' records are read (the slots are a plain array).
+            for k in (0..self.slots.len()).filter(|&k| self.slots[k] == Some(i)) {
+                let uav = &mut fleet.uavs[k];
                 uav.last.policy_fallback = true;
                 self.batch.push(k);
                 self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
