@@ -2,18 +2,25 @@
 //! thinks each may be (`safety::ReachDisk`, docs/safety.md §5 and `safety/src/neighbour_rows.rs`).
 
 use super::TickState;
+use crate::FleetConfig;
+use crate::member::Uav;
 use safety::{ReachDisk, point_disk, reach_disk};
 
+/// Where `uav` can be now under `config`: its reach disk while its link is stale, else its last
+/// state.
+pub(crate) fn disk_of(uav: &Uav, config: &FleetConfig) -> ReachDisk {
+    if uav.stale_ticks == 0 {
+        return point_disk(uav.state.p);
+    }
+    let p = &config.params;
+    let t = f64::from(uav.stale_ticks) * p.dt;
+    reach_disk(uav.state, t, p.delta, config.lost_reach_horizon)
+}
+
 impl TickState<'_> {
-    /// Where UAV d can be now: its reach disk while its link is stale, else its last state.
+    /// Where UAV d can be now ([`disk_of`]).
     pub(crate) fn disk_of(&self, d: usize) -> ReachDisk {
-        let uav = &self.uavs[d];
-        if uav.stale_ticks == 0 {
-            return point_disk(uav.state.p);
-        }
-        let p = &self.config.params;
-        let t = f64::from(uav.stale_ticks) * p.dt;
-        reach_disk(uav.state, t, p.delta, self.config.lost_reach_horizon)
+        disk_of(&self.uavs[d], self.config)
     }
 
     /// How far any stale UAV's disk reaches beyond its last position (widens the neighbour search).

@@ -9,6 +9,7 @@ use crate::condition::Condition;
 use crate::member::Uav;
 use crate::tick::TickState;
 use crate::tick::filtering::FilterStage;
+use crate::tick::lost::disk_of;
 use crate::tick::neighbours::NeighbourSearch;
 use crate::tick::rows::{NeighbourLists, RowBuilder};
 use crate::tick::{StageTimes, parallel};
@@ -99,7 +100,8 @@ impl TickPipeline {
             foreign: &self.neighbours.foreign,
             foreign_disks: &self.foreign_disks,
         };
-        self.rows.build(fleet.road, rule, &params, fleet.uavs, neighbours, |d| fleet.disk_of(d));
+        let config = fleet.config;
+        self.rows.build(fleet.road, rule, &params, fleet.uavs, neighbours, |u| disk_of(u, config));
         self.stages.rows_us = lap();
         self.filter.run(fleet, &self.rows);
         self.stages.filter_us = lap();

@@ -16,7 +16,7 @@
 //! order on one thread, so runs stay the same on any number of threads.
 
 use crate::tick::rows::RowBuilder;
-use safety::{FilterSettings, Row, RowKind, SafetyFilter};
+use safety::{FilterSettings, Row, SafetyFilter};
 use uav::{Params, Vec2};
 
 /// Rounds of the pass: each round visits the UAVs next to a change of the round before.
@@ -80,12 +80,7 @@ impl Repair {
         filter: &mut SafetyFilter,
     ) {
         let settings = filter.settings;
-        let partners = |k: usize| {
-            rows.built(k).iter().filter_map(move |r| match r.kind {
-                RowKind::Collision(d) if d != k && rows.view(d).flying && rows.view(d).cooperates => Some(d),
-                _ => None,
-            })
-        };
+        let partners = |k: usize| rows.partners(k).iter().copied().filter(|&d| rows.view(d).cooperates);
         // Every list holds each UAV at most once: sized once for the fleet, they do not grow.
         let n = inputs.len();
         for list in [&mut self.visit, &mut self.next] {
@@ -160,6 +155,7 @@ mod tests {
     use crate::tick::rows::NeighbourLists;
     use proptest::prelude::*;
     use roads::{Road, RoadLayout};
+    use safety::RowKind;
     use uav::UavState;
 
     /// A fleet of UAVs with the given states on a straight road 4 m wide along x from 0 to 20, its
@@ -179,8 +175,8 @@ mod tests {
         let no_foreign = Ragged::default();
         let neighbours = NeighbourLists { own: &lists, foreign: &no_foreign, foreign_disks: &[] };
         // Every UAV was just added with a fresh state: its disk is its position.
-        rows.build(&fleet.road, fleet.config.road_rule, &params, &fleet.uavs, neighbours, |d| {
-            safety::point_disk(fleet.uavs[d].state.p)
+        rows.build(&fleet.road, fleet.config.road_rule, &params, &fleet.uavs, neighbours, |u| {
+            safety::point_disk(u.state.p)
         });
         (rows, params)
     }
@@ -225,6 +221,7 @@ mod tests {
         let mut inputs = [Vec2::zeros(), Vec2::zeros()];
         let b = rows.built(0).iter().find(|r| r.kind == RowKind::Collision(1)).map(|r| r.b);
         assert!(b.is_some_and(|b| b < URGENT_B), "an urgent pair row: b = {b:?}");
+        assert_eq!((rows.partners(0), rows.partners(1)), (&[1][..], &[0][..]), "the pair is known");
         assert!(violations(&rows, &p, &inputs)[0] > MET, "the pair row is violated");
         let mut repair = Repair::default();
         let mut filter = SafetyFilter::new(FilterSettings::default());

@@ -57,11 +57,13 @@ pub(crate) struct NeighbourLists<'a> {
 /// UAVs whose rows share one buffer and one parallel task.
 const UAVS_PER_BLOCK: usize = 64;
 
-/// The rows and margins of [`UAVS_PER_BLOCK`] consecutive UAVs.
+/// The rows, pair partners and margins of [`UAVS_PER_BLOCK`] consecutive UAVs.
 #[derive(Debug, Default)]
 struct RowBlock {
     /// `rows[i]`: the rows of the block's UAV i.
     rows: Ragged<Row>,
+    /// `partners[i]`: the flying UAVs the block's UAV i has a collision row against.
+    partners: Ragged<usize>,
     /// `margins[i]`: the margins of the block's UAV i.
     margins: Vec<UavMargins>,
 }
@@ -76,7 +78,7 @@ pub(crate) struct RowBuilder {
 
 impl RowBuilder {
     /// Builds every flying UAV's rows (without the sequential share) from `uavs` and their
-    /// neighbour lists; `disk_of(d)` is UAV d's reach disk. Each foreign UAV f is an obstacle, view
+    /// neighbour lists; `disk_of(u)` is UAV u's reach disk. Each foreign UAV f is an obstacle, view
     /// `uavs.len() + f`.
     pub fn build(
         &mut self,
@@ -85,17 +87,22 @@ impl RowBuilder {
         params: &Params,
         uavs: &[Uav],
         neighbours: NeighbourLists<'_>,
-        disk_of: impl Fn(usize) -> ReachDisk,
+        disk_of: impl Fn(&Uav) -> ReachDisk + Sync,
     ) {
         let NeighbourLists { own: lists, foreign: foreign_lists, foreign_disks } = neighbours;
-        self.views.clear();
-        self.views.extend(uavs.iter().enumerate().map(|(d, u)| RowView {
+        let view = |u: &Uav| RowView {
             state: u.state,
             flying: u.condition.flying(),
             cooperates: u.condition.cooperates(),
-            obstacle: (!u.condition.cooperates() && u.condition.in_the_air()).then(|| disk_of(d)),
+            obstacle: (!u.condition.cooperates() && u.condition.in_the_air()).then(|| disk_of(u)),
             segment: u.nav.way().map_or(u.nav.tracker.current.unwrap_or(0), |w| w.cell()),
-        }));
+        };
+        if parallel(uavs.len()) {
+            uavs.par_iter().map(view).collect_into_vec(&mut self.views);
+        } else {
+            self.views.clear();
+            self.views.extend(uavs.iter().map(view));
+        }
         self.views.extend(foreign_disks.iter().map(|disk| RowView {
             state: UavState { p: disk.centre, v: disk.velocity },
             flying: false,
@@ -111,6 +118,7 @@ impl RowBuilder {
             let first = b * UAVS_PER_BLOCK;
             let uavs = first..(first + UAVS_PER_BLOCK).min(n);
             block.rows.reset(uavs.len());
+            block.partners.reset(uavs.len());
             block.margins.clear();
             for (i, k) in uavs.enumerate() {
                 let me = views[k];
@@ -122,6 +130,13 @@ impl RowBuilder {
                     block.rows.fill(i, |rows| {
                         road_margins = rows_of_one(road, rule, params, me, neighbours, views, rows);
                     });
+                    // Its pair partners, read from its rows while they are in the cache (a foreign
+                    // UAV's view never flies).
+                    let partners = block.rows[i].iter().filter_map(|r| match r.kind {
+                        RowKind::Collision(d) if d != k && views[d].flying => Some(d),
+                        _ => None,
+                    });
+                    block.partners.fill(i, |out| out.extend(partners));
                 }
                 // Where the rows' pass could not give the road margin, today's query for this UAV only.
                 let (wall, road_margin) = road_margins.unwrap_or_else(|| {
@@ -146,6 +161,11 @@ impl RowBuilder {
     /// UAV k's rows as built, each pair row with its share only (empty when it does not fly).
     pub fn built(&self, k: usize) -> &[Row] {
         self.blocks.get(k / UAVS_PER_BLOCK).map_or(&[], |block| &block.rows[k % UAVS_PER_BLOCK])
+    }
+
+    /// The flying UAVs UAV k has a collision row against this tick (empty when it does not fly).
+    pub fn partners(&self, k: usize) -> &[usize] {
+        self.blocks.get(k / UAVS_PER_BLOCK).map_or(&[], |block| &block.partners[k % UAVS_PER_BLOCK])
     }
 
     /// UAV k's margins at the states read this tick (None when there is no UAV k).
