@@ -194,8 +194,12 @@ impl FilterStage {
         let p = fleet.config.params;
         let sequential = fleet.config.share == crate::CollisionShare::Sequential;
         self.order.plan(rows, n);
-        self.inputs.clear();
-        self.inputs.extend(fleet.uavs.iter().map(|u| u.last.u_ref));
+        if parallel(n) {
+            fleet.uavs.par_iter().map(|u| u.last.u_ref).collect_into_vec(&mut self.inputs);
+        } else {
+            self.inputs.clear();
+            self.inputs.extend(fleet.uavs.iter().map(|u| u.last.u_ref));
+        }
         self.results.clear();
         self.results.resize(n, Filtered::default());
         // A fixed set of tasks per level (a few per worker thread, for balance), each with its own

@@ -242,10 +242,13 @@ impl TickPipeline {
     fn make_way(&mut self, fleet: &mut TickState<'_>) {
         let d_c = fleet.config.params.kept_d_c();
         let foreign = ForeignNear::new(&self.neighbours.foreign, &self.foreign_views.views, fleet.foreign);
-        self.flying_targets.clear();
-        self.flying_targets.extend(
-            fleet.uavs.iter().map(|u| (u.nav.goal().is_some() && !u.nav.arrived).then_some(u.last.target)),
-        );
+        let flying_target = |u: &Uav| (u.nav.goal().is_some() && !u.nav.arrived).then_some(u.last.target);
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter().map(flying_target).collect_into_vec(&mut self.flying_targets);
+        } else {
+            self.flying_targets.clear();
+            self.flying_targets.extend(fleet.uavs.iter().map(flying_target));
+        }
         let (positions, targets, lists) = (&self.positions, &self.flying_targets, &self.neighbours.lists);
         for_each_uav(fleet.uavs, |k, me| {
             let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { return };

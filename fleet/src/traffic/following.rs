@@ -128,17 +128,27 @@ impl TrafficAlong {
     fn update(&mut self, uavs: &[Uav], foreign: &[ForeignView]) {
         self.forward.clear();
         self.backward.clear();
-        self.seen.clear();
-        self.seen.extend(uavs.iter().map(|u| Seen { route: u.traffic.route, p: u.state.p, v: u.state.v }));
-        let routes = uavs
-            .iter()
-            .filter_map(|u| u.traffic.route)
-            .chain(foreign.iter().filter_map(|f| f.flying_along()));
+        let seen = |u: &Uav| Seen { route: u.traffic.route, p: u.state.p, v: u.state.v };
+        if crate::tick::parallel(uavs.len()) {
+            uavs.par_iter().map(seen).collect_into_vec(&mut self.seen);
+        } else {
+            self.seen.clear();
+            self.seen.extend(uavs.iter().map(seen));
+        }
+        // From the plain copies just made, not the records again.
+        let routes =
+            self.seen.iter().filter_map(|u| u.route).chain(foreign.iter().filter_map(|f| f.flying_along()));
         for pos in routes {
             if pos.direction() > 0.0 { self.forward.push(pos.s) } else { self.backward.push(pos.s) }
         }
-        self.forward.sort_unstable_by(f64::total_cmp);
-        self.backward.sort_unstable_by(f64::total_cmp);
+        // Sorted in place on all cores for large fleets (the same order: a total order on f64).
+        for along in [&mut self.forward, &mut self.backward] {
+            if crate::tick::parallel(along.len()) {
+                along.par_sort_unstable_by(f64::total_cmp);
+            } else {
+                along.sort_unstable_by(f64::total_cmp);
+            }
+        }
     }
 
     /// True when a UAV flying the other way is within `range` of arc length ahead of `me`.

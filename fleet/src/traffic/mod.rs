@@ -29,6 +29,7 @@ use crate::traffic::foreign::{ForeignNear, ForeignView};
 use crate::traffic::sections::{HOLD_M, Section, next_section, sections};
 use crate::traffic::speed::SpeedProfile;
 use crate::traffic::zones::{Request, Reservations};
+use rayon::prelude::*;
 use roads::{Navigator, Restriction, RoutePosition};
 
 /// A stall this long (s) next to a stalled neighbour with priority makes a UAV back off.
@@ -145,10 +146,8 @@ impl TrafficRules {
             self.speeds = SpeedProfile::new(nav.road.profile());
             uavs.iter_mut().for_each(|u| u.traffic.passed = None);
         }
-        for u in uavs.iter_mut() {
-            u.traffic.restriction = Restriction::default();
-            u.traffic.waiting = None;
-        }
+        // Each UAV's restriction and wait are cleared by the first pass of `reserve` (a sequential
+        // pass over the fleet's records fewer: at 100,000 UAVs about 1 ms).
         self.reserve(nav, now, uavs, foreign.all());
         crate::traffic::following::follow(nav, uavs, neighbours, foreign, &mut self.along);
         self.resolve_deadlocks(nav, now, uavs, neighbours, foreign);
@@ -162,9 +161,12 @@ impl TrafficRules {
         let gap = FOLLOW_GAP_IN_DC * nav.d_c;
         self.wanted.clear();
         // Each UAV's next section, not the one it last crossed while it is on that one's exit side;
-        // a grant it no longer wants marks its zone as crossed.
+        // a grant it no longer wants marks its zone as crossed. No restriction or wait yet. Per UAV
+        // (each writes only its own record): in parallel for large fleets.
         let (sections, zones) = (&self.sections, &self.zones);
-        self.wanted.extend(uavs.iter_mut().map(|u| {
+        let want = |u: &mut Uav| {
+            u.traffic.restriction = Restriction::default();
+            u.traffic.waiting = None;
             let Some(pos) = u.traffic.route else {
                 u.traffic.passed = None;
                 return None;
@@ -183,7 +185,12 @@ impl TrafficRules {
                 u.traffic.passed = Some(granted);
             }
             wanted
-        }));
+        };
+        if crate::tick::parallel(uavs.len()) {
+            uavs.par_iter_mut().map(want).collect_into_vec(&mut self.wanted);
+        } else {
+            self.wanted.extend(uavs.iter_mut().map(want));
+        }
         // The foremost UAV waiting at each entry (without its grant).
         self.front.clear();
         self.front.resize(2 * self.sections.len(), f64::INFINITY);
