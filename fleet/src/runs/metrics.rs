@@ -1,14 +1,17 @@
 //! Safety metrics of a run, accumulated per tick, and the METRICS.json document.
 
 use crate::fleet::Fleet;
+use crate::member::Uav;
 use crate::progress::stall_time_added;
+use crate::ragged::Ragged;
 use crate::runs::histogram::DurationHistogram;
 use crate::runs::margins::UavMargins;
 use crate::tick::parallel;
 use rayon::prelude::*;
+use roads::Airspace;
 use serde::Serialize;
 use std::collections::BTreeMap;
-use uav::UavState;
+use uav::{Params, UavState};
 
 /// Solver statistics of a run.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -139,11 +142,16 @@ impl MetricsRecorder {
         self.record_with(fleet, t, Some(truth));
     }
 
-    fn record_with(&mut self, fleet: &Fleet, t: f64, truth: Option<&[Option<UavState>]>) {
-        let p = fleet.config.params;
-        let road = fleet.airspace();
-        let uavs = fleet.uavs();
-        let lists = fleet.neighbour_lists();
+    /// Each UAV's margins on its own into `margins`, at `truth` when it has a state per UAV, else
+    /// at the fleet's states (in parallel for large fleets; a minimum does not depend on the order).
+    fn measure_margins(
+        &mut self,
+        road: &Airspace,
+        p: &Params,
+        uavs: &[Uav],
+        lists: &Ragged<usize>,
+        truth: Option<&[Option<UavState>]>,
+    ) {
         self.states.clear();
         match truth.filter(|truth| truth.len() == uavs.len()) {
             // No segment hint: the estimate's segment need not hold the true position.
@@ -154,17 +162,8 @@ impl MetricsRecorder {
             ),
         }
         let states = &self.states;
-        // The fleet's states: their margins as the tick's rows stage recorded them, if it still
-        // has those states (one pass over the walls and pairs per tick, not two).
-        let rows = &fleet.pipeline.rows;
-        let built = truth.is_none() && rows.margins_hold_for(uavs);
-        // Each UAV's margins on its own (in parallel for large fleets; a minimum does not depend on
-        // the order).
         let margins_of = |(k, &(state, hint)): (usize, &(Option<UavState>, Option<usize>))| {
             let Some(state) = state else { return UavMargins::NONE };
-            if built && let Some(margins) = rows.margins(k) {
-                return margins;
-            }
             // The pairs of this tick's neighbour search: any other pair is farther apart than the
             // activation radius at twice the fleet's top speed, so its S_kd exceeds D_c.
             let later = lists
@@ -175,18 +174,29 @@ impl MetricsRecorder {
                 .filter_map(|&d| states.get(d)?.0.as_ref());
             UavMargins::of(road, hint, &state, p.delta, later)
         };
-        if built {
-            // A copy per UAV: not worth the threads.
-            self.margins.clear();
-            self.margins.extend(states.iter().enumerate().map(margins_of));
-        } else if parallel(states.len()) {
+        if parallel(states.len()) {
             states.par_iter().enumerate().map(margins_of).collect_into_vec(&mut self.margins);
         } else {
             self.margins.clear();
             self.margins.extend(states.iter().enumerate().map(margins_of));
         }
+    }
+
+    fn record_with(&mut self, fleet: &Fleet, t: f64, truth: Option<&[Option<UavState>]>) {
+        let p = fleet.config.params;
+        let road = fleet.airspace();
+        let uavs = fleet.uavs();
+        let lists = fleet.neighbour_lists();
+        // The fleet's states: their margins as the tick's rows stage recorded them, if it still
+        // has those states (one pass over the walls and pairs per tick, not two).
+        let rows = &fleet.pipeline.rows;
+        let built = truth.is_none() && rows.margins_hold_for(uavs);
+        if !built {
+            self.measure_margins(road, &p, uavs, lists, truth);
+        }
         for (k, u) in uavs.iter().enumerate() {
-            let m = self.margins[k];
+            // `margins_hold_for`: the rows stage has margins for every UAV.
+            let m = if built { rows.margins(k).unwrap_or(UavMargins::NONE) } else { self.margins[k] };
             self.min_wall = self.min_wall.min(m.wall);
             self.outside += u64::from(m.wall < 0.0);
             self.min_road = self.min_road.min(m.road_margin);

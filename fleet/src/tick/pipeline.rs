@@ -124,11 +124,20 @@ impl TickPipeline {
             .zip(&self.foreign_disks)
             .map(|(f, disk)| (disk.centre - f.state.p).norm() + disk.radius)
             .fold(0.0, f64::max);
-        self.positions.clear();
-        self.positions.extend(fleet.uavs.iter().map(|u| u.state.p));
+        // Plain copies of the states, own UAVs first: one pass over the records (in parallel for
+        // large fleets), then the foreign UAVs.
+        let state = |u: &Uav| (u.state.p, u.state.v);
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter().map(state).unzip_into_vecs(&mut self.positions, &mut self.velocities);
+        } else {
+            self.positions.clear();
+            self.velocities.clear();
+            for (p, v) in fleet.uavs.iter().map(state) {
+                self.positions.push(p);
+                self.velocities.push(v);
+            }
+        }
         self.positions.extend(fleet.foreign.iter().map(|f| f.state.p));
-        self.velocities.clear();
-        self.velocities.extend(fleet.uavs.iter().map(|u| u.state.v));
         self.velocities.extend(fleet.foreign.iter().map(|f| f.state.v));
         let v_max = self.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
         let pair = Clearance::pair(params.d_c, &params);

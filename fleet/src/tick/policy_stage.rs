@@ -16,21 +16,17 @@ impl TickPipeline {
     pub(super) fn run_policies(&mut self, fleet: &mut TickState<'_>) {
         let (delta, dt) = (fleet.config.params.delta, fleet.config.params.dt);
         // Every UAV brakes unless its policy gives a finite action; a fallback is counted only for
-        // a UAV whose policy ran and gave none (one that is not flying runs no policy).
+        // a UAV whose policy ran and gave none (one that is not flying runs no policy). In the same
+        // pass, each flying UAV's policy by its place among the registry's names (the same order as
+        // `iter_mut`): one string comparison per UAV where neighbours in the fleet share a policy
+        // (the previous UAV's is tried first), not one per UAV and policy.
+        let paused = fleet.paused;
+        self.slots.clear();
+        let mut last: Option<(usize, &str)> = None;
         for uav in fleet.uavs.iter_mut() {
             uav.last.u_ref = braking_input(uav.state.v, delta, dt);
             uav.last.policy_fallback = false;
-        }
-        if fleet.paused {
-            return;
-        }
-        // Each flying UAV's policy by its place among the registry's names (the same order as
-        // `iter_mut`), in one pass: one string comparison per UAV where neighbours in the fleet
-        // share a policy (the previous UAV's is tried first), not one per UAV and policy.
-        self.slots.clear();
-        let mut last: Option<(usize, &str)> = None;
-        for uav in fleet.uavs.iter() {
-            let slot = if !uav.condition.flying() {
+            let slot = if paused || !uav.condition.flying() {
                 None
             } else if let Some((i, _)) = last.filter(|(_, name)| *name == uav.policy) {
                 Some(i)
@@ -40,6 +36,9 @@ impl TickPipeline {
                 found.map(|(i, _)| i)
             };
             self.slots.push(slot);
+        }
+        if paused {
+            return;
         }
         for (i, (_, policy)) in fleet.policies.iter_mut().enumerate() {
             self.batch.clear();
