@@ -8,6 +8,7 @@ use crate::ragged::Ragged;
 use crate::traffic::foreign::{ForeignNear, stalled_ahead};
 use crate::traffic::yielding::{Flying, make_way};
 use crate::traffic::{BACK_OFF_S, BLOCKING_IN_DC, DEADLOCK_AFTER_S, TrafficRules};
+use rayon::prelude::*;
 use roads::{Navigator, RoutePosition};
 use uav::Vec2;
 
@@ -15,7 +16,7 @@ impl TrafficRules {
     /// Sets the back-off of every UAV stalled next to a stalled neighbour with priority (own, or
     /// foreign from `foreign`), and keeps the back-offs still running.
     pub(crate) fn resolve_deadlocks(
-        &self,
+        &mut self,
         nav: &Navigator,
         now: f64,
         uavs: &mut [Uav],
@@ -23,7 +24,21 @@ impl TrafficRules {
         foreign: ForeignNear<'_>,
     ) {
         let blocking = BLOCKING_IN_DC * nav.d_c;
-        for k in 0..uavs.len() {
+        // Only a UAV with a back-off running or stalled long enough does anything below, and what
+        // decides that is its own record, which only its own turn changes: found in parallel for
+        // large fleets (one pass over the records on all cores), then visited in index order.
+        let may = |u: &Uav| {
+            u.traffic.back_off.is_some()
+                || (u.traffic.route.is_some()
+                    && u.traffic.progress.stalled_for(now).is_some_and(|s| s >= DEADLOCK_AFTER_S))
+        };
+        if crate::tick::parallel(uavs.len()) {
+            uavs.par_iter().map(may).collect_into_vec(&mut self.may_back_off);
+        } else {
+            self.may_back_off.clear();
+            self.may_back_off.extend(uavs.iter().map(may));
+        }
+        for k in (0..uavs.len()).filter(|&k| self.may_back_off[k]) {
             if let Some((target, until)) = uavs[k].traffic.back_off {
                 if now < until && uavs[k].traffic.route.is_some() {
                     uavs[k].traffic.restriction.back_off = Some(target);

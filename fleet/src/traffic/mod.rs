@@ -81,6 +81,8 @@ pub struct TrafficRules {
     front: Vec<f64>,
     /// Scratch: per UAV, whether it waits at the head of its entry's queue this tick.
     heads: Vec<bool>,
+    /// Scratch: per UAV, whether it may back off this tick (one running, or stalled long enough).
+    may_back_off: Vec<bool>,
     /// The speed limit along the road (rebuilt with the sections when the road changes).
     speeds: SpeedProfile,
     /// Scratch: where the UAVs are along the road by direction (`crate::traffic::following`).
