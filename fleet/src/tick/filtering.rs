@@ -17,9 +17,9 @@
 //! instead of at least 271 arrivals in `mixed`.)
 
 use crate::tick::TickState;
-use crate::tick::parallel;
 use crate::tick::repair::Repair;
 use crate::tick::rows::RowBuilder;
+use crate::tick::{map_into, parallel};
 use rayon::prelude::*;
 use safety::{Row, SafetyFilter};
 use uav::{Params, Vec2};
@@ -194,12 +194,7 @@ impl FilterStage {
         let p = fleet.config.params;
         let sequential = fleet.config.share == crate::CollisionShare::Sequential;
         self.order.plan(rows, n);
-        if parallel(n) {
-            fleet.uavs.par_iter().map(|u| u.last.u_ref).collect_into_vec(&mut self.inputs);
-        } else {
-            self.inputs.clear();
-            self.inputs.extend(fleet.uavs.iter().map(|u| u.last.u_ref));
-        }
+        map_into(fleet.uavs, |u| u.last.u_ref, &mut self.inputs);
         self.results.clear();
         self.results.resize(n, Filtered::default());
         // A fixed set of tasks per level (a few per worker thread, for balance), each with its own

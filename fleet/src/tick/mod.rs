@@ -13,6 +13,7 @@ use crate::config::FleetConfig;
 use crate::member::{ForeignUav, Uav};
 use crate::traffic::TrafficRules;
 use policies::PolicyRegistry;
+use rayon::prelude::*;
 use roads::Airspace;
 
 /// What one tick reads and writes of the fleet, borrowed field by field: the stages know the fleet
@@ -44,6 +45,31 @@ pub const PARALLEL_FROM_UAVS: usize = 256;
 /// True when a stage over `n` UAVs runs in parallel ([`PARALLEL_FROM_UAVS`]).
 pub(crate) fn parallel(n: usize) -> bool {
     n >= PARALLEL_FROM_UAVS
+}
+
+/// `out[k] = f(&items[k])` for every item, `out`'s buffer reused: in parallel for large fleets
+/// ([`parallel`]), the same on any number of threads (each call reads only its own item).
+pub(crate) fn map_into<T: Sync, R: Send>(items: &[T], f: impl Fn(&T) -> R + Sync + Send, out: &mut Vec<R>) {
+    if parallel(items.len()) {
+        items.par_iter().map(f).collect_into_vec(out);
+    } else {
+        out.clear();
+        out.extend(items.iter().map(f));
+    }
+}
+
+/// [`map_into`] with `f` changing each item (its own only).
+pub(crate) fn map_mut_into<T: Send, R: Send>(
+    items: &mut [T],
+    f: impl Fn(&mut T) -> R + Sync + Send,
+    out: &mut Vec<R>,
+) {
+    if parallel(items.len()) {
+        items.par_iter_mut().map(f).collect_into_vec(out);
+    } else {
+        out.clear();
+        out.extend(items.iter_mut().map(f));
+    }
 }
 
 /// Wall time (µs) of each stage of the last tick (ARCHITECTURE.md, "One tick").

@@ -12,7 +12,7 @@ use crate::tick::filtering::FilterStage;
 use crate::tick::lost::disk_of;
 use crate::tick::neighbours::NeighbourSearch;
 use crate::tick::rows::{NeighbourLists, RowBuilder};
-use crate::tick::{StageTimes, parallel};
+use crate::tick::{StageTimes, map_into, map_mut_into, parallel};
 use crate::traffic::cycles::back_off_target;
 use crate::traffic::foreign::{ForeignNear, ForeignViews};
 use crate::traffic::passing::{FOREIGN_PASS, pass_point, pass_point_with};
@@ -165,7 +165,6 @@ impl TickPipeline {
         let now = fleet.tick as f64 * params.dt;
         let nav = Navigator::new(road, fleet.config.nav, &params);
         let mut segments = std::mem::take(&mut self.segments);
-        segments.clear();
         let paused = fleet.paused;
         // Per UAV and independent of the others: in parallel, with the same result on any number of
         // threads (each UAV's computation is the same; only where it runs differs).
@@ -177,11 +176,7 @@ impl TickPipeline {
             uav.traffic.progress.update(uav.traffic.route.map(|pos| pos.remaining()), now);
             segment
         };
-        if parallel(fleet.uavs.len()) {
-            fleet.uavs.par_iter_mut().map(locate).collect_into_vec(&mut segments);
-        } else {
-            segments.extend(fleet.uavs.iter_mut().map(locate));
-        }
+        map_mut_into(fleet.uavs, locate, &mut segments);
         if fleet.config.nav == NavMode::Traffic {
             let foreign =
                 ForeignNear::new(&self.neighbours.foreign, &self.foreign_views.views, fleet.foreign);
@@ -252,12 +247,7 @@ impl TickPipeline {
         let d_c = fleet.config.params.kept_d_c();
         let foreign = ForeignNear::new(&self.neighbours.foreign, &self.foreign_views.views, fleet.foreign);
         let flying_target = |u: &Uav| (u.nav.goal().is_some() && !u.nav.arrived).then_some(u.last.target);
-        if parallel(fleet.uavs.len()) {
-            fleet.uavs.par_iter().map(flying_target).collect_into_vec(&mut self.flying_targets);
-        } else {
-            self.flying_targets.clear();
-            self.flying_targets.extend(fleet.uavs.iter().map(flying_target));
-        }
+        map_into(fleet.uavs, flying_target, &mut self.flying_targets);
         let (positions, targets, lists) = (&self.positions, &self.flying_targets, &self.neighbours.lists);
         for_each_uav(fleet.uavs, |k, me| {
             let Some(goal) = me.nav.goal().filter(|_| me.nav.arrived) else { return };

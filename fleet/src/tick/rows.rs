@@ -19,7 +19,7 @@
 use crate::member::Uav;
 use crate::ragged::Ragged;
 use crate::runs::margins::{UavMargins, closest_pair, road_margin_at, road_margin_reach};
-use crate::tick::parallel;
+use crate::tick::{map_into, parallel};
 use rayon::prelude::*;
 use roads::{Airspace, Boundary, SEGMENT_NEAR_M};
 use safety::{
@@ -97,12 +97,7 @@ impl RowBuilder {
             obstacle: (!u.condition.cooperates() && u.condition.in_the_air()).then(|| disk_of(u)),
             segment: u.nav.way().map_or(u.nav.tracker.current.unwrap_or(0), |w| w.cell()),
         };
-        if parallel(uavs.len()) {
-            uavs.par_iter().map(view).collect_into_vec(&mut self.views);
-        } else {
-            self.views.clear();
-            self.views.extend(uavs.iter().map(view));
-        }
+        map_into(uavs, view, &mut self.views);
         self.views.extend(foreign_disks.iter().map(|disk| RowView {
             state: UavState { p: disk.centre, v: disk.velocity },
             flying: false,

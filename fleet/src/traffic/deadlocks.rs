@@ -8,7 +8,6 @@ use crate::ragged::Ragged;
 use crate::traffic::foreign::{ForeignNear, stalled_ahead};
 use crate::traffic::yielding::{Flying, make_way};
 use crate::traffic::{BACK_OFF_S, BLOCKING_IN_DC, DEADLOCK_AFTER_S, TrafficRules};
-use rayon::prelude::*;
 use roads::{Navigator, RoutePosition};
 use uav::Vec2;
 
@@ -32,12 +31,7 @@ impl TrafficRules {
                 || (u.traffic.route.is_some()
                     && u.traffic.progress.stalled_for(now).is_some_and(|s| s >= DEADLOCK_AFTER_S))
         };
-        if crate::tick::parallel(uavs.len()) {
-            uavs.par_iter().map(may).collect_into_vec(&mut self.may_back_off);
-        } else {
-            self.may_back_off.clear();
-            self.may_back_off.extend(uavs.iter().map(may));
-        }
+        crate::tick::map_into(uavs, may, &mut self.may_back_off);
         for k in (0..uavs.len()).filter(|&k| self.may_back_off[k]) {
             if let Some((target, until)) = uavs[k].traffic.back_off {
                 if now < until && uavs[k].traffic.route.is_some() {

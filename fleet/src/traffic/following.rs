@@ -129,12 +129,7 @@ impl TrafficAlong {
         self.forward.clear();
         self.backward.clear();
         let seen = |u: &Uav| Seen { route: u.traffic.route, p: u.state.p, v: u.state.v };
-        if crate::tick::parallel(uavs.len()) {
-            uavs.par_iter().map(seen).collect_into_vec(&mut self.seen);
-        } else {
-            self.seen.clear();
-            self.seen.extend(uavs.iter().map(seen));
-        }
+        crate::tick::map_into(uavs, seen, &mut self.seen);
         // From the plain copies just made, not the records again.
         let routes =
             self.seen.iter().filter_map(|u| u.route).chain(foreign.iter().filter_map(|f| f.flying_along()));

@@ -29,7 +29,6 @@ use crate::traffic::foreign::{ForeignNear, ForeignView};
 use crate::traffic::sections::{HOLD_M, Section, next_section, sections};
 use crate::traffic::speed::SpeedProfile;
 use crate::traffic::zones::{Request, Reservations};
-use rayon::prelude::*;
 use roads::{Navigator, Restriction, RoutePosition};
 
 /// A stall this long (s) next to a stalled neighbour with priority makes a UAV back off.
@@ -161,7 +160,6 @@ impl TrafficRules {
         let approach = 2.0 * nav.r_s + HOLD_M;
         crate::traffic::foreign::occupy(&self.sections, &mut self.zones, foreign, approach);
         let gap = FOLLOW_GAP_IN_DC * nav.d_c;
-        self.wanted.clear();
         // Each UAV's next section, not the one it last crossed while it is on that one's exit side;
         // a grant it no longer wants marks its zone as crossed. No restriction or wait yet. Per UAV
         // (each writes only its own record): in parallel for large fleets.
@@ -188,11 +186,7 @@ impl TrafficRules {
             }
             wanted
         };
-        if crate::tick::parallel(uavs.len()) {
-            uavs.par_iter_mut().map(want).collect_into_vec(&mut self.wanted);
-        } else {
-            self.wanted.extend(uavs.iter_mut().map(want));
-        }
+        crate::tick::map_mut_into(uavs, want, &mut self.wanted);
         // The foremost UAV waiting at each entry (without its grant).
         self.front.clear();
         self.front.resize(2 * self.sections.len(), f64::INFINITY);
