@@ -4,10 +4,10 @@
 //! in-process simulated links; after two warm-up ticks, `--ticks` ticks are timed, each with the
 //! metrics a headless run records. Prints tick p50/p99 and the mean time of each stage per tick and
 //! per UAV and the process's resident memory, then how the per-UAV cost of each fleet compares with
-//! the next smaller one's and the largest's with the smallest's, then the roofline: each stage's time over its floor on this machine
-//! ([`crate::roofline`]). With `--road
-//! city` the UAVs fly across a street grid instead (`fleet::city::city_scenario`: B × B blocks,
-//! square junctions, two-way streets 6 m wide limited to 3 m/s, about 17 UAVs per block, goals 1.5–4
+//! the next smaller one's and the largest's with the smallest's, then the roofline: each stage's
+//! time over its floor on this machine ([`crate::roofline`]). With `--road city` the UAVs fly
+//! across a street grid instead (`fleet::city::city_scenario`: B × B blocks, square junctions,
+//! two-way streets 6 m wide limited to 3 m/s, about 17 UAVs per block, goals 1.5–4
 //! blocks away).
 
 use flights::say;
