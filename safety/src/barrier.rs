@@ -101,14 +101,22 @@ fn allowance_term(b: f64, zeta: f64, eta_v: f64) -> f64 {
     }
 }
 
+/// The rate the braking term may count on when the read `rate` is off by up to `eta_v`: a read
+/// approach as read (what the allowance in b already covers), a read recession only the part of it
+/// the error cannot take away, `max(rate − η_v, 0)` (docs/safety.md §12).
+fn sure_rate(rate: f64, eta_v: f64) -> f64 {
+    if rate > 0.0 { (rate - eta_v).max(0.0) } else { rate }
+}
+
 /// The barrier of a UAV `dist` (m) from an obstacle, receding at `rate` (m/s), braking at `delta`
 /// (m/s²), and its row's right-hand side without curvature terms (docs/safety.md §1, §3, §12):
 /// h = √(2δ(dist − D − η_p)), b = h + rate − η_v, c = δ·rate/h + ζb³ + the allowance term.
 fn barrier(dist: f64, rate: f64, delta: f64, clearance: Clearance, zeta: f64) -> (f64, f64) {
     let h = (2.0 * delta * (dist - clearance.boundary()).max(0.0)).sqrt();
     let b = h + rate - clearance.eta_v;
+    let sure = sure_rate(rate, clearance.eta_v);
     let c =
-        braking_term(delta, rate, h, h + rate) + zeta * b.powi(3) + allowance_term(b, zeta, clearance.eta_v);
+        braking_term(delta, sure, h, h + sure) + zeta * b.powi(3) + allowance_term(b, zeta, clearance.eta_v);
     (b, c)
 }
 
