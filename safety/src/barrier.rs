@@ -110,7 +110,7 @@ fn sure_rate(rate: f64, eta_v: f64) -> f64 {
 
 /// The barrier of a UAV `dist` (m) from an obstacle, receding at `rate` (m/s), braking at `delta`
 /// (m/s²), and its row's right-hand side without curvature terms (docs/safety.md §1, §3, §12):
-/// h = √(2δ(dist − D − η_p)), b = h + rate − η_v, c = δ·rate/h + ζb³ + the allowance term.
+/// h = √(2δ(dist − D − η_p)), b = h + rate − η_v, c = δ·[`sure_rate`]/h + ζb³ + the allowance term.
 fn barrier(dist: f64, rate: f64, delta: f64, clearance: Clearance, zeta: f64) -> (f64, f64) {
     let h = (2.0 * delta * (dist - clearance.boundary()).max(0.0)).sqrt();
     let b = h + rate - clearance.eta_v;
@@ -123,7 +123,8 @@ fn barrier(dist: f64, rate: f64, delta: f64, clearance: Clearance, zeta: f64) ->
 /// Collision row of UAV k against neighbour d (docs/safety.md §1, §2; paper eq. 4, 11, 14):
 /// b_kd = √(2δΣ(‖p_kd‖ − D_c)) + p̂_kdᵀv_kd, row
 /// `−p̂ᵀu_k ≤ δ_k/δΣ · (δΣ ṅ/h + ‖v_⊥‖²/n + ζ b_kd³)`, with δΣ = δ_k + δ_d; with model-error
-/// allowances D_c + η_p in h and b_kd − η_v in the class-K term (§12).
+/// allowances D_c + η_p in h, b_kd − η_v in the class-K term and the braking term at the rate the
+/// read vouches for, ṅ_η (§12).
 pub fn collision_row(
     p_kd: Vec2,
     v_kd: Vec2,
@@ -204,7 +205,8 @@ pub fn vertex_row(
 
 /// Signed line barrier (docs/safety.md §3, E5): with s = n̂_inᵀ(p − a) and ṡ = n̂_inᵀv,
 /// b_kij = √(2δ(s − D_s)) + ṡ, row `−n̂_inᵀu ≤ δṡ/g + ζb³`; with model-error allowances D_s + η_p in
-/// g and b_kij − η_v in the class-K term (§12). `n_in` must be a unit vector.
+/// g, b_kij − η_v in the class-K term and ṡ_η in the braking term (§12). `n_in` must be a unit
+/// vector.
 pub fn line_row(
     s: f64,
     s_dot: f64,
