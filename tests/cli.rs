@@ -336,3 +336,54 @@ fn a_broken_network_exits_2_naming_the_road_segment_and_rule() {
     assert_eq!(serve.status.code(), Some(2), "{err}");
     assert!(err.contains("--region") && err.contains("network"), "{err}");
 }
+
+#[test]
+fn bench_scale_writes_every_measured_tick_with_its_stages_and_names_a_file_it_cannot_write() {
+    let csv = scratch("tick-times.csv");
+    let run = airroads(&[
+        "bench",
+        "scale",
+        "--uavs",
+        "300",
+        "--ticks",
+        "4",
+        "--policy",
+        "pd",
+        "--tick-times",
+        csv.to_str().unwrap(),
+    ]);
+    assert!(run.status.success(), "{}", String::from_utf8_lossy(&run.stderr));
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    let stages = ["states", "navigation", "neighbours", "policies", "rows", "filter", "send", "metrics"];
+    let header: Vec<String> = ["uavs", "tick", "tick_us"]
+        .iter()
+        .map(|s| s.to_string())
+        .chain(stages.iter().map(|s| format!("{s}_us")))
+        .collect();
+    assert_eq!(lines.next().unwrap(), header.join(","));
+    let rows: Vec<Vec<f64>> = lines.map(|l| l.split(',').map(|x| x.parse().unwrap()).collect()).collect();
+    assert_eq!(rows.len(), 4, "one row per measured tick");
+    for (i, row) in rows.iter().enumerate() {
+        assert_eq!(row.len(), 3 + stages.len());
+        assert_eq!((row[0], row[1]), (300.0, (i + 1) as f64));
+        assert!(row.iter().all(|x| x.is_finite() && *x >= 0.0), "{row:?}");
+        // The tick's time covers its stages (each rounded to 0.1 µs).
+        let stages_sum: f64 = row[3..].iter().sum();
+        assert!(row[2] + 0.1 * stages.len() as f64 >= stages_sum, "{row:?}");
+    }
+    let missing = scratch("no-such-dir").join("t.csv");
+    let bad = airroads(&[
+        "bench",
+        "scale",
+        "--uavs",
+        "300",
+        "--ticks",
+        "1",
+        "--tick-times",
+        missing.to_str().unwrap(),
+    ]);
+    assert_eq!(bad.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&bad.stderr);
+    assert!(stderr.contains("--tick-times") && stderr.contains("t.csv"), "{stderr}");
+}

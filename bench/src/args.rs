@@ -44,6 +44,10 @@ pub struct BenchArgs {
     /// city`), for `airroads run` and for other simulators (scripts/rvo2-bench).
     #[arg(long, value_name = "DIR")]
     pub write_scenarios: Option<PathBuf>,
+    /// Also write every measured tick's time and stage times (µs) as CSV rows to FILE (`scale`):
+    /// `uavs,tick,tick_us,` then each stage as printed, `states_us` to `metrics_us`.
+    #[arg(long, value_name = "FILE")]
+    pub tick_times: Option<PathBuf>,
     /// What `scale` flies: `trunk`, the winding two-way trunk road, or `city`, a street grid of
     /// square junctions and two-way streets sized from the fleet (`fleet::city`).
     #[arg(long, default_value = "trunk", value_parser = ["trunk", "city"])]

@@ -5,7 +5,8 @@
 //! metrics a headless run records. Prints tick p50/p99 and the mean time of each stage per tick and
 //! per UAV and the process's resident memory, then how the per-UAV cost of each fleet compares with
 //! the next smaller one's and the largest's with the smallest's, then the roofline: each stage's
-//! time over its floor on this machine ([`crate::roofline`]). With `--road city` the UAVs fly
+//! time over its floor on this machine ([`crate::roofline`]); `--tick-times FILE` also writes each
+//! measured tick's times as CSV. With `--road city` the UAVs fly
 //! across a street grid instead (`fleet::city::city_scenario`: B × B blocks, square junctions,
 //! two-way streets 6 m wide limited to 3 m/s, about 17 UAVs per block, goals 1.5–4
 //! blocks away).
@@ -19,6 +20,7 @@ use engine::stats::percentiles;
 use fleet::city::city_scenario;
 use fleet::trunk::trunk_scenario;
 use fleet::{MetricsRecorder, StageTimes};
+use std::io::Write;
 use std::process::ExitCode;
 use std::time::Instant;
 
@@ -26,9 +28,9 @@ use std::time::Instant;
 const STAGES: [&str; 8] =
     ["states", "navigation", "neighbours", "policies", "rows", "filter", "send", "metrics"];
 
-/// Sum of each stage's µs over the measured ticks, in [`STAGES`] order.
-fn add(sum: &mut [f64; 8], s: &StageTimes, metrics_us: f64) {
-    let each = [
+/// Each stage's µs in one tick, in [`STAGES`] order.
+fn stage_us(s: &StageTimes, metrics_us: f64) -> [f64; 8] {
+    [
         s.read_us,
         s.navigation_us,
         s.neighbours_us,
@@ -37,8 +39,29 @@ fn add(sum: &mut [f64; 8], s: &StageTimes, metrics_us: f64) {
         s.filter_us,
         s.send_us,
         metrics_us,
-    ];
-    sum.iter_mut().zip(each).for_each(|(a, b)| *a += b);
+    ]
+}
+
+/// The `--tick-times` CSV file: a header, then a row per measured tick.
+struct TickTimes {
+    path: std::path::PathBuf,
+    out: std::io::BufWriter<std::fs::File>,
+}
+
+impl TickTimes {
+    /// Creates FILE and writes the header.
+    fn create(path: &std::path::Path) -> std::io::Result<Self> {
+        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        let stages: Vec<String> = STAGES.iter().map(|s| format!("{s}_us")).collect();
+        writeln!(out, "uavs,tick,tick_us,{}", stages.join(","))?;
+        Ok(Self { path: path.to_path_buf(), out })
+    }
+
+    /// One tick's row.
+    fn row(&mut self, uavs: usize, tick: usize, tick_us: f64, stages: &[f64; 8]) -> std::io::Result<()> {
+        let stages: Vec<String> = stages.iter().map(|us| format!("{us:.1}")).collect();
+        writeln!(self.out, "{uavs},{tick},{tick_us:.1},{}", stages.join(","))
+    }
 }
 
 /// Writes `scenario` as DIR/NAME.json.
@@ -85,6 +108,16 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
     }
     header.push_str(&format!(" {:>7}", "rss MB"));
     say!("{header}");
+    let mut tick_times = None;
+    if let Some(path) = &args.tick_times {
+        match TickTimes::create(path) {
+            Ok(file) => tick_times = Some(file),
+            Err(e) => {
+                eprintln!("error: --tick-times {}: {e}", path.display());
+                return ExitCode::FAILURE;
+            }
+        }
+    }
     let mut per_uav = Vec::new();
     let mut measured = Vec::new();
     for &n in &sizes {
@@ -121,14 +154,22 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
             recorder.record(&fleet, fleet.ticks() as f64 * dt);
         }
         let (mut sums, mut tick_us) = ([0.0; 8], Vec::with_capacity(ticks));
-        for _ in 0..ticks {
+        for measured_tick in 0..ticks {
             let started = Instant::now();
             fleet.tick();
             let recorded = Instant::now();
             recorder.record(&fleet, fleet.ticks() as f64 * dt);
             let metrics_us = recorded.elapsed().as_secs_f64() * 1e6;
-            tick_us.push(started.elapsed().as_secs_f64() * 1e6);
-            add(&mut sums, &fleet.stage_times(), metrics_us);
+            let this_tick_us = started.elapsed().as_secs_f64() * 1e6;
+            tick_us.push(this_tick_us);
+            let stages = stage_us(&fleet.stage_times(), metrics_us);
+            sums.iter_mut().zip(stages).for_each(|(sum, us)| *sum += us);
+            if let Some(file) = &mut tick_times
+                && let Err(e) = file.row(n, measured_tick + 1, this_tick_us, &stages)
+            {
+                eprintln!("error: --tick-times {}: {e}", file.path.display());
+                return ExitCode::FAILURE;
+            }
         }
         let mean_us = tick_us.iter().sum::<f64>() / ticks as f64;
         let tick = percentiles(&mut tick_us);
@@ -142,6 +183,12 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
         per_uav.push((n, mean_us / n as f64));
         measured.push((n, sums.map(|total| total / ticks as f64 * 1e-6)));
         drop(fleet);
+    }
+    if let Some(file) = &mut tick_times
+        && let Err(e) = file.out.flush()
+    {
+        eprintln!("error: --tick-times {}: {e}", file.path.display());
+        return ExitCode::FAILURE;
     }
     if let Some(line) = per_uav_summary(&per_uav) {
         say!("{line}");
