@@ -6,10 +6,9 @@
 //! per UAV and the process's resident memory, then how the per-UAV cost of each fleet compares with
 //! the next smaller one's and the largest's with the smallest's, then the roofline: each stage's
 //! time over its floor on this machine ([`crate::roofline`]); `--tick-times FILE` also writes each
-//! measured tick's times as CSV. With `--road city` the UAVs fly
-//! across a street grid instead (`fleet::city::city_scenario`: B × B blocks, square junctions,
-//! two-way streets 6 m wide limited to 3 m/s, about 17 UAVs per block, goals 1.5–4
-//! blocks away).
+//! measured tick's times as CSV. With `--road city` the UAVs fly across a street grid instead
+//! (`fleet::city::city_scenario`: B × B blocks, square junctions, two-way streets 6 m wide limited
+//! to 3 m/s, about 17 UAVs per block, goals 1.5–4 blocks away).
 
 use flights::say;
 
@@ -52,15 +51,21 @@ impl TickTimes {
     /// Creates FILE and writes the header.
     fn create(path: &std::path::Path) -> std::io::Result<Self> {
         let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
-        let stages: Vec<String> = STAGES.iter().map(|s| format!("{s}_us")).collect();
-        writeln!(out, "uavs,tick,tick_us,{}", stages.join(","))?;
+        write!(out, "uavs,tick,tick_us")?;
+        for stage in STAGES {
+            write!(out, ",{stage}_us")?;
+        }
+        writeln!(out)?;
         Ok(Self { path: path.to_path_buf(), out })
     }
 
     /// One tick's row.
     fn row(&mut self, uavs: usize, tick: usize, tick_us: f64, stages: &[f64; 8]) -> std::io::Result<()> {
-        let stages: Vec<String> = stages.iter().map(|us| format!("{us:.1}")).collect();
-        writeln!(self.out, "{uavs},{tick},{tick_us:.1},{}", stages.join(","))
+        write!(self.out, "{uavs},{tick},{tick_us:.1}")?;
+        for us in stages {
+            write!(self.out, ",{us:.1}")?;
+        }
+        writeln!(self.out)
     }
 }
 
