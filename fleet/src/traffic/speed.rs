@@ -131,7 +131,12 @@ pub fn keep_distance(v: Vec2, u_ref: Vec2, rel: Vec2, other_v: Vec2, d_c: f64, d
 /// lead + √(δ·gap) let a UAV tailgate one leaving a section at speed; when that one braked for a
 /// crowd, the pair row squeezed it between the two: `headon` with `rl`, BENCHMARKS.md.)
 pub fn closing_limit(lead: f64, gap: f64, delta: f64) -> f64 {
-    if lead > 0.0 { (lead * lead + delta * gap).sqrt() } else { lead + (delta * gap).sqrt() }
+    // Both cases in one expression, without a branch on the sign of `lead` (it flips from
+    // neighbour to neighbour, and a mispredicted branch stalls the square roots and divisions of
+    // the neighbours after it): for lead ≤ 0 the root is √(0 + δ·gap) = √(δ·gap) exactly, and for
+    // lead > 0 nothing is added to it, so the limit is the same to the bit.
+    let away = lead.max(0.0);
+    (away * away + delta * gap).sqrt() + lead.min(0.0)
 }
 
 /// `u_ref` changed as little as possible so that the next velocity's component along the unit
@@ -221,6 +226,21 @@ mod tests {
             } else if v.dot(&dir) <= limit + delta * dt {
                 prop_assert!(got <= limit + 1e-9, "closing at {got} over {limit}");
             }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(3000))]
+
+        /// The branch-free closing limit is the two-case formula of its doc to the bit: a neighbour
+        /// moving away gives √(lead² + δ·gap), one standing or coming closer lead + √(δ·gap).
+        #[test]
+        fn the_closing_limit_is_its_two_cases_to_the_bit(
+            lead in prop_oneof![-4.0f64..4.0, Just(0.0), Just(-0.0)], gap in prop_oneof![0.0f64..10.0, Just(0.0)],
+            delta in 0.5f64..10.0,
+        ) {
+            let cases = if lead > 0.0 { (lead * lead + delta * gap).sqrt() } else { lead + (delta * gap).sqrt() };
+            prop_assert_eq!(closing_limit(lead, gap, delta).to_bits(), cases.to_bits());
         }
     }
 
