@@ -194,14 +194,19 @@ fn find(
                 while from[w] < runs[w].1 && entries[from[w]].1 < x - radius {
                     from[w] += 1;
                 }
-                for &(_, xd, d) in &entries[from[w]..runs[w].1] {
-                    if xd > x + radius {
-                        break;
-                    }
-                    if d as usize != a && (positions[d as usize] - p).norm_squared() <= r2 {
-                        hits.push((xd, d));
-                    }
+                // The window's end first (x alone, in order), then its points written one after
+                // the other with the count moved on only for those within the radius: whether a
+                // point is within it is as good as random, and a branch on it was mispredicted.
+                let window = &entries[from[w]..runs[w].1];
+                let window = &window[..window.iter().take_while(|e| e.1 <= x + radius).count()];
+                let mut n = hits.len();
+                hits.resize(n + window.len(), (0.0, 0));
+                for &(_, xd, d) in window {
+                    hits[n] = (xd, d);
+                    let within = d as usize != a && (positions[d as usize] - p).norm_squared() <= r2;
+                    n += usize::from(within);
                 }
+                hits.truncate(n);
             }
             hits.sort_unstable_by(|u, w| u.0.total_cmp(&w.0).then(u.1.cmp(&w.1)));
             for &(_, d) in hits.iter() {
