@@ -59,6 +59,12 @@ impl TickTimes {
         Ok(Self { path: path.to_path_buf(), out })
     }
 
+    /// Reports an error writing the file and gives the command's exit code.
+    fn failed(path: &std::path::Path, e: std::io::Error) -> ExitCode {
+        eprintln!("error: --tick-times {}: {e}", path.display());
+        ExitCode::FAILURE
+    }
+
     /// One tick's row.
     fn row(&mut self, uavs: usize, tick: usize, tick_us: f64, stages: &[f64; 8]) -> std::io::Result<()> {
         write!(self.out, "{uavs},{tick},{tick_us:.1}")?;
@@ -117,10 +123,7 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
     if let Some(path) = &args.tick_times {
         match TickTimes::create(path) {
             Ok(file) => tick_times = Some(file),
-            Err(e) => {
-                eprintln!("error: --tick-times {}: {e}", path.display());
-                return ExitCode::FAILURE;
-            }
+            Err(e) => return TickTimes::failed(path, e),
         }
     }
     let mut per_uav = Vec::new();
@@ -172,8 +175,7 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
             if let Some(file) = &mut tick_times
                 && let Err(e) = file.row(n, measured_tick + 1, this_tick_us, &stages)
             {
-                eprintln!("error: --tick-times {}: {e}", file.path.display());
-                return ExitCode::FAILURE;
+                return TickTimes::failed(&file.path, e);
             }
         }
         let mean_us = tick_us.iter().sum::<f64>() / ticks as f64;
@@ -192,8 +194,7 @@ fn measure(args: &BenchArgs, threads: usize) -> ExitCode {
     if let Some(file) = &mut tick_times
         && let Err(e) = file.out.flush()
     {
-        eprintln!("error: --tick-times {}: {e}", file.path.display());
-        return ExitCode::FAILURE;
+        return TickTimes::failed(&file.path, e);
     }
     if let Some(line) = per_uav_summary(&per_uav) {
         say!("{line}");
