@@ -175,6 +175,11 @@ pub struct DroneStats {
     pub motor_packets: u64,
     /// Motor packets received since the last hello (0: the stabilizer has not run yet).
     pub motor_packets_since_hello: u64,
+    /// The fewest motor packets the firmware sent in one second of physics (1000 ticks) since its
+    /// stabilizer started, over the whole seconds it ran through (none yet: `None`). 500 on an
+    /// idle machine; far less is a firmware the host did not run in real time (or one that
+    /// stopped: killed, frozen).
+    pub slowest_second: Option<u64>,
     /// Times the motors were stopped because the firmware sent no motor packet for 100 ms (a
     /// killed or frozen firmware; a real Crazyflie's watchdog resets it).
     pub motor_watchdog_cuts: u64,

@@ -123,6 +123,31 @@ fn feeds_sensors_at_their_rates_and_takes_motor_pwm() {
     sitl.shutdown().expect("shutdown");
 }
 
+/// The slowest second of a firmware: none before its stabilizer ran a whole second; then the
+/// fewest motor packets of any second, so a firmware that falls to a fifth of its pace shows it.
+#[test]
+fn the_slowest_second_shows_a_firmware_that_fell_behind() {
+    let sitl = SitlHandle::spawn(config(1)).expect("spawn");
+    let fw = firmware(&sitl, 0);
+    let send_for = |period: Duration, run: Duration| {
+        let end = Instant::now() + run;
+        while Instant::now() < end {
+            fw.send(&motor_datagram([0; 4])).expect("send motors");
+            std::thread::sleep(period);
+        }
+    };
+    assert_eq!(sitl.stats(0).expect("drone 0").slowest_second, None, "no motor packet yet");
+    // At its pace (every 2 ms) for more than two seconds: at least one whole second counted.
+    send_for(Duration::from_millis(2), Duration::from_millis(2300));
+    let at_pace = sitl.stats(0).expect("drone 0").slowest_second.expect("a whole second counted");
+    assert!(at_pace > 150, "{at_pace} motor packets in the slowest second at 500/s");
+    // Then every 10 ms (at most 100/s) for more than two seconds.
+    send_for(Duration::from_millis(10), Duration::from_millis(2300));
+    let behind = sitl.stats(0).expect("drone 0").slowest_second.expect("counted");
+    assert!(behind <= 110 && behind < at_pace, "{behind} in the slowest second at 100/s");
+    sitl.shutdown().expect("shutdown");
+}
+
 #[test]
 fn relays_client_and_firmware_and_leaves_null_packets_unanswered() {
     let sitl = SitlHandle::spawn(config(1)).expect("spawn");

@@ -90,6 +90,12 @@ impl FirmwareFleet {
         after.iter().zip(&since.1).map(|(a, b)| (a - b) as f64 / seconds).collect()
     }
 
+    /// The fewest motor packets any UAV's firmware sent in one second of physics since its
+    /// stabilizer started (500 at its pace; `None` before a whole second).
+    pub fn slowest_second(&self) -> Option<u64> {
+        (0..self.physics.len()).filter_map(|i| self.physics.stats(i)?.slowest_second).min()
+    }
+
     /// Setpoints relayed to each UAV's firmware so far, and when the last one was.
     pub fn setpoints(&self) -> Vec<(u64, Option<std::time::Instant>)> {
         (0..self.physics.len())

@@ -54,6 +54,7 @@ pub fn run_on_firmware(
         cf2.display(),
         firmware.run_dir.display()
     );
+    let started = firmware.motor_packets();
     let dt = scenario.params.dt;
     let mut make_link = crazyflie_links(runtime.handle(), dt);
     // Setpoint latency: from the start of a tick to its setpoint's arrival at the firmware's
@@ -82,21 +83,22 @@ pub fn run_on_firmware(
         states
     };
     let outcome =
-        run_scenario_on_truth(&scenario, options, policies, &mut make_link, &mut wait_tick, &mut truth)
-            .context("flying the Crazyflie firmware")?;
-    if let Some(first) = first {
-        let rates = firmware.motor_rates_since(&first);
-        let (lo, hi) = rates.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), r| (lo.min(*r), hi.max(*r)));
-        let stats = firmware.physics.loop_stats();
-        say!(
-            "  firmware         motor packets {lo:.0}-{hi:.0}/s per Crazyflie (500 on an idle machine), {} \
-             loop-rate warnings in {} consoles; physics {:.0} Hz, {} resyncs",
-            firmware.rate_warnings(),
-            rates.len(),
-            stats.physics_rate_hz(),
-            stats.resyncs
-        );
-    }
+        run_scenario_on_truth(&scenario, options, policies, &mut make_link, &mut wait_tick, &mut truth);
+    // How the firmware kept up, from the first airborne tick (from its start when it never got
+    // there: a firmware the host cannot run in real time is often why).
+    let rates = firmware.motor_rates_since(first.as_ref().unwrap_or(&started));
+    let (lo, hi) = rates.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), r| (lo.min(*r), hi.max(*r)));
+    let stats = firmware.physics.loop_stats();
+    let slowest = firmware.slowest_second().map_or_else(|| "none yet".to_string(), |n| n.to_string());
+    say!(
+        "  firmware         motor packets {lo:.0}-{hi:.0}/s per Crazyflie (500 on an idle machine), \
+         slowest second {slowest}, {} loop-rate warnings in {} consoles; physics {:.0} Hz, {} resyncs",
+        firmware.rate_warnings(),
+        rates.len(),
+        stats.physics_rate_hz(),
+        stats.resyncs
+    );
+    let outcome = outcome.context("flying the Crazyflie firmware")?;
     let latency = engine::stats::percentiles(&mut latencies_us);
     say!(
         "  setpoints        {} arrived, latency from the tick p50 {:.1} ms, p99 {:.1} ms, max {:.1} ms",

@@ -17,6 +17,8 @@ const MAX_READS_PER_TICK: usize = 256;
 const TICKS_PER_BARO: u64 = 20;
 /// Physics ticks per ground-truth row (100 Hz at 1 kHz).
 const TICKS_PER_TRUTH_ROW: u64 = 10;
+/// Physics ticks per second of [`DroneStats::slowest_second`] (1 s at 1 kHz).
+const TICKS_PER_SECOND: u64 = 1000;
 /// Ground-truth rows between flushes of the file.
 const ROWS_PER_FLUSH: u64 = 100;
 /// The ground-truth file's header line.
@@ -73,6 +75,8 @@ pub(super) struct Drone {
     pose_phase: f64,
     /// Physics ticks since the firmware's last motor packet (see [`MOTOR_WATCHDOG_TICKS`]).
     ticks_without_motors: u64,
+    /// The motor packets counted when the current second began, if the stabilizer ran by then.
+    motors_at_second_start: Option<u64>,
     pub(super) stats: DroneStats,
     truth_file: Option<TruthFile>,
     /// The first error writing the ground-truth file (the file is abandoned then).
@@ -103,6 +107,7 @@ impl Drone {
             answer_null,
             pose_phase: 0.0,
             ticks_without_motors: 0,
+            motors_at_second_start: None,
             stats: DroneStats::default(),
             truth_file,
             truth_error: None,
@@ -134,6 +139,8 @@ impl Drone {
             self.quad.set_pwm([0; 4]);
             self.stats.hellos += 1;
             self.stats.motor_packets_since_hello = 0;
+            // A second with a restart in it is not one the stabilizer ran through.
+            self.motors_at_second_start = None;
             self.stats.firmware = Some(from);
             self.send_to_firmware(&[HELLO]);
             return;
@@ -243,6 +250,21 @@ impl Drone {
         if tick.is_multiple_of(TICKS_PER_TRUTH_ROW) {
             self.write_truth_row();
         }
+        if tick.is_multiple_of(TICKS_PER_SECOND) {
+            self.count_second();
+        }
+    }
+
+    /// At the end of a second of physics: the firmware's motor packets in it, when its stabilizer
+    /// ran through all of it, lower [`DroneStats::slowest_second`].
+    fn count_second(&mut self) {
+        if let Some(at_start) = self.motors_at_second_start {
+            let in_second = self.stats.motor_packets - at_start;
+            self.stats.slowest_second =
+                Some(self.stats.slowest_second.map_or(in_second, |s| s.min(in_second)));
+        }
+        self.motors_at_second_start =
+            (self.stats.motor_packets_since_hello > 0).then_some(self.stats.motor_packets);
     }
 
     fn write_truth_row(&mut self) {
