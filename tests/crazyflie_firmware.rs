@@ -15,14 +15,16 @@
 //! Skipped (with a message) unless `AIRROADS_CF_SITL` names the firmware's SITL folder (the one
 //! holding `build.sh`); the firmware is built once into
 //! `${AIRROADS_CACHE:-$HOME/.cache/airroads}/cf-sitl-build`. The firmware's emulated clock can
-//! slip under CPU load; a failed flight is tried once more with fresh processes.
+//! slip under CPU load; a failed flight is tried once more with fresh processes, and a flight
+//! whose firmware the host did not run in real time (the physics counts its motor packets every
+//! second) does not count, up to four tries (`support::firmware::with_retries`).
 
 mod support;
 
 use cfsim::sitl::SitlFaults;
 use serde_json::Value;
 use std::time::{Duration, Instant};
-use support::firmware::{ONE_FLIGHT, Rig, firmware_binary, uavs, until, with_one_retry};
+use support::firmware::{KEEPING_UP, MAX_TRIES, ONE_FLIGHT, Rig, firmware_binary, uavs, until, with_retries};
 use uav::Vec2;
 
 /// `airroads run --link firmware` writes METRICS.json with exactly the keys of any run, its
@@ -35,9 +37,10 @@ async fn a_run_over_the_firmware_writes_the_same_report() {
     let out = std::env::temp_dir().join(format!("airroads-firmware-metrics-{}.json", std::process::id()));
     let trajectory = out.with_extension("csv");
     let scenario = support::repo().join("scenarios/lab3.json");
-    let mut tries = Vec::new();
-    // One retry, as for the flight above: the firmware's clock can slip under load.
-    for _ in 0..2 {
+    let (mut tries, mut counted) = (Vec::new(), 0);
+    // As `with_retries`: one retry of a failed run, more only when the host did not run the
+    // firmware in real time (its slowest second, printed by the run).
+    for _ in 0..MAX_TRIES {
         let run = std::process::Command::new(env!("CARGO_BIN_EXE_airroads"))
             .args(["run", scenario.to_str().unwrap(), "--link", "firmware", "--cf2", cf2.to_str().unwrap()])
             .args(["--out", out.to_str().unwrap(), "--trajectory", trajectory.to_str().unwrap()])
@@ -68,15 +71,36 @@ async fn a_run_over_the_firmware_writes_the_same_report() {
             return;
         }
         tries.push(format!("{:?}: {stdout}{}", run.status.code(), String::from_utf8_lossy(&run.stderr)));
+        let slowest = stdout
+            .split("slowest second ")
+            .nth(1)
+            .and_then(|rest| rest.split(',').next())
+            .and_then(|n| n.parse::<u64>().ok());
+        match slowest {
+            Some(n) if n < KEEPING_UP => {
+                eprintln!("the run failed, but a firmware sent {n} motor packets in a second")
+            }
+            _ => counted += 1,
+        }
+        if counted == 2 {
+            break;
+        }
     }
-    panic!("the run over the firmware failed twice:\n{}", tries.join("\n"));
+    if counted == 0 {
+        eprintln!(
+            "skipped: in {MAX_TRIES} runs the host never ran the firmware in real time:\n{}",
+            tries.join("\n")
+        );
+        return;
+    }
+    panic!("the run over the firmware failed:\n{}", tries.join("\n"));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn lab3_flies_through_three_real_firmware_processes() {
     let _alone = ONE_FLIGHT.lock().await;
     let Some(cf2) = firmware_binary("scenarios/lab3.json with the server").await else { return };
-    let report = with_one_retry(&cf2, "lab3-firmware", |rig| async move {
+    let report = with_retries(&cf2, "lab3-firmware", |rig| async move {
         let outcome = flight(&rig).await;
         (rig, outcome)
     })
@@ -91,7 +115,7 @@ async fn lab3_flies_through_three_real_firmware_processes() {
 async fn a_firmware_killed_in_flight_degrades_only_its_crazyflie() {
     let _alone = ONE_FLIGHT.lock().await;
     let Some(cf2) = firmware_binary("a firmware killed in flight").await else { return };
-    let report = with_one_retry(&cf2, "lab3-firmware-killed", |mut rig| async move {
+    let report = with_retries(&cf2, "lab3-firmware-killed", |mut rig| async move {
         let outcome = killed_flight(&mut rig).await;
         (rig, outcome)
     })
@@ -106,7 +130,7 @@ async fn a_firmware_killed_in_flight_degrades_only_its_crazyflie() {
 async fn lost_packets_and_motion_capture_gaps_keep_the_fleet_safe() {
     let _alone = ONE_FLIGHT.lock().await;
     let Some(cf2) = firmware_binary("lab3 with lost packets and motion-capture gaps").await else { return };
-    let report = with_one_retry(&cf2, "lab3-firmware-faults", |rig| async move {
+    let report = with_retries(&cf2, "lab3-firmware-faults", |rig| async move {
         let outcome = faulty_flight(&rig).await;
         (rig, outcome)
     })
@@ -116,7 +140,7 @@ async fn lost_packets_and_motion_capture_gaps_keep_the_fleet_safe() {
 
 async fn faulty_flight(rig: &Rig) -> Result<String, String> {
     let server = &rig.server;
-    until(server, "every UAV flying", |s| uavs(s).iter().all(|u| u["phase"] == "flying")).await?;
+    until(rig, "every UAV flying", |s| uavs(s).iter().all(|u| u["phase"] == "flying")).await?;
     let state = server.get("/api/state").await;
     let (d_c, d_s) = (state["d_c"].as_f64().expect("d_c"), state["d_s"].as_f64().expect("d_s"));
     let watch = rig.watch();
@@ -127,7 +151,7 @@ async fn faulty_flight(rig: &Rig) -> Result<String, String> {
     rig.sitl.set_faults(0, SitlFaults { link_loss: 0.2, ..SitlFaults::default() });
     rig.sitl.set_faults(1, SitlFaults { pose_gap: gap(2.0), ..SitlFaults::default() });
     rig.sitl.set_faults(2, SitlFaults { link_loss: 0.1, pose_gap: gap(4.0), ..SitlFaults::default() });
-    until(server, "every UAV arrived", |s| uavs(s).iter().all(|u| u["arrived"] == true)).await?;
+    until(rig, "every UAV arrived", |s| uavs(s).iter().all(|u| u["arrived"] == true)).await?;
     let seen = watch.margins();
     if seen.separation_m < d_c || seen.wall_m < d_s {
         return Err(format!("true margins {seen:?} below D_c = {d_c} m / D_s = {d_s} m"));
@@ -152,7 +176,7 @@ async fn faulty_flight(rig: &Rig) -> Result<String, String> {
 async fn a_crazyflie_that_locks_in_flight_falls_and_is_never_flown_again() {
     let _alone = ONE_FLIGHT.lock().await;
     let Some(cf2) = firmware_binary("a Crazyflie that locks in flight").await else { return };
-    let report = with_one_retry(&cf2, "lab3-firmware-locked", |rig| async move {
+    let report = with_retries(&cf2, "lab3-firmware-locked", |rig| async move {
         let outcome = locked_flight(&rig).await;
         (rig, outcome)
     })
@@ -162,14 +186,15 @@ async fn a_crazyflie_that_locks_in_flight_falls_and_is_never_flown_again() {
 
 async fn locked_flight(rig: &Rig) -> Result<String, String> {
     let server = &rig.server;
-    until(server, "every UAV flying", |s| uavs(s).iter().all(|u| u["phase"] == "flying")).await?;
+    until(rig, "every UAV flying", |s| uavs(s).iter().all(|u| u["phase"] == "flying")).await?;
     let state = server.get("/api/state").await;
     let (d_c, d_s) = (state["d_c"].as_f64().expect("d_c"), state["d_s"].as_f64().expect("d_s"));
     let watch = rig.watch();
     tokio::time::sleep(Duration::from_secs(2)).await;
     let at = rig.sitl.truth(0).expect("drone").position;
+    rig.silence(0);
     rig.sitl.set_faults(0, SitlFaults { link_loss: 1.0, ..SitlFaults::default() });
-    until(server, "cf1 reported lost", |s| uavs(s)[0]["lost"] == true).await?;
+    until(rig, "cf1 reported lost", |s| uavs(s)[0]["lost"] == true).await?;
     tokio::time::sleep(Duration::from_secs(3)).await;
     let truth = rig.sitl.truth(0).expect("drone");
     if !truth.on_floor || truth.pwm != [0; 4] {
@@ -208,13 +233,14 @@ async fn locked_flight(rig: &Rig) -> Result<String, String> {
 
 async fn killed_flight(rig: &mut Rig) -> Result<String, String> {
     let server = &rig.server;
-    until(server, "every UAV flying", |s| uavs(s).iter().all(|u| u["phase"] == "flying")).await?;
+    until(rig, "every UAV flying", |s| uavs(s).iter().all(|u| u["phase"] == "flying")).await?;
     let state = server.get("/api/state").await;
     let (d_c, d_s) = (state["d_c"].as_f64().expect("d_c"), state["d_s"].as_f64().expect("d_s"));
     let watch = rig.watch();
     // Under way for 3 s, then cf1's firmware dies.
     tokio::time::sleep(Duration::from_secs(3)).await;
     let at = rig.sitl.truth(0).expect("drone").position;
+    rig.silence(0);
     rig.processes.kill(0);
     let killed = Instant::now();
     while !rig.sitl.truth(0).is_some_and(|t| t.on_floor && t.pwm == [0; 4]) {
@@ -226,14 +252,14 @@ async fn killed_flight(rig: &mut Rig) -> Result<String, String> {
     let fell_after = killed.elapsed();
     let down = rig.sitl.truth(0).expect("drone").position;
     let drift = Vec2::new(down[0] - at[0], down[1] - at[1]).norm();
-    until(server, "cf1 reported lost", |s| uavs(s)[0]["lost"] == true).await?;
+    until(rig, "cf1 reported lost", |s| uavs(s)[0]["lost"] == true).await?;
     // The others fly on; cf1 stays an obstacle until the operator removes it.
     tokio::time::sleep(Duration::from_secs(2)).await;
     let (status, body) = server.call("DELETE", "/api/uavs/cf1", None).await;
     if status != 204 {
         return Err(format!("remove cf1: {status} {body}"));
     }
-    until(server, "cf2 and cf3 arrived", |s| uavs(s).iter().all(|u| u["arrived"] == true)).await?;
+    until(rig, "cf2 and cf3 arrived", |s| uavs(s).iter().all(|u| u["arrived"] == true)).await?;
     let seen = watch.margins();
     if seen.separation_m < d_c || seen.wall_m < d_s {
         return Err(format!("true margins {seen:?} below D_c = {d_c} m / D_s = {d_s} m"));
@@ -251,7 +277,7 @@ async fn killed_flight(rig: &mut Rig) -> Result<String, String> {
 async fn flight(rig: &Rig) -> Result<String, String> {
     let (server, sitl) = (&rig.server, &rig.sitl);
     let t0 = Instant::now();
-    until(server, "every UAV flying (take-off confirmed by the firmware)", |s| {
+    until(rig, "every UAV flying (take-off confirmed by the firmware)", |s| {
         uavs(s).iter().all(|u| u["phase"] == "flying")
     })
     .await?;
@@ -265,7 +291,7 @@ async fn flight(rig: &Rig) -> Result<String, String> {
         }
     }
     let watch = rig.watch();
-    let arrived = until(server, "every UAV arrived", |s| uavs(s).iter().all(|u| u["arrived"] == true)).await;
+    let arrived = until(rig, "every UAV arrived", |s| uavs(s).iter().all(|u| u["arrived"] == true)).await;
     let seen = watch.margins();
     drop(watch);
     arrived?;
@@ -290,7 +316,7 @@ async fn flight(rig: &Rig) -> Result<String, String> {
     if status != 200 {
         return Err(format!("land cf1: {status} {body}"));
     }
-    until(server, "cf1 landed", |s| uavs(s)[0]["phase"] == "landed").await?;
+    until(rig, "cf1 landed", |s| uavs(s)[0]["phase"] == "landed").await?;
     // Motors off and within the firmware's last centimetres at once (it cuts them once its landing
     // trajectory ends, a few millimetres up), resting on the floor a moment later.
     let truth = sitl.truth(0).expect("drone");
@@ -306,11 +332,13 @@ async fn flight(rig: &Rig) -> Result<String, String> {
         tokio::time::sleep(Duration::from_millis(20)).await;
     }
     // The emergency stop: cf2 and cf3 stopped, their firmware locked, their motors off.
+    rig.silence(1);
+    rig.silence(2);
     let (status, body) = server.call("POST", "/api/fleet/stop", None).await;
     if status != 200 {
         return Err(format!("stop: {status} {body}"));
     }
-    until(server, "cf2 and cf3 stopped", |s| uavs(s)[1..].iter().all(|u| u["phase"] == "stopped")).await?;
+    until(rig, "cf2 and cf3 stopped", |s| uavs(s)[1..].iter().all(|u| u["phase"] == "stopped")).await?;
     for (i, u) in uavs(&server.get("/api/state").await).iter().enumerate().skip(1) {
         let pwm = sitl.truth(i).expect("drone").pwm;
         if pwm != [0; 4] || u["firmware"]["locked"] != true {
