@@ -24,7 +24,9 @@ mod support;
 use cfsim::sitl::SitlFaults;
 use serde_json::Value;
 use std::time::{Duration, Instant};
-use support::firmware::{KEEPING_UP, MAX_TRIES, ONE_FLIGHT, Rig, firmware_binary, uavs, until, with_retries};
+use support::firmware::{
+    KEEPING_UP, MAX_TRIES, ONE_FLIGHT, Rig, firmware_binary, tell, uavs, until, with_retries,
+};
 use uav::Vec2;
 
 /// `airroads run --link firmware` writes METRICS.json with exactly the keys of any run, its
@@ -87,10 +89,10 @@ async fn a_run_over_the_firmware_writes_the_same_report() {
         }
     }
     if counted == 0 {
-        eprintln!(
+        tell(&format!(
             "skipped: in {MAX_TRIES} runs the host never ran the firmware in real time:\n{}",
             tries.join("\n")
-        );
+        ));
         return;
     }
     panic!("the run over the firmware failed:\n{}", tries.join("\n"));

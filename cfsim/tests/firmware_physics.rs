@@ -84,7 +84,10 @@ fn firmware_takes_off_hovers_and_lands_on_cfsim_physics() {
         }
     }
     if counted == 0 {
-        eprintln!(
+        // Past the harness's capture (it only takes the print macros): a passing run's log shows it.
+        use std::io::Write as _;
+        let _ = writeln!(
+            std::io::stderr(),
             "skipped: in {MAX_TRIES} tries the host never ran the firmware in real time: {}",
             failures.join(" / ")
         );

@@ -188,16 +188,26 @@ where
         }
     }
     if counted == 0 {
-        return format!(
+        let message = format!(
             "skipped: {name}: in {MAX_TRIES} tries the host never ran the firmware in real time: {}",
             failures.join(" / ")
         );
+        tell(&message);
+        return message;
     }
     panic!(
         "{name} failed: {} (firmware consoles and ground truth in {})",
         failures.join(" / "),
         run_dir.display()
     )
+}
+
+/// Writes `message` to the test's stderr past the harness's capture (which only takes the print
+/// macros), so that a passing run's log shows it: a firmware test skipped for a slow host must not
+/// pass unseen.
+pub fn tell(message: &str) {
+    use std::io::Write as _;
+    let _ = writeln!(std::io::stderr(), "{message}");
 }
 
 /// The margins being read from the physics (stopped when dropped).
