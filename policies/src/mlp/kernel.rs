@@ -199,8 +199,10 @@ const TANH_NUMERATOR: [f32; 7] = [
 #[allow(clippy::excessive_precision)]
 const TANH_DENOMINATOR: [f32; 4] = [0.0002546136580, 0.02449515379, 0.4641733162, 1.0];
 
-/// tanh as tract's `stanh` computes it, operation for operation (a rational minimax fit on the
-/// input clamped to ±7.5, separate multiplies and adds): the same bits. NaN stays NaN.
+/// tanh by tract's `stanh` fit (a rational minimax fit on the input clamped to ±7.5), its two
+/// polynomials evaluated by fused multiply-adds: half the operations of `stanh`'s separate
+/// multiplies and adds, which made tanh about a third of the kernel's time on AVX2. Within a few
+/// ulps of tract's (its outputs are checked against tract's within 1e-5); NaN stays NaN.
 #[inline(always)]
 fn tanh<S: Simd>(simd: S, x: S::f32s) -> S::f32s {
     let (low, high) = (simd.splat_f32s(-TANH_CLAMP), simd.splat_f32s(TANH_CLAMP));
@@ -209,22 +211,24 @@ fn tanh<S: Simd>(simd: S, x: S::f32s) -> S::f32s {
     let [a13, a11, a9, a7, a5, a3, a1] = TANH_NUMERATOR;
     let mut p = simd.splat_f32s(a13);
     for a in [a11, a9, a7, a5, a3, a1] {
-        p = simd.add_f32s(simd.mul_f32s(x2, p), simd.splat_f32s(a));
+        p = simd.mul_add_f32s(x2, p, simd.splat_f32s(a));
     }
     let p = simd.mul_f32s(p, c);
     let [b6, b4, b2, b0] = TANH_DENOMINATOR;
     let mut q = simd.splat_f32s(b6);
     for b in [b4, b2, b0] {
-        q = simd.add_f32s(simd.mul_f32s(x2, q), simd.splat_f32s(b));
+        q = simd.mul_add_f32s(x2, q, simd.splat_f32s(b));
     }
     let t = simd.div_f32s(p, q);
     simd.select_f32s(simd.equal_f32s(x, x), t, x)
 }
 
-/// [`tanh`] on one number (column operations on the input, before the first product).
+/// [`tanh`] on one number, the same operations (column operations on the input, before the first
+/// product).
 pub(super) fn tanh_scalar(x: f32) -> f32 {
     let c = x.clamp(-TANH_CLAMP, TANH_CLAMP);
     let x2 = c * c;
-    let horner = |coefficients: &[f32]| coefficients[1..].iter().fold(coefficients[0], |p, &a| x2 * p + a);
+    let horner =
+        |coefficients: &[f32]| coefficients[1..].iter().fold(coefficients[0], |p, &a| x2.mul_add(p, a));
     horner(&TANH_NUMERATOR) * c / horner(&TANH_DENOMINATOR)
 }
