@@ -17,16 +17,15 @@
 //! `${AIRROADS_CACHE:-$HOME/.cache/airroads}/cf-sitl-build`. The firmware's emulated clock can
 //! slip under CPU load; a failed flight is tried once more with fresh processes, and a flight
 //! whose firmware the host did not run in real time (the physics counts its motor packets every
-//! second) does not count, up to four tries (`support::firmware::with_retries`).
+//! second) does not count, up to four tries (`cfsim::sitl::pace::Tries`).
 
 mod support;
 
 use cfsim::sitl::SitlFaults;
+use cfsim::sitl::pace::{KEEPING_UP, Tries};
 use serde_json::Value;
 use std::time::{Duration, Instant};
-use support::firmware::{
-    KEEPING_UP, MAX_TRIES, ONE_FLIGHT, Rig, firmware_binary, tell, uavs, until, with_retries,
-};
+use support::firmware::{ONE_FLIGHT, Rig, firmware_binary, tell, uavs, until, with_retries};
 use uav::Vec2;
 
 /// `airroads run --link firmware` writes METRICS.json with exactly the keys of any run, its
@@ -39,10 +38,10 @@ async fn a_run_over_the_firmware_writes_the_same_report() {
     let out = std::env::temp_dir().join(format!("airroads-firmware-metrics-{}.json", std::process::id()));
     let trajectory = out.with_extension("csv");
     let scenario = support::repo().join("scenarios/lab3.json");
-    let (mut tries, mut counted) = (Vec::new(), 0);
-    // As `with_retries`: one retry of a failed run, more only when the host did not run the
-    // firmware in real time (its slowest second, printed by the run).
-    for _ in 0..MAX_TRIES {
+    // As `with_retries`: the host may not run the firmware in real time (the run prints its slowest
+    // second).
+    let mut tries = Tries::default();
+    loop {
         let run = std::process::Command::new(env!("CARGO_BIN_EXE_airroads"))
             .args(["run", scenario.to_str().unwrap(), "--link", "firmware", "--cf2", cf2.to_str().unwrap()])
             .args(["--out", out.to_str().unwrap(), "--trajectory", trajectory.to_str().unwrap()])
@@ -72,30 +71,23 @@ async fn a_run_over_the_firmware_writes_the_same_report() {
             let _ = std::fs::remove_file(&out);
             return;
         }
-        tries.push(format!("{:?}: {stdout}{}", run.status.code(), String::from_utf8_lossy(&run.stderr)));
         let slowest = stdout
             .split("slowest second ")
             .nth(1)
             .and_then(|rest| rest.split(',').next())
             .and_then(|n| n.parse::<u64>().ok());
-        match slowest {
-            Some(n) if n < KEEPING_UP => {
-                eprintln!("the run failed, but a firmware sent {n} motor packets in a second")
-            }
-            _ => counted += 1,
-        }
-        if counted == 2 {
+        let behind = slowest
+            .filter(|&n| n < KEEPING_UP)
+            .map(|n| format!("a firmware sent {n} motor packets in its slowest second"));
+        let reason = format!("{:?}: {stdout}{}", run.status.code(), String::from_utf8_lossy(&run.stderr));
+        if !tries.failed(reason, behind) {
             break;
         }
     }
-    if counted == 0 {
-        tell(&format!(
-            "skipped: in {MAX_TRIES} runs the host never ran the firmware in real time:\n{}",
-            tries.join("\n")
-        ));
-        return;
+    match tries.verdict() {
+        Ok(skipped) => tell(&skipped),
+        Err(failures) => panic!("the run over the firmware failed:\n{failures}"),
     }
-    panic!("the run over the firmware failed:\n{}", tries.join("\n"));
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

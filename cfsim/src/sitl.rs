@@ -18,6 +18,7 @@
 
 mod drone;
 pub mod firmware;
+pub mod pace;
 mod run;
 pub mod wire;
 

@@ -12,14 +12,8 @@ use std::time::{Duration, Instant};
 
 use cfsim::quadrotor::GroundTruth;
 use cfsim::sitl::firmware::{self, FirmwareProcesses, StartOptions};
+use cfsim::sitl::pace::Tries;
 use cfsim::sitl::{SitlConfig, SitlHandle};
-
-/// A firmware that sent fewer motor packets than this in a second of physics (500 at its pace) was
-/// not run in real time by the host: the flight says nothing about the physics or the firmware.
-const KEEPING_UP: u64 = 300;
-/// Flights tried at most; only a firmware the host could not keep up with earns more than one
-/// retry.
-const MAX_TRIES: usize = 4;
 
 /// Start positions (m).
 const STARTS: [[f64; 3]; 2] = [[0.0, 0.0, 0.0], [0.5, -0.5, 0.0]];
@@ -59,41 +53,31 @@ fn firmware_takes_off_hovers_and_lands_on_cfsim_physics() {
     let cf2 = build_firmware(Path::new(&source));
     let run_dir = std::env::temp_dir().join(format!("airroads-cf-sitl-{}", std::process::id()));
     std::fs::create_dir_all(&run_dir).expect("run folder");
-    // Under CPU load the emulated firmware clock can slip far enough to fail a flight: one retry,
-    // and more (up to MAX_TRIES in all) when the host did not run the firmware in real time.
-    let (mut failures, mut counted) = (Vec::new(), 0);
-    for _ in 0..MAX_TRIES {
+    // Under CPU load the emulated firmware clock can slip far enough to fail a flight (`Tries`).
+    let mut tries = Tries::default();
+    loop {
         match fly(&cf2, &run_dir) {
             Ok(report) => {
                 println!("{report}");
                 let _ = std::fs::remove_dir_all(&run_dir);
                 return;
             }
-            Err(Failed { reason, behind: Some(behind) }) => {
-                eprintln!("flight failed ({reason}), but {behind}: trying again with fresh processes");
-                failures.push(format!("{reason} [{behind}]"));
-            }
-            Err(Failed { reason, behind: None }) => {
-                eprintln!("flight failed ({reason}); trying once more with fresh processes");
-                failures.push(reason);
-                counted += 1;
-                if counted == 2 {
+            Err(Failed { reason, behind }) => {
+                eprintln!("flight failed ({reason}); {behind:?}");
+                if !tries.failed(reason, behind) {
                     break;
                 }
             }
         }
     }
-    if counted == 0 {
-        // Past the harness's capture (it only takes the print macros): a passing run's log shows it.
-        use std::io::Write as _;
-        let _ = writeln!(
-            std::io::stderr(),
-            "skipped: in {MAX_TRIES} tries the host never ran the firmware in real time: {}",
-            failures.join(" / ")
-        );
-        return;
+    match tries.verdict() {
+        Ok(skipped) => {
+            // Past the harness's capture (it only takes the print macros): a passing log shows it.
+            use std::io::Write as _;
+            let _ = writeln!(std::io::stderr(), "{skipped}");
+        }
+        Err(failures) => panic!("{failures} (firmware output and ground truth in {})", run_dir.display()),
     }
-    panic!("{} (firmware output and ground truth in {})", failures.join(" / "), run_dir.display());
 }
 
 /// The firmware binary, built on first use into the cache (`$AIRROADS_CACHE`, else
@@ -134,14 +118,7 @@ fn fly(cf2: &Path, run_dir: &Path) -> Result<String, Failed> {
     };
     let outcome = flight(&sitl);
     // Measured while the firmware processes still run.
-    let behind = (0..STARTS.len()).find_map(|i| {
-        let slowest = sitl.stats(i)?.slowest_second?;
-        (slowest < KEEPING_UP).then(|| {
-            format!(
-                "the host did not run drone {i}'s firmware in real time ({slowest} motor packets in a second)"
-            )
-        })
-    });
+    let behind = (0..STARTS.len()).find_map(|i| sitl.fell_behind(i));
     drop(children);
     let shutdown = sitl.shutdown().map_err(|e| e.to_string());
     match outcome.and_then(|report| shutdown.map(|()| report)) {

@@ -4,6 +4,7 @@
 
 use super::{Running, scenario, shipped, start};
 use cfsim::sitl::firmware::{self, FirmwareProcesses, StartOptions};
+use cfsim::sitl::pace::Tries;
 use cfsim::sitl::{SitlConfig, SitlHandle};
 use serde_json::Value;
 use std::path::{Path, PathBuf};
@@ -19,14 +20,6 @@ pub const AIRBORNE_M: f64 = 0.3;
 
 /// One firmware flight at a time: three firmware processes already take most of two cores.
 pub static ONE_FLIGHT: tokio::sync::Mutex<()> = tokio::sync::Mutex::const_new(());
-
-/// A firmware that sent fewer motor packets than this in a second of physics (500 at its pace)
-/// was not run in real time by the host: the flight around it says nothing about the server.
-pub const KEEPING_UP: u64 = 300;
-
-/// Flights tried at most per test; only a firmware the host could not keep up with earns more
-/// than the one retry of a failed flight.
-pub const MAX_TRIES: usize = 4;
 
 /// The firmware built from `AIRROADS_CF_SITL` (once, into the cache), or `None` with a message
 /// saying how to run the test.
@@ -116,19 +109,10 @@ impl Rig {
     }
 
     /// Why the flight says nothing about the server, if a firmware (not silenced) fell behind
-    /// real time: its slowest second of motor packets, measured by the physics.
+    /// real time ([`SitlHandle::fell_behind`]).
     pub fn fell_behind(&self) -> Option<String> {
         let silenced = self.silenced.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-        (0..self.sitl.len()).filter(|i| !silenced.contains(i)).find_map(|i| {
-            let slowest = self.sitl.stats(i)?.slowest_second?;
-            (slowest < KEEPING_UP).then(|| {
-                format!(
-                    "the host did not run cf{}'s firmware in real time ({slowest} motor packets in its \
-                     slowest second, 500 at its pace)",
-                    i + 1
-                )
-            })
-        })
+        (0..self.sitl.len()).filter(|i| !silenced.contains(i)).find_map(|i| self.sitl.fell_behind(i))
     }
 
     /// Starts reading the true margins of the airborne Crazyflies; read them with
@@ -140,12 +124,10 @@ impl Rig {
     }
 }
 
-/// Flies `flight` on a fresh rig until it passes: a flight that failed is tried once more (the
-/// firmware's emulated clock can slip under load), one whose firmware fell behind real time
-/// ([`Rig::fell_behind`]) does not count, up to [`MAX_TRIES`] in all. Panics with every reason and
-/// where the consoles are after two counted failures, or when no flight passed; when every try's
-/// firmware fell behind, the test is skipped with that message (the host could not run the
-/// firmware, which says nothing about the server).
+/// Flies `flight` on a fresh rig until it passes, as [`Tries`] allows (a failed flight is tried
+/// once more; one whose firmware fell behind real time, [`Rig::fell_behind`], does not count).
+/// Panics with every reason and where the consoles are; when no try's firmware kept up, returns
+/// the skip message (the host could not run the firmware, which says nothing about the server).
 pub async fn with_retries<F, Fut>(cf2: &Path, name: &str, flight: F) -> String
 where
     F: Fn(Rig) -> Fut,
@@ -153,8 +135,8 @@ where
 {
     let run_dir = std::env::temp_dir().join(format!("airroads-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&run_dir).expect("run folder");
-    let (mut failures, mut counted) = (Vec::new(), 0);
-    for _ in 0..MAX_TRIES {
+    let mut tries = Tries::default();
+    loop {
         let (outcome, behind) = match Rig::start(cf2, &run_dir).await {
             Ok(rig) => {
                 let (rig, outcome) = flight(rig).await;
@@ -164,42 +146,29 @@ where
             }
             Err(e) => (Err(format!("the rig did not start: {e}")), None),
         };
-        let e = match outcome {
+        match outcome {
             Ok(report) => {
                 let _ = std::fs::remove_dir_all(&run_dir);
                 return report;
             }
-            Err(e) => e,
-        };
-        match behind {
-            Some(behind) => {
-                let e = if e.contains(&behind) { e } else { format!("{e} ({behind})") };
-                eprintln!("{name}: flight failed ({e}): trying again with fresh processes");
-                failures.push(e);
-            }
-            None => {
-                eprintln!("{name}: flight failed ({e}); trying once more with fresh processes");
-                failures.push(e);
-                counted += 1;
-                if counted == 2 {
+            Err(e) => {
+                eprintln!("{name}: flight failed ({e}); {behind:?}");
+                if !tries.failed(e, behind) {
                     break;
                 }
             }
         }
     }
-    if counted == 0 {
-        let message = format!(
-            "skipped: {name}: in {MAX_TRIES} tries the host never ran the firmware in real time: {}",
-            failures.join(" / ")
-        );
-        tell(&message);
-        return message;
+    match tries.verdict() {
+        Ok(skipped) => {
+            let message = format!("{name}: {skipped}");
+            tell(&message);
+            message
+        }
+        Err(failures) => {
+            panic!("{name} failed: {failures} (firmware consoles and ground truth in {})", run_dir.display())
+        }
     }
-    panic!(
-        "{name} failed: {} (firmware consoles and ground truth in {})",
-        failures.join(" / "),
-        run_dir.display()
-    )
 }
 
 /// Writes `message` to the test's stderr past the harness's capture (which only takes the print
@@ -275,8 +244,8 @@ pub async fn until(rig: &Rig, what: &str, done: impl Fn(&Value) -> bool) -> Resu
         if done(&state) {
             return Ok(());
         }
-        if let Some(behind) = rig.fell_behind() {
-            return Err(format!("not {what}: {behind}"));
+        if rig.fell_behind().is_some() {
+            return Err(format!("gave up waiting for {what}: a firmware fell behind real time"));
         }
         if Instant::now() > deadline {
             return Err(format!("not {what} within {PATIENCE} s: {state}"));
