@@ -6,6 +6,7 @@ use crate::condition::Condition;
 use crate::config::FleetConfig;
 use crate::progress::Progress;
 use links::{Link, LinkPhase};
+use rayon::prelude::*;
 use roads::{NavState, Restriction, RoutePosition};
 use safety::{ReachDisk, flown_reach_disk};
 use uav::{UavState, Vec2};
@@ -151,12 +152,18 @@ pub struct RouteChoice {
 /// Sets each UAV's `front_since` from `front` (whether it waits at the head of its line this tick,
 /// by index): kept while it stays there, started now when it gets there, cleared otherwise.
 pub(crate) fn mark_fronts(uavs: &mut [Uav], front: &[bool], now: f64) {
-    for (k, u) in uavs.iter_mut().enumerate() {
+    let mark = |(k, u): (usize, &mut Uav)| {
         u.traffic.front_since = if front.get(k).copied().unwrap_or(false) {
             Some(u.traffic.front_since.unwrap_or(now))
         } else {
             None
         };
+    };
+    // Each UAV's own record: in parallel for large fleets.
+    if crate::tick::parallel(uavs.len()) {
+        uavs.par_iter_mut().enumerate().for_each(mark);
+    } else {
+        uavs.iter_mut().enumerate().for_each(mark);
     }
 }
 

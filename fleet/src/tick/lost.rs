@@ -1,9 +1,10 @@
 //! Neighbours that do not fly the filter (taking off, landing, stale or lost links): where the fleet
 //! thinks each may be (`safety::ReachDisk`, docs/safety.md §5 and `safety/src/neighbour_rows.rs`).
 
-use super::TickState;
+use super::{TickState, parallel};
 use crate::FleetConfig;
 use crate::member::Uav;
+use rayon::prelude::*;
 use safety::{ReachDisk, point_disk, reach_disk};
 
 /// Where `uav` can be now under `config`: its reach disk while its link is stale, else its last
@@ -18,19 +19,18 @@ pub(crate) fn disk_of(uav: &Uav, config: &FleetConfig) -> ReachDisk {
 }
 
 impl TickState<'_> {
-    /// Where UAV d can be now ([`disk_of`]).
-    pub(crate) fn disk_of(&self, d: usize) -> ReachDisk {
-        disk_of(&self.uavs[d], self.config)
-    }
-
     /// How far any stale UAV's disk reaches beyond its last position (widens the neighbour search).
+    /// A maximum, the same in any order: in parallel for large fleets.
     pub(crate) fn max_stale_reach(&self) -> f64 {
-        (0..self.uavs.len())
-            .filter(|&d| self.uavs[d].stale_ticks > 0)
-            .map(|d| {
-                let disk = self.disk_of(d);
-                (disk.centre - self.uavs[d].state.p).norm() + disk.radius
-            })
-            .fold(0.0, f64::max)
+        let reach = |u: &Uav| {
+            let disk = disk_of(u, self.config);
+            (disk.centre - u.state.p).norm() + disk.radius
+        };
+        let stale = |u: &&Uav| u.stale_ticks > 0;
+        if parallel(self.uavs.len()) {
+            self.uavs.par_iter().filter(stale).map(reach).reduce(|| 0.0, f64::max)
+        } else {
+            self.uavs.iter().filter(stale).map(reach).fold(0.0, f64::max)
+        }
     }
 }

@@ -52,12 +52,16 @@ pub(crate) struct TickPipeline {
     /// Per UAV this tick: its target while it flies to its goal (None once arrived or without one),
     /// a plain copy the way-making UAVs read from any thread.
     flying_targets: Vec<Option<Vec2>>,
+    /// The registry's policy names, in its order (refreshed when they change).
+    policy_names: Vec<String>,
     /// Each UAV's policy this tick, by its place among the registry's names (None: runs none).
     slots: Vec<Option<usize>>,
     /// One policy's batch: observations, UAV indices, actions.
     observations: Vec<Observation>,
     batch: Vec<usize>,
     actions: Vec<Vec2>,
+    /// Per UAV this tick: what its policy gave (None: it ran none; Some(None): no finite action).
+    nominal: Vec<Option<Option<Vec2>>>,
     /// How long each stage of the last tick took.
     pub stages: StageTimes,
 }
@@ -105,9 +109,9 @@ impl TickPipeline {
         self.stages.rows_us = lap();
         self.filter.run(fleet, &self.rows);
         self.stages.filter_us = lap();
-        for uav in fleet.uavs.iter_mut() {
-            uav.link.send(uav.last.u);
-        }
+        // Each link is its own (a real one hands its setpoint to its own radio task): in parallel
+        // for large fleets, as the records are read.
+        for_each_uav(fleet.uavs, |_, uav| uav.link.send(uav.last.u));
         self.stages.send_us = lap();
     }
 
@@ -302,9 +306,11 @@ impl TickPipeline {
         });
     }
 
+    /// Reads every link's phase and state and settles each UAV's condition. Per UAV (each reads its
+    /// own link and writes its own record): in parallel for large fleets.
     fn read_states(&mut self, fleet: &mut TickState<'_>) {
         let (dt, stale_after) = (fleet.config.params.dt, fleet.config.stale_after);
-        for uav in fleet.uavs.iter_mut() {
+        for_each_uav(fleet.uavs, |_, uav| {
             uav.phase = uav.link.phase();
             match uav.link.state() {
                 Some(s) if s.is_finite() => {
@@ -320,7 +326,7 @@ impl TickPipeline {
             } else if matches!(uav.phase, LinkPhase::Landed | LinkPhase::Stopped) {
                 uav.was_airborne = false;
             }
-        }
+        });
     }
 }
 

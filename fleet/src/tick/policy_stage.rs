@@ -4,61 +4,81 @@
 use super::{TickPipeline, for_each_uav};
 use crate::member::Uav;
 use crate::tick::TickState;
+use crate::tick::{map_into, parallel};
 use crate::traffic::foreign::ForeignNear;
 use crate::traffic::speed::{crowd_limit, govern, keep_distance};
 use policies::observation;
+use rayon::prelude::*;
 use roads::network::Network;
 use roads::{Airspace, NavMode};
 use uav::{Vec2, braking_input};
 
 impl TickPipeline {
-    /// Evaluates each policy once on the batch of UAVs that use it.
+    /// Evaluates each policy once on the batch of UAVs that use it, then sets every UAV's nominal
+    /// input. Every pass over the records is per UAV (each reads or writes its own): in parallel
+    /// for large fleets, the same on any number of threads.
     pub(super) fn run_policies(&mut self, fleet: &mut TickState<'_>) {
         let (delta, dt) = (fleet.config.params.delta, fleet.config.params.dt);
-        // Every UAV brakes unless its policy gives a finite action; a fallback is counted only for
-        // a UAV whose policy ran and gave none (one that is not flying runs no policy). In the same
-        // pass, each flying UAV's policy by its place among the registry's names (the same order as
-        // `iter_mut`): one string comparison per UAV where neighbours in the fleet share a policy
-        // (the previous UAV's is tried first), not one per UAV and policy.
+        // Each flying UAV's policy by its place among the registry's names (the same order as
+        // `iter_mut`); one that is not flying, or a paused fleet, runs none. The last name found
+        // is tried first, so neighbours in the fleet sharing a policy cost one comparison each.
         let paused = fleet.paused;
-        self.slots.clear();
-        let mut last: Option<(usize, &str)> = None;
-        for uav in fleet.uavs.iter_mut() {
-            uav.last.u_ref = braking_input(uav.state.v, delta, dt);
-            uav.last.policy_fallback = false;
-            let slot = if paused || !uav.condition.flying() {
-                None
-            } else if let Some((i, _)) = last.filter(|(_, name)| *name == uav.policy) {
-                Some(i)
-            } else {
-                let found = fleet.policies.names().enumerate().find(|(_, name)| *name == uav.policy);
-                last = found.or(last);
-                found.map(|(i, _)| i)
-            };
-            self.slots.push(slot);
+        if !fleet.policies.names().eq(self.policy_names.iter().map(String::as_str)) {
+            self.policy_names = fleet.policies.names().map(String::from).collect();
         }
-        if paused {
-            return;
-        }
-        for (i, (_, policy)) in fleet.policies.iter_mut().enumerate() {
-            self.batch.clear();
-            self.observations.clear();
-            // Only this policy's UAVs' records are read (the slots are a plain array).
-            for k in (0..self.slots.len()).filter(|&k| self.slots[k] == Some(i)) {
-                let uav = &mut fleet.uavs[k];
-                uav.last.policy_fallback = true;
-                self.batch.push(k);
-                self.observations.push(observation(&uav.state, uav.last.target, Vec2::zeros()));
+        let names = &self.policy_names;
+        let slot_of = |last: &mut Option<usize>, uav: &Uav| {
+            if paused || !uav.condition.flying() {
+                return None;
             }
-            if self.batch.is_empty() || policy.act(&self.observations, &mut self.actions).is_err() {
+            if let Some(i) = last.filter(|&i| names[i] == uav.policy) {
+                return Some(i);
+            }
+            let found = names.iter().position(|name| *name == uav.policy);
+            *last = found.or(*last);
+            found
+        };
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter().map_init(|| None, slot_of).collect_into_vec(&mut self.slots);
+        } else {
+            let mut last = None;
+            self.slots.clear();
+            self.slots.extend(fleet.uavs.iter().map(|uav| slot_of(&mut last, uav)));
+        }
+        // What each UAV's policy gave: None when it ran none, Some(None) when it ran and gave no
+        // finite action, Some(Some(u)) otherwise.
+        self.nominal.clear();
+        self.nominal.resize(fleet.uavs.len(), None);
+        for (i, (_, policy)) in fleet.policies.iter_mut().enumerate() {
+            // Only this policy's UAVs' records are read (the slots are a plain array).
+            self.batch.clear();
+            self.batch.extend((0..self.slots.len()).filter(|&k| self.slots[k] == Some(i)));
+            if self.batch.is_empty() {
                 continue;
             }
-            for (&k, u) in self.batch.iter().zip(&self.actions) {
-                if uav::is_finite(u) {
-                    fleet.uavs[k].last.u_ref = uav::saturate(*u, delta);
-                    fleet.uavs[k].last.policy_fallback = false;
-                }
+            let uavs = &*fleet.uavs;
+            let observe = |&k: &usize| observation(&uavs[k].state, uavs[k].last.target, Vec2::zeros());
+            map_into(&self.batch, observe, &mut self.observations);
+            let acted = policy.act(&self.observations, &mut self.actions).is_ok();
+            for (n, &k) in self.batch.iter().enumerate() {
+                let action = self.actions.get(n).filter(|u| acted && uav::is_finite(u));
+                self.nominal[k] = Some(action.copied());
             }
+        }
+        // Every UAV brakes unless its policy gave a finite action; a fallback is counted only for a
+        // UAV whose policy ran and gave none.
+        let nominal = &self.nominal;
+        for_each_uav(fleet.uavs, |k, uav| {
+            let (u_ref, fallback) = match nominal[k] {
+                Some(Some(u)) => (uav::saturate(u, delta), false),
+                Some(None) => (braking_input(uav.state.v, delta, dt), true),
+                None => (braking_input(uav.state.v, delta, dt), false),
+            };
+            uav.last.u_ref = u_ref;
+            uav.last.policy_fallback = fallback;
+        });
+        if paused {
+            return;
         }
         match fleet.road {
             Airspace::Road(_) if fleet.config.nav == NavMode::Traffic => self.limit_speeds(fleet),

@@ -172,7 +172,14 @@ impl RowBuilder {
     /// still at the state read this tick.
     pub fn margins_hold_for(&self, uavs: &[Uav]) -> bool {
         let built: usize = self.blocks.iter().map(|block| block.margins.len()).sum();
-        built == uavs.len() && uavs.iter().zip(&self.views).all(|(u, view)| u.state == view.state)
+        let same = |(u, view): (&Uav, &RowView)| u.state == view.state;
+        // Each UAV on its own, an `all` being the same in any order: in parallel for large fleets.
+        built == uavs.len()
+            && if parallel(uavs.len()) {
+                uavs.par_iter().zip(&self.views).all(same)
+            } else {
+                uavs.iter().zip(&self.views).all(same)
+            }
     }
 
     /// UAV k's rows into `out`, with the whole pair row against each cooperating neighbour d filtered

@@ -76,6 +76,8 @@ pub struct TrafficRules {
     queue: Vec<(usize, usize, f64, usize)>,
     /// Scratch: the section (zone, entry) each UAV must cross next, if it is near one.
     wanted: Vec<Option<(usize, usize)>>,
+    /// The UAVs that want a zone this tick, in order (those with a `wanted` zone).
+    asking: Vec<usize>,
     /// Scratch: per zone and entry, the queue order of the foremost UAV waiting there.
     front: Vec<f64>,
     /// Scratch: per UAV, whether it waits at the head of its entry's queue this tick.
@@ -164,13 +166,8 @@ impl TrafficRules {
         // a grant it no longer wants marks its zone as crossed. No restriction or wait yet. Per UAV
         // (each writes only its own record): in parallel for large fleets.
         let (sections, zones) = (&self.sections, &self.zones);
-        let want = |u: &mut Uav| {
-            u.traffic.restriction = Restriction::default();
-            u.traffic.waiting = None;
-            let Some(pos) = u.traffic.route else {
-                u.traffic.passed = None;
-                return None;
-            };
+        let wanted_by = |u: &mut Uav| {
+            let pos = u.traffic.route?;
             let wanted = next_section(sections, &pos, approach).filter(|&(zone, entry)| {
                 (u.traffic.passed != Some((zone, entry)) || !sections[zone].exit_side(entry, pos.s))
                     && !flies_on_inside(
@@ -186,11 +183,29 @@ impl TrafficRules {
             }
             wanted
         };
+        let want = |u: &mut Uav| {
+            u.traffic.restriction = Restriction::default();
+            u.traffic.waiting = None;
+            if u.traffic.route.is_none() {
+                u.traffic.passed = None;
+            }
+            let wanted = wanted_by(u);
+            if wanted.is_none() {
+                // Wanting no zone, it keeps no grant and waits for none; the passes below skip it.
+                u.traffic.grant = None;
+                u.traffic.waiting_since = None;
+            }
+            wanted
+        };
         crate::tick::map_mut_into(uavs, want, &mut self.wanted);
+        // The UAVs that want a zone, in order: the only records the passes below read.
+        self.asking.clear();
+        self.asking.extend(self.wanted.iter().enumerate().filter_map(|(k, w)| w.map(|_| k)));
         // The foremost UAV waiting at each entry (without its grant).
         self.front.clear();
         self.front.resize(2 * self.sections.len(), f64::INFINITY);
-        for (u, &wanted) in uavs.iter().zip(&self.wanted) {
+        for &k in &self.asking {
+            let (u, wanted) = (&uavs[k], self.wanted[k]);
             if let (Some((zone, entry)), Some(pos)) = (wanted, u.traffic.route)
                 && u.traffic.grant != wanted
             {
@@ -198,7 +213,8 @@ impl TrafficRules {
                 *front = front.min(queue_order(&pos));
             }
         }
-        for (k, u) in uavs.iter_mut().enumerate() {
+        for &k in &self.asking {
+            let u = &mut uavs[k];
             let (position, wanted) = (u.traffic.route, self.wanted[k]);
             if let Some((zone, entry)) = wanted.filter(|_| u.traffic.grant == wanted)
                 && let Some(pos) = position
@@ -218,10 +234,8 @@ impl TrafficRules {
                 }
             }
             u.traffic.grant = None;
-            let Some((zone, entry)) = wanted else {
-                u.traffic.waiting_since = None;
-                continue;
-            };
+            // Every asking UAV wants a zone.
+            let Some((zone, entry)) = wanted else { continue };
             let since = *u.traffic.waiting_since.get_or_insert(now);
             let z = self.sections[zone];
             let pushed = PUSHED_PAST_HOLD_M;
@@ -282,7 +296,9 @@ impl TrafficRules {
     fn line_up(&mut self, nav: &Navigator, uavs: &mut [Uav]) {
         let entering = &mut self.entering;
         entering.clear();
-        for (k, u) in uavs.iter().enumerate() {
+        // Only a UAV that wants a zone still holds a grant here (`reserve`).
+        for &k in &self.asking {
+            let u = &uavs[k];
             if let (Some((zone, entry)), Some(pos)) = (u.traffic.grant, u.traffic.route) {
                 let z = self.sections[zone];
                 let along = if entry == 0 { pos.s } else { -pos.s };
