@@ -16,13 +16,13 @@
 use crate::member::Uav;
 use crate::ragged::Ragged;
 use crate::traffic::FOLLOW_GAP_IN_DC;
+use crate::traffic::along::{Seen, TrafficAlong};
+use crate::traffic::foreign::ForeignNear;
 #[cfg(test)]
 use crate::traffic::foreign::ForeignViews;
-use crate::traffic::foreign::{ForeignNear, ForeignView};
 use crate::traffic::speed::KEEP_MARGIN_M;
 use rayon::prelude::*;
 use roads::{Navigator, RoutePosition};
-use uav::Vec2;
 
 /// Lateral distance (m) beyond D_c under which the UAV ahead counts as in the same lane.
 pub const SAME_LANE_MARGIN_M: f64 = 0.15;
@@ -56,7 +56,7 @@ pub fn follow(
 ) {
     let gap = FOLLOW_GAP_IN_DC * nav.d_c;
     let keep = nav.d_c + KEEP_MARGIN_M;
-    traffic.update(uavs, foreign.all());
+    traffic.update(uavs, foreign.all(), nav.road.centerline().length(), nav.r_s);
     let traffic = &*traffic;
     // Per UAV, reading the others from the plain copies (`TrafficAlong::seen`) and writing only its
     // own restriction: in parallel for large fleets, the same on any number of threads.
@@ -96,65 +96,6 @@ pub fn follow(
         uavs.par_iter_mut().enumerate().for_each(follow_one);
     } else {
         uavs.iter_mut().enumerate().for_each(follow_one);
-    }
-}
-
-/// What [`follow`] reads of every UAV, copied once per tick (a UAV's link is not shared across
-/// threads, so the UAVs themselves are not).
-#[derive(Debug, Clone, Copy)]
-struct Seen {
-    /// Where it is on its route (None off one).
-    route: Option<RoutePosition>,
-    /// Position.
-    p: Vec2,
-    /// Velocity.
-    v: Vec2,
-}
-
-/// Where the UAVs on a route are along the road, by direction of travel (sorted arc lengths,
-/// rebuilt each tick into buffers kept between ticks).
-#[derive(Debug, Default)]
-pub struct TrafficAlong {
-    /// Towards increasing s.
-    forward: Vec<f64>,
-    /// Towards decreasing s.
-    backward: Vec<f64>,
-    /// Every UAV as [`follow`] reads it, by index.
-    seen: Vec<Seen>,
-}
-
-impl TrafficAlong {
-    /// Sorts the UAVs on a route and the `foreign` ones moving along the road by direction.
-    fn update(&mut self, uavs: &[Uav], foreign: &[ForeignView]) {
-        self.forward.clear();
-        self.backward.clear();
-        let seen = |u: &Uav| Seen { route: u.traffic.route, p: u.state.p, v: u.state.v };
-        crate::tick::map_into(uavs, seen, &mut self.seen);
-        // From the plain copies just made, not the records again.
-        let routes =
-            self.seen.iter().filter_map(|u| u.route).chain(foreign.iter().filter_map(|f| f.flying_along()));
-        for pos in routes {
-            if pos.direction() > 0.0 { self.forward.push(pos.s) } else { self.backward.push(pos.s) }
-        }
-        // Sorted in place on all cores for large fleets (the same order: a total order on f64).
-        for along in [&mut self.forward, &mut self.backward] {
-            if crate::tick::parallel(along.len()) {
-                along.par_sort_unstable_by(f64::total_cmp);
-            } else {
-                along.sort_unstable_by(f64::total_cmp);
-            }
-        }
-    }
-
-    /// True when a UAV flying the other way is within `range` of arc length ahead of `me`.
-    fn oncoming_within(&self, me: &RoutePosition, range: f64) -> bool {
-        let (others, lo, hi) = if me.direction() > 0.0 {
-            (&self.backward, me.s, me.s + range)
-        } else {
-            (&self.forward, me.s - range, me.s)
-        };
-        let first = others.partition_point(|&s| s < lo);
-        others.get(first).is_some_and(|&s| s <= hi)
     }
 }
 

@@ -9,6 +9,7 @@
 //!   ([`crate::traffic::deadlocks`]);
 //! - foreign UAVs (other regions') are seen too ([`crate::traffic::foreign`]).
 
+pub(crate) mod along;
 pub mod congestion;
 pub mod cycles;
 pub(crate) mod deadlocks;
@@ -87,7 +88,7 @@ pub struct TrafficRules {
     /// The speed limit along the road (rebuilt with the sections when the road changes).
     speeds: SpeedProfile,
     /// Scratch: where the UAVs are along the road by direction (`crate::traffic::following`).
-    along: crate::traffic::following::TrafficAlong,
+    along: crate::traffic::along::TrafficAlong,
     /// On a network: the junctions and merges (`crate::traffic::junctions`).
     pub(crate) junctions: crate::traffic::junctions::JunctionRules,
     /// On a network: the queues at the conflict zones and the route choice they drive
