@@ -190,15 +190,20 @@ fn find(
             // radius are kept with their x, then the three windows' hits are put in (x, index)
             // order (each window is in that order already: a sort of a few short runs).
             hits.clear();
+            // The window is widened by a few ulps of its bounds, so that rounding in x ± r never
+            // leaves out a point the distance test below keeps (a pair 1.0324927 m apart with
+            // that radius was found from one side only), and the lists stay symmetric.
+            let slack = (x.abs() + radius) * 4.0 * f64::EPSILON;
+            let (x_lo, x_hi) = (x - radius - slack, x + radius + slack);
             for w in 0..3 {
-                while from[w] < runs[w].1 && entries[from[w]].1 < x - radius {
+                while from[w] < runs[w].1 && entries[from[w]].1 < x_lo {
                     from[w] += 1;
                 }
                 // The window's end first (x alone, in order), then its points written one after
                 // the other with the count moved on only for those within the radius: whether a
                 // point is within it is as good as random, and a branch on it was mispredicted.
                 let window = &entries[from[w]..runs[w].1];
-                let window = &window[..window.iter().take_while(|e| e.1 <= x + radius).count()];
+                let window = &window[..window.iter().take_while(|e| e.1 <= x_hi).count()];
                 let mut n = hits.len();
                 hits.resize(n + window.len(), (0.0, 0));
                 for &(_, xd, d) in window {
@@ -246,6 +251,22 @@ mod tests {
     /// The lists of a search, one vector each.
     fn lists(s: &NeighbourSearch) -> Vec<Vec<usize>> {
         (0..s.lists.len()).map(|k| s.lists[k].to_vec()).collect()
+    }
+
+    /// Two points whose distance equals the radius to the last bit, where x + r rounds below the
+    /// farther one's x (found by the property test below): each is in the other's list.
+    #[test]
+    fn a_pair_at_the_radius_is_found_from_both_sides() {
+        let radius = 1.0324927022956785;
+        let pts = [
+            Vec2::new(-0.9911929942038513, 24.779824855096283),
+            Vec2::new(0.041299708091827175, 24.779824855096283),
+        ];
+        assert!((pts[1] - pts[0]).norm_squared() <= radius * radius);
+        let mut s = NeighbourSearch::default();
+        s.update(&pts, radius);
+        assert_eq!(lists(&s), vec![vec![1], vec![0]]);
+        assert_eq!(lists(&s), brute(&pts, radius));
     }
 
     #[test]
