@@ -10,7 +10,6 @@ use crate::tick::{StageTimes, TickState};
 use crate::traffic::TrafficRules;
 use links::Link;
 use policies::PolicyRegistry;
-use rayon::prelude::*;
 use roads::{Airspace, NavMode, NavState, Road};
 use uav::{UavState, Vec2};
 
@@ -125,11 +124,6 @@ impl Fleet {
         };
         self.pipeline.run(&mut state);
         self.tick += 1;
-        let arrived = |u: &&Uav| u.nav.arrived;
-        if crate::tick::parallel(self.uavs.len()) {
-            self.uavs.par_iter().filter(arrived).count()
-        } else {
-            self.uavs.iter().filter(arrived).count()
-        }
+        self.pipeline.arrived
     }
 }

@@ -64,6 +64,8 @@ pub(crate) struct TickPipeline {
     nominal: Vec<Option<Option<Vec2>>>,
     /// How long each stage of the last tick took.
     pub stages: StageTimes,
+    /// UAVs arrived at their goals after the last tick.
+    pub arrived: usize,
 }
 
 impl TickPipeline {
@@ -109,9 +111,7 @@ impl TickPipeline {
         self.stages.rows_us = lap();
         self.filter.run(fleet, &self.rows);
         self.stages.filter_us = lap();
-        // Each link is its own (a real one hands its setpoint to its own radio task): in parallel
-        // for large fleets, as the records are read.
-        for_each_uav(fleet.uavs, |_, uav| uav.link.send(uav.last.u));
+        self.send(fleet);
         self.stages.send_us = lap();
     }
 
@@ -128,19 +128,9 @@ impl TickPipeline {
             .zip(&self.foreign_disks)
             .map(|(f, disk)| (disk.centre - f.state.p).norm() + disk.radius)
             .fold(0.0, f64::max);
-        // Plain copies of the states, own UAVs first: one pass over the records (in parallel for
-        // large fleets), then the foreign UAVs.
-        let state = |u: &Uav| (u.state.p, u.state.v);
-        if parallel(fleet.uavs.len()) {
-            fleet.uavs.par_iter().map(state).unzip_into_vecs(&mut self.positions, &mut self.velocities);
-        } else {
-            self.positions.clear();
-            self.velocities.clear();
-            for (p, v) in fleet.uavs.iter().map(state) {
-                self.positions.push(p);
-                self.velocities.push(v);
-            }
-        }
+        // The plain copies of the own UAVs' states (`read_states`), then the foreign UAVs'.
+        self.positions.truncate(fleet.uavs.len());
+        self.velocities.truncate(fleet.uavs.len());
         self.positions.extend(fleet.foreign.iter().map(|f| f.state.p));
         self.velocities.extend(fleet.foreign.iter().map(|f| f.state.v));
         let v_max = self.velocities.iter().map(|v| v.norm()).fold(0.0, f64::max);
@@ -306,11 +296,12 @@ impl TickPipeline {
         });
     }
 
-    /// Reads every link's phase and state and settles each UAV's condition. Per UAV (each reads its
-    /// own link and writes its own record): in parallel for large fleets.
+    /// Reads every link's phase and state, settles each UAV's condition, and copies each UAV's
+    /// position and velocity into the plain arrays the other stages read. Per UAV (each reads its
+    /// own link and writes its own record): in parallel for large fleets, in one pass.
     fn read_states(&mut self, fleet: &mut TickState<'_>) {
         let (dt, stale_after) = (fleet.config.params.dt, fleet.config.stale_after);
-        for_each_uav(fleet.uavs, |_, uav| {
+        let read = |uav: &mut Uav| {
             uav.phase = uav.link.phase();
             match uav.link.state() {
                 Some(s) if s.is_finite() => {
@@ -326,7 +317,34 @@ impl TickPipeline {
             } else if matches!(uav.phase, LinkPhase::Landed | LinkPhase::Stopped) {
                 uav.was_airborne = false;
             }
-        });
+            (uav.state.p, uav.state.v)
+        };
+        let (positions, velocities) = (&mut self.positions, &mut self.velocities);
+        if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter_mut().map(read).unzip_into_vecs(positions, velocities);
+        } else {
+            positions.clear();
+            velocities.clear();
+            for (p, v) in fleet.uavs.iter_mut().map(read) {
+                positions.push(p);
+                velocities.push(v);
+            }
+        }
+    }
+
+    /// Hands each UAV's filtered input to its link (each link is its own: a real one passes its
+    /// setpoint to its own radio task) and counts the arrived UAVs, in one pass: in parallel for
+    /// large fleets.
+    fn send(&mut self, fleet: &mut TickState<'_>) {
+        let send = |uav: &mut Uav| {
+            uav.link.send(uav.last.u);
+            uav.nav.arrived
+        };
+        self.arrived = if parallel(fleet.uavs.len()) {
+            fleet.uavs.par_iter_mut().map(send).filter(|&arrived| arrived).count()
+        } else {
+            fleet.uavs.iter_mut().map(send).filter(|&arrived| arrived).count()
+        };
     }
 }
 
