@@ -40,6 +40,27 @@ impl DurationHistogram {
         self.max = self.max.max(us);
     }
 
+    /// Forgets every duration recorded (keeping its buckets' memory).
+    pub fn clear(&mut self) {
+        if self.total > 0 {
+            self.counts.fill(0);
+        }
+        (self.total, self.min, self.max) = (0, f64::INFINITY, f64::NEG_INFINITY);
+    }
+
+    /// Adds the durations `other` recorded, as if recorded here.
+    pub fn merge(&mut self, other: &DurationHistogram) {
+        if other.total == 0 {
+            return;
+        }
+        for (mine, theirs) in self.counts.iter_mut().zip(other.counts.iter()) {
+            *mine += theirs;
+        }
+        self.total += other.total;
+        self.min = self.min.min(other.min);
+        self.max = self.max.max(other.max);
+    }
+
     /// Number of durations recorded.
     pub fn len(&self) -> u64 {
         self.total
@@ -96,6 +117,28 @@ mod tests {
             let got = h.quantile(q);
             let bound = 0.01 * exact + BASE_US;
             prop_assert!((got - exact).abs() <= bound, "q {}: {} vs exact {}", q, got, exact);
+        }
+
+        /// Histograms of the parts of a series, merged (after a clear, as a reused one is), answer
+        /// every quantile as the histogram of the whole series.
+        #[test]
+        fn merged_parts_answer_as_the_whole(
+            values in proptest::collection::vec(prop_oneof![0.0f64..1e-3, 1e-3f64..10.0, 10.0f64..1e5], 0..300),
+            cut in 0usize..300,
+            q in 0.0f64..=1.0,
+        ) {
+            let cut = cut.min(values.len());
+            let (mut whole, mut merged, mut part) =
+                (DurationHistogram::default(), DurationHistogram::default(), DurationHistogram::default());
+            values.iter().for_each(|&v| whole.record(v));
+            part.record(123.0);
+            for chunk in [&values[..cut], &values[cut..]] {
+                part.clear();
+                chunk.iter().for_each(|&v| part.record(v));
+                merged.merge(&part);
+            }
+            prop_assert_eq!(merged.len(), whole.len());
+            prop_assert_eq!(merged.quantile(q), whole.quantile(q));
         }
     }
 

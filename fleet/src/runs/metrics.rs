@@ -2,10 +2,9 @@
 
 use crate::fleet::Fleet;
 use crate::member::Uav;
-use crate::progress::stall_time_added;
 use crate::ragged::Ragged;
-use crate::runs::histogram::DurationHistogram;
 use crate::runs::margins::UavMargins;
+use crate::runs::totals::{CHUNK_UAVS, StallRecord, Totals};
 use crate::tick::parallel;
 use rayon::prelude::*;
 use roads::Airspace;
@@ -81,52 +80,35 @@ pub struct Stall {
     pub at: [f64; 2],
 }
 
-/// A [`Stall`] as recorded, its UAV by index.
-#[derive(Debug, Clone, Copy)]
-struct StallRecord {
-    uav: usize,
-    start_s: f64,
-    duration_s: f64,
-    at: [f64; 2],
-}
-
 /// Accumulates metrics tick by tick.
 #[derive(Debug, Default)]
 pub struct MetricsRecorder {
-    min_collision: Option<f64>,
-    min_separation: Option<f64>,
-    min_road: f64,
-    min_wall: f64,
-    outside: u64,
-    solves: u64,
-    slack_used: u64,
-    max_slack: f64,
-    failures: u64,
-    /// Policy outputs replaced by braking (reported in the summary).
-    pub policy_fallbacks: u64,
-    solve_us: DurationHistogram,
+    /// Everything added up so far.
+    totals: Totals,
     /// First arrival time by UAV index (a headless run never removes UAVs).
     arrival: Vec<Option<f64>>,
-    stall_s: f64,
-    max_stall_s: f64,
-    max_wait_s: f64,
-    /// Stalls going on, by UAV index (a headless run never removes UAVs), and those that ended, each
-    /// with its UAV's index (the id is looked up when they are read: no string copied per stall).
+    /// Stalls going on, by UAV index (a headless run never removes UAVs).
     ongoing: Vec<Option<StallRecord>>,
-    stalls: Vec<StallRecord>,
+    /// Scratch: each chunk's totals this tick (a large fleet's, [`CHUNK_UAVS`] UAVs each).
+    parts: Vec<Totals>,
     /// Scratch: each UAV's state and tracked segment, and its margins, this tick.
     states: Vec<(Option<UavState>, Option<usize>)>,
     margins: Vec<UavMargins>,
 }
 
-fn min_opt(a: Option<f64>, b: f64) -> Option<f64> {
-    Some(a.map_or(b, |a| a.min(b)))
-}
+/// One chunk of the fleet in [`MetricsRecorder::record_with`]: its place, its totals, and its UAVs'
+/// stalls going on and first arrivals.
+type ChunkOf<'a> = (usize, ((&'a mut Totals, &'a mut [Option<StallRecord>]), &'a mut [Option<f64>]));
 
 impl MetricsRecorder {
     /// A recorder with no observation yet.
     pub fn new() -> Self {
-        Self { min_road: f64::INFINITY, min_wall: f64::INFINITY, ..Self::default() }
+        Self::default()
+    }
+
+    /// Policy outputs replaced by braking so far (UAV-ticks; reported in the summary).
+    pub fn policy_fallbacks(&self) -> u64 {
+        self.totals.policy_fallbacks
     }
 
     /// Records the states the fleet read in its last tick (time `t`) and what the filter did.
@@ -194,56 +176,52 @@ impl MetricsRecorder {
         if !built {
             self.measure_margins(road, &p, uavs, lists, truth);
         }
-        for (k, u) in uavs.iter().enumerate() {
-            // `margins_hold_for`: the rows stage has margins for every UAV.
-            let m = if built { rows.margins(k).unwrap_or(UavMargins::NONE) } else { self.margins[k] };
-            self.min_wall = self.min_wall.min(m.wall);
-            self.outside += u64::from(m.wall < 0.0);
-            self.min_road = self.min_road.min(m.road_margin);
-            if let Some((collision, separation)) = m.closest {
-                self.min_collision = min_opt(self.min_collision, collision);
-                self.min_separation = min_opt(self.min_separation, separation);
+        let n = uavs.len();
+        if self.ongoing.len() < n {
+            self.ongoing.resize(n, None);
+        }
+        if self.arrival.len() < n {
+            self.arrival.resize(n, None);
+        }
+        let margins = &self.margins;
+        // `margins_hold_for`: the rows stage has margins for every UAV.
+        let margins_of =
+            |k: usize| if built { rows.margins(k).unwrap_or(UavMargins::NONE) } else { margins[k] };
+        let time = (t, p.dt);
+        if !parallel(n) {
+            let (ongoing, arrival) = (&mut self.ongoing, &mut self.arrival);
+            for (k, u) in uavs.iter().enumerate() {
+                self.totals.add((k, u, margins_of(k)), time, &mut ongoing[k], &mut arrival[k]);
             }
-            let last = &u.last;
-            self.stall_s += stall_time_added(last.stall_s, p.dt);
-            self.max_stall_s = self.max_stall_s.max(last.stall_s);
-            if let Some(since) = u.traffic.front_since {
-                self.max_wait_s = self.max_wait_s.max(t - since);
+            return;
+        }
+        // Per chunk of consecutive UAVs on all cores, each into its own totals, added up in order.
+        let chunks = n.div_ceil(CHUNK_UAVS);
+        if self.parts.len() < chunks {
+            self.parts.resize_with(chunks, Totals::default);
+        }
+        let add_chunk = |(c, ((part, ongoing), arrival)): ChunkOf<'_>| {
+            part.clear();
+            let first = c * CHUNK_UAVS;
+            for (i, u) in uavs[first..].iter().take(CHUNK_UAVS).enumerate() {
+                part.add((first + i, u, margins_of(first + i)), time, &mut ongoing[i], &mut arrival[i]);
             }
-            if self.ongoing.len() <= k {
-                self.ongoing.resize(k + 1, None);
-            }
-            match (&mut self.ongoing[k], last.stall_s > 0.0) {
-                (Some(stall), true) => stall.duration_s = last.stall_s,
-                (slot @ None, true) => {
-                    let at = [u.state.p.x, u.state.p.y];
-                    *slot =
-                        Some(StallRecord { uav: k, start_s: t - last.stall_s, duration_s: last.stall_s, at });
-                }
-                (slot @ Some(_), false) => self.stalls.extend(slot.take()),
-                (None, false) => {}
-            }
-            if last.solved {
-                self.solves += 1;
-                self.solve_us.record(last.solve_us);
-            }
-            self.slack_used += u64::from(last.max_slack > 1e-6);
-            self.max_slack = self.max_slack.max(last.max_slack);
-            self.failures += u64::from(last.failed);
-            self.policy_fallbacks += u64::from(last.policy_fallback);
-            if self.arrival.len() <= k {
-                self.arrival.resize(k + 1, None);
-            }
-            if u.nav.arrived && self.arrival[k].is_none() {
-                self.arrival[k] = Some(t);
-            }
+        };
+        self.parts[..chunks]
+            .par_iter_mut()
+            .zip(self.ongoing.par_chunks_mut(CHUNK_UAVS))
+            .zip(self.arrival.par_chunks_mut(CHUNK_UAVS))
+            .enumerate()
+            .for_each(add_chunk);
+        for part in &self.parts[..chunks] {
+            self.totals.merge(part);
         }
     }
 
     /// Every stall so far (those going on included) of the UAVs of `fleet`, longest first.
     pub fn stalls(&self, fleet: &Fleet) -> Vec<Stall> {
         let id = |k: usize| fleet.uavs().get(k).map(|u| u.id.clone()).unwrap_or_default();
-        let recorded = self.stalls.iter().chain(self.ongoing.iter().flatten());
+        let recorded = self.totals.ended.iter().chain(self.ongoing.iter().flatten());
         let mut all: Vec<Stall> = recorded
             .map(|r| Stall { id: id(r.uav), start_s: r.start_s, duration_s: r.duration_s, at: r.at })
             .collect();
@@ -260,33 +238,34 @@ impl MetricsRecorder {
             .enumerate()
             .map(|(k, u)| (u.id.clone(), self.arrival.get(k).copied().flatten()))
             .collect();
-        let pct = |q: f64| self.solve_us.quantile(q);
+        let pct = |q: f64| self.totals.solve_us.quantile(q);
+        let m = &self.totals;
         let qp = QpMetrics {
-            solves: self.solves,
-            slack_used: self.slack_used,
-            max_slack: self.max_slack,
-            failures: self.failures,
+            solves: m.solves,
+            slack_used: m.slack_used,
+            max_slack: m.max_slack,
+            failures: m.failures,
             p50_us: pct(0.5),
             p99_us: pct(0.99),
         };
-        let safe = self.min_collision.is_none_or(|m| m >= p.d_c)
-            && self.min_road >= p.d_s
-            && self.outside == 0
-            && self.failures == 0;
+        let safe = m.min_collision.is_none_or(|c| c >= p.d_c)
+            && m.min_road >= p.d_s
+            && m.outside == 0
+            && m.failures == 0;
         RunMetrics {
             scenario: scenario.to_string(),
             ticks: fleet.ticks(),
             sim_time_s: fleet.ticks() as f64 * p.dt,
             all_arrived: arrival.values().all(Option::is_some),
             arrival_time_s: arrival,
-            stall_s: self.stall_s,
-            max_stall_s: self.max_stall_s,
-            max_wait_s: self.max_wait_s,
-            min_collision_margin_m: self.min_collision,
-            min_road_margin_m: self.min_road,
-            min_separation_m: self.min_separation,
-            min_wall_distance_m: self.min_wall,
-            steps_outside_road: self.outside,
+            stall_s: m.stall_s,
+            max_stall_s: m.max_stall_s,
+            max_wait_s: m.max_wait_s,
+            min_collision_margin_m: m.min_collision,
+            min_road_margin_m: m.min_road,
+            min_separation_m: m.min_separation,
+            min_wall_distance_m: m.min_wall,
+            steps_outside_road: m.outside,
             qp,
             safe,
         }

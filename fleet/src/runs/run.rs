@@ -183,7 +183,7 @@ fn run_with(
         w.flush()?;
     }
     land(&mut fleet, wait_tick, params.dt);
-    let (policy_fallbacks, stalls) = (recorder.policy_fallbacks, recorder.stalls(&fleet));
+    let (policy_fallbacks, stalls) = (recorder.policy_fallbacks(), recorder.stalls(&fleet));
     let paths = paths.map(PathRecorder::finish).unwrap_or_default();
     Ok(RunOutcome { metrics: recorder.finish(&fleet, &scenario.name), policy_fallbacks, stalls, paths })
 }
