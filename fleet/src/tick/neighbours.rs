@@ -1,7 +1,9 @@
 //! Neighbour search on a uniform grid of rows: the plane is cut into horizontal bands as tall as
 //! the radius, every UAV is sorted by (band, x, index), and each UAV looks at its own band and the
 //! two beside it within x ± radius, found with pointers that only move forward along each band. Every
-//! pair closer than the radius is in such a window (its y differs by less than one band), the work is
+//! pair closer than the radius is in such a window (its y differs by less than one band; the window
+//! is widened by a few ulps, and reaches the next band but one where rounding in y / r puts a pair
+//! exactly r apart two bands apart, so that the exact distance test alone decides), the work is
 //! O(N log N) for the sort plus O(N + candidates) at bounded density, whichever way the road runs (a
 //! sweep along x alone degenerated on roads running north–south), and each UAV's list comes out
 //! ordered by x, then index (the hits of three windows, each in that order, put together). Each
@@ -132,7 +134,7 @@ impl NeighbourSearch {
             _ => entries.len(),
         };
         let [first, second] = &mut self.halves;
-        let search = (positions, own, radius);
+        let search = (positions, own, radius, &band);
         if wide {
             rayon::join(
                 || find(entries, 0..split, search, first),
@@ -162,7 +164,7 @@ impl NeighbourSearch {
 fn find(
     entries: &[(i64, f64, u32)],
     range: std::ops::Range<usize>,
-    (positions, own, radius): (&[Vec2], usize, f64),
+    (positions, own, radius, band): (&[Vec2], usize, f64, &(impl Fn(f64) -> i64 + Sync)),
     out: &mut Found,
 ) {
     out.own.clear();
@@ -172,14 +174,17 @@ fn find(
     let r2 = radius * radius;
     let mut start = range.start;
     while start < range.end {
+        // Bands are clamped to ±MAX_BAND (2⁵²), so b ± 2 does not overflow.
         let b = entries[start].0;
         let end = start + entries[start..].partition_point(|e| e.0 == b);
-        // The runs of bands b − 1, b and b + 1 (empty where no UAV is), with window pointers.
+        // The runs of bands b − 2 to b + 2 (empty where no UAV is), with window pointers: a UAV
+        // looks at b − 1 to b + 1, and at b ± 2 as well when y ∓ r (widened as x ± r below) falls
+        // there, which rounding in y / r can make happen for a pair exactly r apart.
         let run = |band: i64| {
             let lo = entries.partition_point(|e| e.0 < band);
             (lo, lo + entries[lo..].partition_point(|e| e.0 == band))
         };
-        let runs = [run(b - 1), (start, end), run(b + 1)];
+        let runs = [run(b - 2), run(b - 1), (start, end), run(b + 1), run(b + 2)];
         let mut from = runs.map(|(lo, _)| lo);
         for &(_, x, a) in &entries[start..end] {
             let (a, p) = (a as usize, positions[a as usize]);
@@ -195,7 +200,10 @@ fn find(
             // that radius was found from one side only), and the lists stay symmetric.
             let slack = (x.abs() + radius) * 4.0 * f64::EPSILON;
             let (x_lo, x_hi) = (x - radius - slack, x + radius + slack);
-            for w in 0..3 {
+            let slack_y = (p.y.abs() + radius) * 4.0 * f64::EPSILON;
+            let below = usize::from(band(p.y - radius - slack_y) < b - 1);
+            let above = usize::from(band(p.y + radius + slack_y) > b + 1);
+            for w in 1 - below..4 + above {
                 while from[w] < runs[w].1 && entries[from[w]].1 < x_lo {
                     from[w] += 1;
                 }
@@ -269,6 +277,19 @@ mod tests {
         assert_eq!(lists(&s), brute(&pts, radius));
     }
 
+    /// Two points r apart across two band edges, where y / r rounds to bands two apart (a tiny
+    /// negative y in band −1, the other at exactly r in band 1): each is in the other's list.
+    #[test]
+    fn a_pair_two_bands_apart_by_rounding_is_found() {
+        let radius = 3.45463424658999;
+        let pts = [Vec2::new(0.0, -1e-17), Vec2::new(0.0, radius)];
+        assert!((pts[1] - pts[0]).norm_squared() <= radius * radius);
+        let mut s = NeighbourSearch::default();
+        s.update(&pts, radius);
+        assert_eq!(lists(&s), vec![vec![1], vec![0]]);
+        assert_eq!(lists(&s), brute(&pts, radius));
+    }
+
     #[test]
     fn grid_finds_exactly_the_pairs_within_the_radius() {
         let pts: Vec<Vec2> =
@@ -282,7 +303,8 @@ mod tests {
         #![proptest_config(ProptestConfig::with_cases(1000))]
 
         /// The grid's lists equal the all-pairs search: clusters, points on cell borders (multiples of
-        /// the radius), negative and far-out coordinates, non-finite points, repeated points.
+        /// the radius, or a hair below), negative and far-out coordinates, non-finite points, repeated
+        /// points.
         #[test]
         fn grid_equals_all_pairs(
             raw in proptest::collection::vec((0u8..8, -50i32..50, -50i32..50, 0.0f64..1.0), 0..120),
@@ -295,6 +317,8 @@ mod tests {
                     1 => Vec2::new(f64::NAN, j as f64),
                     2 => Vec2::new(i as f64 * 1e12, j as f64 * 1e12),
                     3 => Vec2::new(1.0, 1.0),
+                    // On a band's edge, or a hair below it: pairs exactly r apart across two edges.
+                    4 => Vec2::new(i as f64 * radius, j as f64 * radius - f * 1e-15),
                     _ => Vec2::new(i as f64 * 0.1 + f, j as f64 * 0.1 - f),
                 })
                 .collect();
