@@ -261,33 +261,27 @@ mod tests {
         (0..s.lists.len()).map(|k| s.lists[k].to_vec()).collect()
     }
 
-    /// Two points whose distance equals the radius to the last bit, where x + r rounds below the
-    /// farther one's x (found by the property test below): each is in the other's list.
+    /// Pairs exactly the radius apart where rounding once hid them (each case failed before its
+    /// fix): x + r rounding below the farther one's x (found by the property test below), and
+    /// y / r rounding to bands two apart (a tiny negative y in band −1, the other at r in band 1).
+    /// Each is in the other's list.
     #[test]
-    fn a_pair_at_the_radius_is_found_from_both_sides() {
-        let radius = 1.0324927022956785;
-        let pts = [
-            Vec2::new(-0.9911929942038513, 24.779824855096283),
-            Vec2::new(0.041299708091827175, 24.779824855096283),
-        ];
-        assert!((pts[1] - pts[0]).norm_squared() <= radius * radius);
-        let mut s = NeighbourSearch::default();
-        s.update(&pts, radius);
-        assert_eq!(lists(&s), vec![vec![1], vec![0]]);
-        assert_eq!(lists(&s), brute(&pts, radius));
-    }
-
-    /// Two points r apart across two band edges, where y / r rounds to bands two apart (a tiny
-    /// negative y in band −1, the other at exactly r in band 1): each is in the other's list.
-    #[test]
-    fn a_pair_two_bands_apart_by_rounding_is_found() {
-        let radius = 3.45463424658999;
-        let pts = [Vec2::new(0.0, -1e-17), Vec2::new(0.0, radius)];
-        assert!((pts[1] - pts[0]).norm_squared() <= radius * radius);
-        let mut s = NeighbourSearch::default();
-        s.update(&pts, radius);
-        assert_eq!(lists(&s), vec![vec![1], vec![0]]);
-        assert_eq!(lists(&s), brute(&pts, radius));
+    fn pairs_exactly_the_radius_apart_are_found_from_both_sides() {
+        let across_x = (
+            1.0324927022956785,
+            [
+                Vec2::new(-0.9911929942038513, 24.779824855096283),
+                Vec2::new(0.041299708091827175, 24.779824855096283),
+            ],
+        );
+        let across_bands = (3.45463424658999, [Vec2::new(0.0, -1e-17), Vec2::new(0.0, 3.45463424658999)]);
+        for (radius, pts) in [across_x, across_bands] {
+            assert!((pts[1] - pts[0]).norm_squared() <= radius * radius);
+            let mut s = NeighbourSearch::default();
+            s.update(&pts, radius);
+            assert_eq!(lists(&s), vec![vec![1], vec![0]], "{pts:?} with radius {radius}");
+            assert_eq!(lists(&s), brute(&pts, radius));
+        }
     }
 
     #[test]
