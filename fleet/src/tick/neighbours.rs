@@ -6,7 +6,7 @@
 //! exactly r apart two bands apart, so that the exact distance test alone decides), the work is
 //! O(N log N) for the sort plus O(N + candidates) at bounded density, whichever way the road runs (a
 //! sweep along x alone degenerated on roads running north–south), and each UAV's list comes out
-//! ordered by x, then index (the hits of three windows, each in that order, put together). Each
+//! ordered by x, then index (the hits of its windows, each in that order, put together). Each
 //! sort starts from the last one's order: UAVs move little in a tick, and an insertion sort finishes
 //! it in about one pass. The lists share one buffer ([`Ragged`]) reused every tick. Large fleets
 //! search the two halves of the bands at once (and sort on both cores when the order is new).
@@ -192,7 +192,7 @@ fn find(
                 continue;
             }
             // Each window: the entries of a run with x in [x − r, x + r]; its points within the
-            // radius are kept with their x, then the three windows' hits are put in (x, index)
+            // radius are kept with their x, then the windows' hits are put in (x, index)
             // order (each window is in that order already: a sort of a few short runs).
             hits.clear();
             // The window is widened by a few ulps of its bounds, so that rounding in x ± r never

@@ -90,6 +90,9 @@ pub struct TrafficAlong {
     forward: Buckets,
     /// Towards decreasing s.
     backward: Buckets,
+    /// The arc length (m) ahead that [`TrafficAlong::oncoming_within`] looks over (the buckets'
+    /// length).
+    range: f64,
     /// Scratch: each direction's arc lengths before bucketing.
     scratch: [Vec<f64>; 2],
     /// Every UAV as `follow` reads it, by index.
@@ -100,6 +103,7 @@ impl TrafficAlong {
     /// Buckets the UAVs on a route and the `foreign` ones moving along the road by direction, on a
     /// road `length` m long, for queries over `range` m of arc length.
     pub(crate) fn update(&mut self, uavs: &[Uav], foreign: &[ForeignView], length: f64, range: f64) {
+        self.range = range;
         let seen = |u: &Uav| Seen { route: u.traffic.route, p: u.state.p, v: u.state.v };
         crate::tick::map_into(uavs, seen, &mut self.seen);
         let [forward, backward] = &mut self.scratch;
@@ -113,8 +117,9 @@ impl TrafficAlong {
         self.backward.fill(backward, length, range);
     }
 
-    /// True when a UAV flying the other way is within `range` of arc length ahead of `me`.
-    pub(crate) fn oncoming_within(&self, me: &RoutePosition, range: f64) -> bool {
+    /// True when a UAV flying the other way is within the `range` of the last update ahead of `me`.
+    pub(crate) fn oncoming_within(&self, me: &RoutePosition) -> bool {
+        let range = self.range;
         if me.direction() > 0.0 {
             self.backward.any_within(me.s, me.s + range)
         } else {

@@ -117,7 +117,7 @@ fn applies(
         return None;
     }
     let other_way = |o: Option<RoutePosition>| o.is_some_and(|o| o.direction() != me.direction());
-    let oncoming = traffic.oncoming_within(me, nav.r_s)
+    let oncoming = traffic.oncoming_within(me)
         || neighbours.iter().any(|&d| other_way(uavs[d].route))
         || foreign.of(k).any(|f| other_way(f.flying_along()));
     let p = uavs[k].p;

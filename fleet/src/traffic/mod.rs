@@ -77,8 +77,8 @@ pub struct TrafficRules {
     queue: Vec<(usize, usize, f64, usize)>,
     /// Scratch: the section (zone, entry) each UAV must cross next, if it is near one.
     wanted: Vec<Option<(usize, usize)>>,
-    /// The UAVs that want a zone this tick, in order (those with a `wanted` zone).
-    asking: Vec<usize>,
+    /// The UAVs that want a zone this tick, in order, each with the (zone, entry) it wants.
+    asking: Vec<(usize, (usize, usize))>,
     /// Scratch: per zone and entry, the queue order of the foremost UAV waiting there.
     front: Vec<f64>,
     /// Scratch: per UAV, whether it waits at the head of its entry's queue this tick.
@@ -201,23 +201,23 @@ impl TrafficRules {
         crate::tick::map_mut_into(uavs, want, &mut self.wanted);
         // The UAVs that want a zone, in order: the only records the passes below read.
         self.asking.clear();
-        self.asking.extend(self.wanted.iter().enumerate().filter_map(|(k, w)| w.map(|_| k)));
+        self.asking.extend(self.wanted.iter().enumerate().filter_map(|(k, w)| w.map(|w| (k, w))));
         // The foremost UAV waiting at each entry (without its grant).
         self.front.clear();
         self.front.resize(2 * self.sections.len(), f64::INFINITY);
-        for &k in &self.asking {
-            let (u, wanted) = (&uavs[k], self.wanted[k]);
-            if let (Some((zone, entry)), Some(pos)) = (wanted, u.traffic.route)
-                && u.traffic.grant != wanted
+        for &(k, (zone, entry)) in &self.asking {
+            let u = &uavs[k];
+            if let Some(pos) = u.traffic.route
+                && u.traffic.grant != Some((zone, entry))
             {
                 let front = &mut self.front[2 * zone + entry];
                 *front = front.min(queue_order(&pos));
             }
         }
-        for &k in &self.asking {
+        for &(k, (zone, entry)) in &self.asking {
             let u = &mut uavs[k];
-            let (position, wanted) = (u.traffic.route, self.wanted[k]);
-            if let Some((zone, entry)) = wanted.filter(|_| u.traffic.grant == wanted)
+            let position = u.traffic.route;
+            if u.traffic.grant == Some((zone, entry))
                 && let Some(pos) = position
             {
                 // Clear of its entry (the next may follow, lined up behind it) once a follow gap past
@@ -235,8 +235,6 @@ impl TrafficRules {
                 }
             }
             u.traffic.grant = None;
-            // Every asking UAV wants a zone.
-            let Some((zone, entry)) = wanted else { continue };
             let since = *u.traffic.waiting_since.get_or_insert(now);
             let z = self.sections[zone];
             let pushed = PUSHED_PAST_HOLD_M;
@@ -298,7 +296,7 @@ impl TrafficRules {
         let entering = &mut self.entering;
         entering.clear();
         // Only a UAV that wants a zone still holds a grant here (`reserve`).
-        for &k in &self.asking {
+        for &(k, _) in &self.asking {
             let u = &uavs[k];
             if let (Some((zone, entry)), Some(pos)) = (u.traffic.grant, u.traffic.route) {
                 let z = self.sections[zone];
