@@ -93,10 +93,31 @@ fn min_opt(a: Option<f64>, b: Option<f64>) -> Option<f64> {
 impl Totals {
     /// Back to no observation, keeping the memory of the histogram and the ended stalls.
     pub fn clear(&mut self) {
-        let (mut solve_us, mut ended) = (std::mem::take(&mut self.solve_us), std::mem::take(&mut self.ended));
+        // Field by field (a `Default` would allocate a histogram only to drop it, once per chunk and
+        // tick), destructured so that a new field cannot be forgotten.
+        let Self {
+            min_collision,
+            min_separation,
+            min_road,
+            min_wall,
+            outside,
+            solves,
+            slack_used,
+            max_slack,
+            failures,
+            policy_fallbacks,
+            solve_us,
+            stall_s,
+            max_stall_s,
+            max_wait_s,
+            ended,
+        } = self;
         solve_us.clear();
         ended.clear();
-        *self = Self { solve_us, ended, ..Self::default() };
+        (*min_collision, *min_separation) = (None, None);
+        (*min_road, *min_wall) = (f64::INFINITY, f64::INFINITY);
+        (*outside, *solves, *slack_used, *failures, *policy_fallbacks) = (0, 0, 0, 0, 0);
+        (*max_slack, *stall_s, *max_stall_s, *max_wait_s) = (0.0, 0.0, 0.0, 0.0);
     }
 
     /// Adds UAV k (`u`, its margins `m`) at time `t` of ticks `dt` long: its stall going on
