@@ -38,6 +38,19 @@ async fn health_openapi_state_and_metrics() {
     assert!(metrics["ticks"].as_u64().unwrap() >= 3, "{metrics}");
     assert!(metrics["tick"]["p99_us"].as_f64().unwrap() > 0.0, "{metrics}");
     assert_eq!(metrics["qp"]["failures"], 0);
+    // Where the ticks went: every stage measured, the fleet's and the snapshot's adding up to the
+    // mean tick (at most the longest).
+    let stages = &metrics["stages"];
+    let stage = |key: &str| stages[key].as_f64().unwrap_or_else(|| panic!("stages.{key} missing: {metrics}"));
+    let in_tick =
+        ["read_us", "neighbours_us", "navigation_us", "policies_us", "rows_us", "filter_us", "send_us"]
+            .iter()
+            .chain(&["snapshot_us", "other_us"])
+            .map(|key| stage(key))
+            .inspect(|&us| assert!(us >= 0.0, "{metrics}"))
+            .sum::<f64>();
+    assert!(stage("filter_us") > 0.0 && stage("snapshot_us") > 0.0 && stage("publish_us") > 0.0, "{metrics}");
+    assert!(in_tick <= metrics["tick"]["max_us"].as_f64().unwrap() + 1.0, "{metrics}");
     // Stalls are measured (nothing stalls here in the first ticks).
     assert_eq!(
         (metrics["stalled_uavs"].as_u64(), metrics["longest_stall_s"].as_f64()),

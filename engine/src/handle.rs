@@ -287,6 +287,8 @@ fn first_fleet(
 ) -> anyhow::Result<(Fleet, String)> {
     let saved = if resume { store.load()? } else { None };
     let mut fleet_config = config.fleet;
+    // The snapshot shows each UAV's collision margin: the rows stage measures it with the rows.
+    fleet_config.uav_collision_margins = true;
     let Some(saved) = saved else {
         fleet_config.params = config.initial.params;
         let mut fleet = Fleet::new(fleet_config, config.initial.road.clone(), config.policies);

@@ -18,6 +18,7 @@ pub mod road_view;
 pub mod snapshot;
 pub mod stats;
 pub mod store;
+mod tick_counts;
 
 pub use fleet_loop::{Engine, LoopChannels, LoopClock};
 pub use handle::{ApplyError, EngineConfig, EngineHandle, RunningEngine, start};

@@ -292,22 +292,24 @@ impl Snapshot {
         let all = fleet.uavs();
         let paused = fleet.paused();
         let before = previous.map_or(&[][..], |s| &s.uavs[..]);
-        // The road margins the tick's rows stage measured, while the fleet holds the states it read.
-        let tick_margins = fleet.tick_road_margins();
+        // The margins the tick's rows stage measured, while the fleet holds the states it read.
+        let tick_margins = fleet.tick_margins();
         // Each UAV's entry on its own (in parallel for large fleets: a UAV is `Sync`, its link only
         // read through `&self` methods that lock what they share).
         let entry = |(k, u): (usize, &Uav)| {
             let state = u.state;
             // UAVs on the ground (landed, stopped, not yet up) are not in each other's airspace.
-            let collision = lists.get(k).filter(|_| u.condition.in_the_air()).and_then(|list| {
-                list.iter()
-                    .filter_map(|&d| all.get(d))
-                    .filter(|d| d.condition.in_the_air())
-                    .map(|d| collision_margin(&state, &d.state, 2.0 * p.delta))
-                    .min_by(f64::total_cmp)
+            let collision = tick_margins.and_then(|m| m.collision(k)).unwrap_or_else(|| {
+                lists.get(k).filter(|_| u.condition.in_the_air()).and_then(|list| {
+                    list.iter()
+                        .filter_map(|&d| all.get(d))
+                        .filter(|d| d.condition.in_the_air())
+                        .map(|d| collision_margin(&state, &d.state, 2.0 * p.delta))
+                        .min_by(f64::total_cmp)
+                })
             });
             let road_margin = match &tick_margins {
-                Some(margin_of) => margin_of(k),
+                Some(margins) => margins.road(k),
                 None => road_margin_in(road, u.nav.tracker.current, &state, p.delta),
             };
             let was = before.get(k);
@@ -355,3 +357,7 @@ impl Snapshot {
         }
     }
 }
+
+#[cfg(test)]
+#[path = "snapshot_tests.rs"]
+mod tests;

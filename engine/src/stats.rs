@@ -2,6 +2,7 @@
 //! for percentiles, running counters and the smallest safety margins seen.
 
 use super::snapshot::Snapshot;
+use super::tick_counts::{TickCounts, min_opt};
 use fleet::Fleet;
 use serde::Serialize;
 use std::collections::VecDeque;
@@ -18,6 +19,106 @@ pub struct DurationStats {
     pub p99_us: f64,
     /// Largest in the window.
     pub max_us: f64,
+}
+
+/// Where a tick's time goes (`stages` in `GET /api/metrics`): the mean over the window of each
+/// stage of the fleet's tick (ARCHITECTURE.md, "One tick"), of building the snapshot, and of what the
+/// loop does after the tick's duration is taken (its statistics, publishing), all in µs.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, schemars::JsonSchema)]
+pub struct TickStages {
+    /// Reading every link's state.
+    pub read_us: f64,
+    /// The neighbour search.
+    pub neighbours_us: f64,
+    /// Navigation and the traffic rules.
+    pub navigation_us: f64,
+    /// The policies and the speed limits.
+    pub policies_us: f64,
+    /// Building every UAV's rows.
+    pub rows_us: f64,
+    /// The CBF-QP filter.
+    pub filter_us: f64,
+    /// Sending every command.
+    pub send_us: f64,
+    /// Building the snapshot (the last part of the tick's duration).
+    pub snapshot_us: f64,
+    /// The rest of the tick's duration (a region's work before the tick, bookkeeping).
+    pub other_us: f64,
+    /// After the tick's duration: these statistics, publishing the snapshot and metrics (not in
+    /// the tick's duration, but on the loop's thread before the next tick).
+    pub publish_us: f64,
+}
+
+impl TickStages {
+    /// The stages as an array, in the order of the fields.
+    fn to_array(self) -> [f64; 10] {
+        [
+            self.read_us,
+            self.neighbours_us,
+            self.navigation_us,
+            self.policies_us,
+            self.rows_us,
+            self.filter_us,
+            self.send_us,
+            self.snapshot_us,
+            self.other_us,
+            self.publish_us,
+        ]
+    }
+
+    /// The stages of an array in the order of the fields.
+    fn from_array(a: [f64; 10]) -> Self {
+        let [
+            read_us,
+            neighbours_us,
+            navigation_us,
+            policies_us,
+            rows_us,
+            filter_us,
+            send_us,
+            snapshot_us,
+            other_us,
+            publish_us,
+        ] = a;
+        Self {
+            read_us,
+            neighbours_us,
+            navigation_us,
+            policies_us,
+            rows_us,
+            filter_us,
+            send_us,
+            snapshot_us,
+            other_us,
+            publish_us,
+        }
+    }
+
+    /// The fleet's stages of one tick with the loop's: `snapshot_us` building the snapshot, `total_us`
+    /// the tick's duration (the rest is `other_us`), `publish_us` the work after it.
+    pub fn of_tick(fleet: fleet::StageTimes, snapshot_us: f64, total_us: f64, publish_us: f64) -> Self {
+        let f = fleet;
+        let counted = f.read_us
+            + f.neighbours_us
+            + f.navigation_us
+            + f.policies_us
+            + f.rows_us
+            + f.filter_us
+            + f.send_us
+            + snapshot_us;
+        Self {
+            read_us: f.read_us,
+            neighbours_us: f.neighbours_us,
+            navigation_us: f.navigation_us,
+            policies_us: f.policies_us,
+            rows_us: f.rows_us,
+            filter_us: f.filter_us,
+            send_us: f.send_us,
+            snapshot_us,
+            other_us: (total_us - counted).max(0.0),
+            publish_us,
+        }
+    }
 }
 
 /// Solver counters since the server started.
@@ -92,6 +193,8 @@ pub struct LoopMetrics {
     pub dt: f64,
     /// Tick durations over the last [`WINDOW_TICKS`] ticks.
     pub tick: DurationStats,
+    /// Where the ticks of the window spent their time (means).
+    pub stages: TickStages,
     /// Duration of the last tick (µs).
     pub last_tick_us: f64,
     /// Ticks whose work took longer than dt (each counted, however long: a stall cannot hide in
@@ -128,15 +231,10 @@ pub struct LoopMetrics {
 #[derive(Debug)]
 pub struct TickStats {
     window: VecDeque<f64>,
+    /// Each tick's stages over the same window ([`TickStages::to_array`]).
+    stage_window: VecDeque<[f64; 10]>,
     scratch: Vec<f64>,
     metrics: LoopMetrics,
-}
-
-fn min_opt(a: Option<f64>, b: Option<f64>) -> Option<f64> {
-    match (a, b) {
-        (Some(a), Some(b)) => Some(a.min(b)),
-        (a, b) => a.or(b),
-    }
 }
 
 impl TickStats {
@@ -144,6 +242,7 @@ impl TickStats {
     pub fn new(dt: f64) -> Self {
         Self {
             window: VecDeque::with_capacity(WINDOW_TICKS),
+            stage_window: VecDeque::with_capacity(WINDOW_TICKS),
             scratch: Vec::with_capacity(WINDOW_TICKS),
             metrics: LoopMetrics { dt, ..LoopMetrics::default() },
         }
@@ -177,43 +276,50 @@ impl TickStats {
             self.window.pop_front();
         }
         self.window.push_back(duration_us);
-        (m.stalled_uavs, m.longest_stall_s, m.links) = (0, 0.0, LinkCounters::default());
-        for u in fleet.uavs() {
-            let l = &u.last;
-            // As METRICS.json counts it.
-            m.stall_s += fleet::progress::stall_time_added(l.stall_s, m.dt);
-            m.stalled_uavs += u64::from(l.stall_s > 0.0);
-            m.longest_stall_s = m.longest_stall_s.max(l.stall_s);
-            m.qp.solves += u64::from(l.solved);
-            m.qp.slack_used += u64::from(l.max_slack > 1e-6);
-            m.qp.max_slack = m.qp.max_slack.max(l.max_slack);
-            m.qp.failures += u64::from(l.failed);
-            m.policy_fallbacks += u64::from(l.policy_fallback);
-            m.stale_states += u64::from(u.stale_ticks > 0);
-            m.links.unconfirmed_commands += u.link.unconfirmed_commands();
-        }
-        // The snapshot already read each link's description and error this tick (an error is a
-        // string behind the session's lock: read it once per tick, not twice).
-        for u in &snapshot.uavs {
-            m.links.crazyflies += u64::from(*u.link != *links::SIM_LINK);
-            m.links.with_error += u64::from(u.link_error.is_some());
-            if let Some(f) = &u.firmware {
-                m.links.locked += u64::from(f.locked);
-                m.links.tumbled_or_crashed += u64::from(f.tumbled || f.crashed);
-                m.links.min_battery_v = min_opt(m.links.min_battery_v, f.battery_v);
-                m.links.min_link_quality = min_opt(m.links.min_link_quality, f.link_quality);
-            }
-        }
+        // One pass over the UAVs and their entries, on all cores for a large fleet.
+        let c = TickCounts::of(fleet.uavs(), &snapshot.uavs, m.dt);
+        m.stall_s += c.stall_s;
+        (m.stalled_uavs, m.longest_stall_s) = (c.stalled_uavs, c.longest_stall_s);
+        m.qp.solves += c.solves;
+        m.qp.slack_used += c.slack_used;
+        m.qp.max_slack = m.qp.max_slack.max(c.max_slack);
+        m.qp.failures += c.failures;
+        m.policy_fallbacks += c.policy_fallbacks;
+        m.stale_states += c.stale_states;
+        m.links = LinkCounters {
+            crazyflies: c.crazyflies,
+            with_error: c.with_error,
+            unconfirmed_commands: c.unconfirmed_commands,
+            locked: c.locked,
+            tumbled_or_crashed: c.tumbled_or_crashed,
+            min_battery_v: c.min_battery_v,
+            min_link_quality: c.min_link_quality,
+            errors: Vec::new(),
+        };
         m.min_collision_margin_m = min_opt(m.min_collision_margin_m, snapshot.min_collision_margin_m);
         m.min_road_margin_m = min_opt(m.min_road_margin_m, snapshot.min_road_margin_m);
     }
 
-    /// The current metrics (percentiles over the window).
+    /// Records where the last tick's time went.
+    pub fn stages(&mut self, stages: TickStages) {
+        if self.stage_window.len() == WINDOW_TICKS {
+            self.stage_window.pop_front();
+        }
+        self.stage_window.push_back(stages.to_array());
+    }
+
+    /// The current metrics (percentiles and means over the window).
     pub fn metrics(&mut self) -> LoopMetrics {
         self.scratch.clear();
         self.scratch.extend(self.window.iter().copied());
         let mut m = self.metrics.clone();
         m.tick = percentiles(&mut self.scratch);
+        let mut sum = [0.0; 10];
+        for stages in &self.stage_window {
+            sum.iter_mut().zip(stages).for_each(|(s, x)| *s += x);
+        }
+        let n = self.stage_window.len().max(1) as f64;
+        m.stages = TickStages::from_array(sum.map(|s| s / n));
         m
     }
 }

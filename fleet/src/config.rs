@@ -64,6 +64,10 @@ pub struct FleetConfig {
     /// when that costs at least this many seconds less than its own, counting the queues measured
     /// ahead ([`crate::traffic::congestion`]); None: every UAV keeps the fastest way by travel time.
     pub reroute_margin_s: Option<f64>,
+    /// The rows stage also measures each UAV's smallest collision margin to a neighbour in the air
+    /// ([`crate::Fleet::tick_margins`]), which the server's snapshot shows per UAV; headless runs
+    /// need only the smallest over the pairs and leave it off.
+    pub uav_collision_margins: bool,
 }
 
 impl Default for FleetConfig {
@@ -77,6 +81,7 @@ impl Default for FleetConfig {
             stale_after: 0.3,
             lost_reach_horizon: 2.0,
             reroute_margin_s: Some(crate::traffic::congestion::REROUTE_MARGIN_S),
+            uav_collision_margins: false,
         }
     }
 }

@@ -30,7 +30,7 @@ pub use member::ForeignUav;
 pub use member::{Uav, UavTick};
 pub use ragged::Ragged;
 pub use runs::histogram::DurationHistogram;
-pub use runs::margins::{collision_margin, road_margin, road_margin_in};
+pub use runs::margins::{TickMargins, collision_margin, road_margin, road_margin_in};
 pub use runs::metrics::{MetricsRecorder, QpMetrics, RunMetrics, Stall};
 pub use runs::run::{
     RunOptions, RunOutcome, TAKEOFF_TIMEOUT_S, TRAJECTORY_HEADER, run_scenario, run_scenario_on,

@@ -3,7 +3,7 @@
 
 use crate::fleet::Fleet;
 use crate::member::Uav;
-use crate::runs::margins::{collision_margin, road_margin};
+use crate::runs::margins::{TickMargins, collision_margin, road_margin};
 use links::Link;
 use roads::{Airspace, NavState};
 use uav::{UavState, Vec2};
@@ -61,13 +61,12 @@ impl Fleet {
         &self.pipeline.neighbours.lists
     }
 
-    /// Each UAV's road margin (eq. 6, `road_margin_in`'s value) as the last tick's rows stage
-    /// measured it, `[k]` for UAV k; None when the fleet no longer holds the states that tick read
-    /// (a UAV added, removed or moved since): measure them again then. One pass over the fleet.
-    pub fn tick_road_margins(&self) -> Option<impl Fn(usize) -> f64 + Sync + '_> {
+    /// Each UAV's margins as the last tick's rows stage measured them ([`TickMargins`]); None when
+    /// the fleet no longer holds the states that tick read (a UAV added, removed or moved since):
+    /// measure them again then. One pass over the fleet.
+    pub fn tick_margins(&self) -> Option<TickMargins<'_>> {
         let rows = &self.pipeline.rows;
-        rows.margins_hold_for(&self.uavs)
-            .then_some(move |k| rows.margins(k).map_or(f64::INFINITY, |m| m.road_margin))
+        rows.margins_hold_for(&self.uavs).then_some(TickMargins { rows })
     }
 
     /// Pause (every UAV brakes to a hover; the filter still runs) or fly the policies again.

@@ -1,5 +1,6 @@
 //! The safety margins a run reports: eq. (2) and eq. (6) left sides with the corrected sign (E1).
 
+use crate::tick::rows::RowBuilder;
 use roads::{Boundary, Wall};
 use safety::barrier::braking_margin;
 use safety::wall_braking_margin;
@@ -58,6 +59,27 @@ fn wall_margin(w: &Wall, s: &UavState, delta: f64) -> f64 {
     wall_braking_margin(w, w.nearest(&s.p), s.p, s.v, delta)
 }
 
+/// Each UAV's margins at the states the last tick read, as its rows stage measured them
+/// ([`crate::Fleet::tick_margins`]), by the UAV's index.
+#[derive(Clone, Copy)]
+pub struct TickMargins<'a> {
+    pub(crate) rows: &'a RowBuilder,
+}
+
+impl TickMargins<'_> {
+    /// UAV k's road margin (eq. 6, [`road_margin_in`]'s value; infinite when there is no UAV k).
+    pub fn road(&self, k: usize) -> f64 {
+        self.rows.margins(k).map_or(f64::INFINITY, |m| m.road_margin)
+    }
+
+    /// UAV k's smallest collision margin S_kd to a neighbour in the air when it is in the air itself
+    /// (`Some(None)` without one), as [`collision_margin`] gives it; None when the fleet does not
+    /// measure it (`FleetConfig::uav_collision_margins` off).
+    pub fn collision(&self, k: usize) -> Option<Option<f64>> {
+        self.rows.collision_margin(k)
+    }
+}
+
 /// One UAV's margins in one tick, as the metrics count them.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(crate) struct UavMargins {
@@ -100,6 +122,33 @@ pub(crate) fn closest_pair<'a>(
         let (m, sep) = (collision_margin(state, other, 2.0 * delta), (state.p - other.p).norm());
         Some(closest.map_or((m, sep), |(a, b)| (a.min(m), b.min(sep))))
     })
+}
+
+/// [`closest_pair`] of UAV k at `state` over its neighbours of higher index, and with it the smallest
+/// S_kd to any neighbour in the air when k is in the air (the snapshot's `collision_margin_m`), in
+/// one pass that measures each pair once: `neighbours` gives each one's index, state and whether it
+/// is in the air. The smallest of equal zeros is −0 (a total order, as `min_by(f64::total_cmp)`).
+pub(crate) fn pair_margins<'a>(
+    (k, state, in_the_air): (usize, &UavState, bool),
+    delta: f64,
+    neighbours: impl Iterator<Item = (usize, &'a UavState, bool)>,
+) -> (Option<(f64, f64)>, Option<f64>) {
+    let (mut closest, mut nearest): (Option<(f64, f64)>, Option<f64>) = (None, None);
+    for (d, other, other_in_the_air) in neighbours {
+        let (later, both_in_the_air) = (d > k, in_the_air && other_in_the_air);
+        if !later && !both_in_the_air {
+            continue;
+        }
+        let m = collision_margin(state, other, 2.0 * delta);
+        if later {
+            let sep = (state.p - other.p).norm();
+            closest = Some(closest.map_or((m, sep), |(a, b)| (a.min(m), b.min(sep))));
+        }
+        if both_in_the_air {
+            nearest = Some(nearest.map_or(m, |n| std::cmp::min_by(n, m, f64::total_cmp)));
+        }
+    }
+    (closest, nearest)
 }
 
 /// The radius beyond which no wall holds the road margin of a UAV at `s` at distance `boundary` > 0

@@ -107,6 +107,7 @@ impl TickPipeline {
             foreign_disks: &self.foreign_disks,
         };
         let config = fleet.config;
+        self.rows.collision_per_uav = config.uav_collision_margins;
         self.rows.build(fleet.road, rule, &params, fleet.uavs, neighbours, |u| disk_of(u, config));
         self.stages.rows_us = lap();
         self.filter.run(fleet, &self.rows);

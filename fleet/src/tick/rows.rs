@@ -18,7 +18,7 @@
 
 use crate::member::Uav;
 use crate::ragged::Ragged;
-use crate::runs::margins::{UavMargins, closest_pair, road_margin_at, road_margin_reach};
+use crate::runs::margins::{UavMargins, closest_pair, pair_margins, road_margin_at, road_margin_reach};
 use crate::tick::{map_into, parallel};
 use rayon::prelude::*;
 use roads::{Airspace, Boundary, SEGMENT_NEAR_M};
@@ -36,6 +36,8 @@ pub(crate) struct RowView {
     pub flying: bool,
     /// It shares pair rows with its neighbours ([`crate::Condition::cooperates`]).
     pub cooperates: bool,
+    /// It is in the air, or may be ([`crate::Condition::in_the_air`]).
+    pub in_the_air: bool,
     /// Its reach disk when it does not cooperate but may be in the air ([`crate::Condition::in_the_air`]).
     pub obstacle: Option<ReachDisk>,
     /// Its tracked segment or cell (a hint for the road's queries).
@@ -66,11 +68,17 @@ struct RowBlock {
     partners: Ragged<usize>,
     /// `margins[i]`: the margins of the block's UAV i.
     margins: Vec<UavMargins>,
+    /// `collision[i]`: the smallest S_kd of the block's UAV i to a neighbour in the air, when both
+    /// are (empty unless [`RowBuilder::collision_per_uav`]).
+    collision: Vec<Option<f64>>,
 }
 
 /// Row buffers, reused from tick to tick.
 #[derive(Debug, Default)]
 pub(crate) struct RowBuilder {
+    /// Also measure each UAV's smallest collision margin to a neighbour in the air
+    /// ([`RowBuilder::collision_margin`]; `FleetConfig::uav_collision_margins`).
+    pub collision_per_uav: bool,
     views: Vec<RowView>,
     /// `blocks[b]`: the rows and margins of UAVs `b·UAVS_PER_BLOCK..`.
     blocks: Vec<RowBlock>,
@@ -94,6 +102,7 @@ impl RowBuilder {
             state: u.state,
             flying: u.condition.flying(),
             cooperates: u.condition.cooperates(),
+            in_the_air: u.condition.in_the_air(),
             obstacle: (!u.condition.cooperates() && u.condition.in_the_air()).then(|| disk_of(u)),
             segment: u.nav.way().map_or(u.nav.tracker.current.unwrap_or(0), |w| w.cell()),
         };
@@ -102,23 +111,31 @@ impl RowBuilder {
             state: UavState { p: disk.centre, v: disk.velocity },
             flying: false,
             cooperates: false,
+            in_the_air: true,
             obstacle: Some(*disk),
             segment: 0,
         }));
         let n = uavs.len();
         self.blocks.resize_with(n.div_ceil(UAVS_PER_BLOCK), RowBlock::default);
         self.blocks.truncate(n.div_ceil(UAVS_PER_BLOCK));
-        let views = &self.views;
+        let (views, collision_per_uav) = (&self.views, self.collision_per_uav);
         let build = |(b, block): (usize, &mut RowBlock)| {
             let first = b * UAVS_PER_BLOCK;
             let uavs = first..(first + UAVS_PER_BLOCK).min(n);
             block.rows.reset(uavs.len());
             block.partners.reset(uavs.len());
             block.margins.clear();
+            block.collision.clear();
             for (i, k) in uavs.enumerate() {
                 let me = views[k];
-                let later = lists[k].iter().filter(|&&d| d > k).map(|&d| &views[d].state);
-                let closest = closest_pair(&me.state, params.delta, later);
+                // The closest later neighbour (for the metrics) and, if asked, the nearest in the air.
+                let (closest, nearest) = if collision_per_uav {
+                    let all = lists[k].iter().map(|&d| (d, &views[d].state, views[d].in_the_air));
+                    pair_margins((k, &me.state, me.in_the_air), params.delta, all)
+                } else {
+                    let later = lists[k].iter().filter(|&&d| d > k).map(|&d| &views[d].state);
+                    (closest_pair(&me.state, params.delta, later), None)
+                };
                 let mut road_margins = None;
                 if me.flying {
                     let neighbours = lists[k].iter().copied().chain(foreign_lists[k].iter().map(|&f| n + f));
@@ -139,6 +156,9 @@ impl RowBuilder {
                     (wall, road_margin_at(road, Some(me.segment), &me.state, params.delta, wall))
                 });
                 block.margins.push(UavMargins { wall, road_margin, closest });
+                if collision_per_uav {
+                    block.collision.push(nearest);
+                }
             }
         };
         if parallel(n) {
@@ -166,6 +186,13 @@ impl RowBuilder {
     /// UAV k's margins at the states read this tick (None when there is no UAV k).
     pub fn margins(&self, k: usize) -> Option<UavMargins> {
         self.blocks.get(k / UAVS_PER_BLOCK)?.margins.get(k % UAVS_PER_BLOCK).copied()
+    }
+
+    /// UAV k's smallest collision margin S_kd to a neighbour in the air at the states read this tick,
+    /// when it is in the air itself (`Some(None)`: no such neighbour or not in the air; None when
+    /// not measured: [`RowBuilder::collision_per_uav`] was off, or there is no UAV k).
+    pub fn collision_margin(&self, k: usize) -> Option<Option<f64>> {
+        self.blocks.get(k / UAVS_PER_BLOCK)?.collision.get(k % UAVS_PER_BLOCK).copied()
     }
 
     /// True when [`RowBuilder::margins`] are those of `uavs` now: built for as many UAVs, each
