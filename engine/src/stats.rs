@@ -50,47 +50,19 @@ pub struct TickStages {
 }
 
 impl TickStages {
-    /// The stages as an array, in the order of the fields.
-    fn to_array(self) -> [f64; 10] {
-        [
-            self.read_us,
-            self.neighbours_us,
-            self.navigation_us,
-            self.policies_us,
-            self.rows_us,
-            self.filter_us,
-            self.send_us,
-            self.snapshot_us,
-            self.other_us,
-            self.publish_us,
-        ]
-    }
-
-    /// The stages of an array in the order of the fields.
-    fn from_array(a: [f64; 10]) -> Self {
-        let [
-            read_us,
-            neighbours_us,
-            navigation_us,
-            policies_us,
-            rows_us,
-            filter_us,
-            send_us,
-            snapshot_us,
-            other_us,
-            publish_us,
-        ] = a;
+    /// Each stage of `self` and `other` combined by `f`.
+    fn combine(self, other: Self, f: impl Fn(f64, f64) -> f64) -> Self {
         Self {
-            read_us,
-            neighbours_us,
-            navigation_us,
-            policies_us,
-            rows_us,
-            filter_us,
-            send_us,
-            snapshot_us,
-            other_us,
-            publish_us,
+            read_us: f(self.read_us, other.read_us),
+            neighbours_us: f(self.neighbours_us, other.neighbours_us),
+            navigation_us: f(self.navigation_us, other.navigation_us),
+            policies_us: f(self.policies_us, other.policies_us),
+            rows_us: f(self.rows_us, other.rows_us),
+            filter_us: f(self.filter_us, other.filter_us),
+            send_us: f(self.send_us, other.send_us),
+            snapshot_us: f(self.snapshot_us, other.snapshot_us),
+            other_us: f(self.other_us, other.other_us),
+            publish_us: f(self.publish_us, other.publish_us),
         }
     }
 
@@ -231,8 +203,8 @@ pub struct LoopMetrics {
 #[derive(Debug)]
 pub struct TickStats {
     window: VecDeque<f64>,
-    /// Each tick's stages over the same window ([`TickStages::to_array`]).
-    stage_window: VecDeque<[f64; 10]>,
+    /// Each tick's stages over the same window.
+    stage_window: VecDeque<TickStages>,
     scratch: Vec<f64>,
     metrics: LoopMetrics,
 }
@@ -305,7 +277,7 @@ impl TickStats {
         if self.stage_window.len() == WINDOW_TICKS {
             self.stage_window.pop_front();
         }
-        self.stage_window.push_back(stages.to_array());
+        self.stage_window.push_back(stages);
     }
 
     /// The current metrics (percentiles and means over the window).
@@ -314,12 +286,10 @@ impl TickStats {
         self.scratch.extend(self.window.iter().copied());
         let mut m = self.metrics.clone();
         m.tick = percentiles(&mut self.scratch);
-        let mut sum = [0.0; 10];
-        for stages in &self.stage_window {
-            sum.iter_mut().zip(stages).for_each(|(s, x)| *s += x);
-        }
+        let sum =
+            self.stage_window.iter().fold(TickStages::default(), |sum, &t| sum.combine(t, |a, b| a + b));
         let n = self.stage_window.len().max(1) as f64;
-        m.stages = TickStages::from_array(sum.map(|s| s / n));
+        m.stages = sum.combine(TickStages::default(), |total, _| total / n);
         m
     }
 }
@@ -349,5 +319,20 @@ mod tests {
         let s = percentiles(&mut v);
         assert_eq!((s.p50_us, s.p99_us, s.max_us), (51.0, 99.0, 100.0));
         assert_eq!(percentiles(&mut []), DurationStats::default());
+    }
+
+    #[test]
+    fn stages_are_means_over_the_window() {
+        let mut stats = TickStats::new(0.05);
+        assert_eq!(stats.metrics().stages, TickStages::default(), "no tick yet");
+        let tick = |us: f64| TickStages { rows_us: us, publish_us: 2.0 * us, ..TickStages::default() };
+        stats.stages(tick(10.0));
+        stats.stages(tick(30.0));
+        let stages = stats.metrics().stages;
+        assert_eq!((stages.rows_us, stages.publish_us, stages.filter_us), (20.0, 40.0, 0.0));
+        for _ in 0..WINDOW_TICKS {
+            stats.stages(tick(5.0));
+        }
+        assert_eq!(stats.metrics().stages.rows_us, 5.0, "older ticks leave the window");
     }
 }
