@@ -18,7 +18,7 @@
 
 use crate::member::Uav;
 use crate::ragged::Ragged;
-use crate::runs::margins::{UavMargins, closest_pair, pair_margins, road_margin_at, road_margin_reach};
+use crate::runs::margins::{UavMargins, pair_margins, road_margin_at, road_margin_reach};
 use crate::tick::{map_into, parallel};
 use rayon::prelude::*;
 use roads::{Airspace, Boundary, SEGMENT_NEAR_M};
@@ -128,14 +128,11 @@ impl RowBuilder {
             block.collision.clear();
             for (i, k) in uavs.enumerate() {
                 let me = views[k];
-                // The closest later neighbour (for the metrics) and, if asked, the nearest in the air.
-                let (closest, nearest) = if collision_per_uav {
-                    let all = lists[k].iter().map(|&d| (d, &views[d].state, views[d].in_the_air));
-                    pair_margins((k, &me.state, me.in_the_air), params.delta, all)
-                } else {
-                    let later = lists[k].iter().filter(|&&d| d > k).map(|&d| &views[d].state);
-                    (closest_pair(&me.state, params.delta, later), None)
-                };
+                // The closest later neighbour (for the metrics) and, if asked, the nearest in the air
+                // (asked or not, the same pass: a UAV counted as on the ground measures no such pair).
+                let all = lists[k].iter().map(|&d| (d, &views[d].state, views[d].in_the_air));
+                let me_in_the_air = collision_per_uav && me.in_the_air;
+                let (closest, nearest) = pair_margins((k, &me.state, me_in_the_air), params.delta, all);
                 let mut road_margins = None;
                 if me.flying {
                     let neighbours = lists[k].iter().copied().chain(foreign_lists[k].iter().map(|&f| n + f));
