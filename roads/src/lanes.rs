@@ -42,7 +42,8 @@ impl ClearanceProfile {
     /// (right, left) clearance at arc length `s`: the smaller of the two samples around it.
     pub fn at(&self, s: f64) -> (f64, f64) {
         let last = self.right.len() - 1;
-        let k = ((s.max(0.0) / PROFILE_STEP_M).floor() as usize).min(last);
+        // A cast truncates, which for s ≥ 0 is the floor (NaN is 0 by `max`): no call to `floor`.
+        let k = ((s.max(0.0) / PROFILE_STEP_M) as usize).min(last);
         let j = (k + 1).min(last);
         (self.right[k].min(self.right[j]), self.left[k].min(self.left[j]))
     }
@@ -51,7 +52,7 @@ impl ClearanceProfile {
     pub fn min_width(&self, s0: f64, s1: f64) -> f64 {
         let (lo, hi) = (s0.min(s1).max(0.0), s0.max(s1).max(0.0));
         let last = self.right.len() - 1;
-        let k0 = ((lo / PROFILE_STEP_M).floor() as usize).min(last);
+        let k0 = ((lo / PROFILE_STEP_M) as usize).min(last);
         let k1 = ((hi / PROFILE_STEP_M).ceil() as usize).min(last);
         (k0..=k1).map(|k| self.right[k] + self.left[k]).fold(f64::INFINITY, f64::min)
     }
@@ -110,21 +111,42 @@ pub fn segment_distance(p: &Vec2, q: &Vec2, a: &Vec2, b: &Vec2) -> f64 {
 pub(crate) fn path_clear<'a>(p: &Vec2, q: &Vec2, need: f64, walls: impl Iterator<Item = &'a Wall>) -> bool {
     let (lo, hi) = (p.inf(q), p.sup(q));
     walls.into_iter().all(|w| {
+        // Both ends on one side of the wall's line, each at least `need` (and a hair) from it: the
+        // whole path is, so it is from the wall too (as the test below would find, whose rounding
+        // is far below the hair). The usual case for the walls along a route: two dot products.
+        // (Not for a NaN `need`, which the test below reads as the ends' distance.)
+        let far = need.max(0.0) + LINE_CULL_M;
+        let (d_p, d_q) = (w.signed_distance(p), w.signed_distance(q));
+        if !need.is_nan() && ((d_p >= far && d_q >= far) || (d_p <= -far && d_q <= -far)) {
+            return true;
+        }
         // A wall whose bounding box is farther than `need` from the path's cannot be too close.
         let gap = (w.a.inf(&w.b) - hi).sup(&(lo - w.a.sup(&w.b))).sup(&Vec2::zeros());
         if gap.norm_squared() > need * need {
             return true;
         }
-        let ends = (w.nearest(p).0 - p).norm().min((w.nearest(q).0 - q).norm());
-        let along = segment_distance(p, q, &w.a, &w.b);
-        along > 0.0 && along >= need.min(ends) - 1e-9
+        path_keeps_clear_of(p, q, need, w)
     })
+}
+
+/// Margin (m) beyond `need` from a wall's line from which [`path_clear`] passes the wall without
+/// measuring the path's distance to it.
+const LINE_CULL_M: f64 = 1e-6;
+
+/// The test of one wall that [`path_clear`] applies when no cull settles it: the path does not
+/// touch the wall and comes no closer to it than `need` or than the nearer of its ends.
+fn path_keeps_clear_of(p: &Vec2, q: &Vec2, need: f64, w: &Wall) -> bool {
+    let ends = (w.nearest(p).0 - p).norm().min((w.nearest(q).0 - q).norm());
+    let along = segment_distance(p, q, &w.a, &w.b);
+    along > 0.0 && along >= need.min(ends) - 1e-9
 }
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+    use crate::geometry::Quad;
     use crate::{Road, RoadLayout};
-    use uav::Vec2;
+    use proptest::prelude::*;
 
     fn l_bend() -> Road {
         // 2 m wide: east along y = 0 to x = 6, then north to y = 6. The inner vertex is (5, 1).
@@ -152,5 +174,27 @@ mod tests {
         assert!(road.path_clear(&Vec2::new(1.0, 0.8), 0, &Vec2::new(4.0, 0.8), 0, 0.5));
         // Through a wall: never.
         assert!(!road.path_clear(&p, 0, &Vec2::new(4.0, 3.0), 0, 0.0));
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(5000))]
+
+        /// The culls of `path_clear` change no answer: it agrees with the test of every wall, for
+        /// paths and walls anywhere (along, across, touching, degenerate, far off), any clearance.
+        #[test]
+        fn path_clear_answers_as_the_test_of_every_wall(
+            ends in prop::array::uniform4(prop_oneof![4 => -6.0f64..6.0, 1 => Just(0.0), 1 => Just(1.0)]),
+            wall in prop::array::uniform4(prop_oneof![4 => -6.0f64..6.0, 1 => Just(0.0), 1 => Just(1.0)]),
+            offset in prop_oneof![Just(0.0), -1e4f64..1e4],
+            need in prop_oneof![Just(0.0), 0.0f64..3.0, -1.0f64..0.0, Just(f64::NAN)],
+        ) {
+            let at = |x: f64, y: f64| Vec2::new(x + offset, y - offset);
+            let (p, q) = (at(ends[0], ends[1]), at(ends[2], ends[3]));
+            let (a, b) = (at(wall[0], wall[1]), at(wall[2], wall[3]));
+            let quad = Quad { p: [b, a, b + Vec2::new(1.0, 1.0), a + Vec2::new(1.0, 1.0)] };
+            let w = Wall::new(a, b, &quad, 0, WallKind::Side21);
+            prop_assume!(w.n_in.iter().all(|x| x.is_finite()));
+            prop_assert_eq!(path_clear(&p, &q, need, std::iter::once(&w)), path_keeps_clear_of(&p, &q, need, &w));
+        }
     }
 }

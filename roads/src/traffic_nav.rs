@@ -199,20 +199,24 @@ impl Navigator<'_> {
             let s = arc_at(k, count);
             line.point_beside_near(s, self.lane_offset(s, direction, pos.lateral), route.segment)
         };
-        let clear = |k: usize, count: usize, need: f64| {
-            let (c, segment) = candidate(k, count);
+        // Whether candidate k (found at `(c, segment)`) is clear.
+        let clear_at = |(c, segment): (Vec2, usize), k: usize, count: usize, need: f64| {
             self.road.path_clear(&route.p, route.segment, &c, segment, need)
                 && (!restriction.keep_lane
                     || self
                         .cut_bend(route.p, c, (pos.s, arc_at(k, count), route.segment), direction)
                         .is_none())
         };
+        let clear = |k: usize, count: usize, need: f64| clear_at(candidate(k, count), k, count, need);
         // The farthest clear candidate, by bisection: a candidate behind an occluding vertex hides the
         // ones beyond it too, so "clear" holds for a prefix of the candidates (up to the rare exception).
         let count = (ahead / PROFILE_STEP_M).ceil() as usize;
         // Most of the time (straight or gentle roads) the farthest one is clear: one test.
-        if count > 0 && clear(count, count, need) {
-            return candidate(count, count).0;
+        if count > 0 {
+            let farthest = candidate(count, count);
+            if clear_at(farthest, count, count, need) {
+                return farthest.0;
+            }
         }
         let farthest = |need: f64| {
             let (mut lo, mut hi) = (0, count.saturating_sub(1));
