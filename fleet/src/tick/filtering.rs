@@ -171,17 +171,17 @@ fn filter_one(
     }
     // Index order (module doc): d filtered before k, whatever its level.
     let before = |d: usize| share_sequential && d < k;
-    rows.rows_of(k, p.delta, before, |d| inputs[d], &mut worker.rows);
-    let (out, took) = worker.filter.filter_timed(u_ref, me.state.v, &worker.rows, p.delta, p.dt);
+    let my_rows = rows.rows_of(k, p.delta, before, |d| inputs[d], &mut worker.rows);
+    let (out, took) = worker.filter.filter_timed(u_ref, me.state.v, my_rows, p.delta, p.dt);
     Filtered {
         u: out.u,
-        rows: worker.rows.len(),
+        rows: my_rows.len(),
         active_rows: out.active_rows,
         max_slack: out.max_slack,
         solved: out.solved,
         failed: out.failed,
         solve_us: if out.solved { took.map_or(0.0, |t| t.as_secs_f64() * 1e6) } else { 0.0 },
-        min_barrier: worker.rows.iter().map(|r| r.b).fold(f64::INFINITY, f64::min),
+        min_barrier: my_rows.iter().map(|r| r.b).fold(f64::INFINITY, f64::min),
     }
 }
 

@@ -113,13 +113,13 @@ impl Repair {
                 if !me.flying {
                     continue;
                 }
-                rows.rows_of(k, p.delta, |_| true, |d| inputs[d], &mut self.rows);
-                if !urgent(&self.rows, inputs[k]) {
+                let my_rows = rows.rows_of(k, p.delta, |_| true, |d| inputs[d], &mut self.rows);
+                if !urgent(my_rows, inputs[k]) {
                     continue;
                 }
-                let before = violation(&self.rows, inputs[k], &settings);
-                let outcome = filter.filter(nominal(k), me.state.v, &self.rows, p.delta, p.dt);
-                if outcome.failed || violation(&self.rows, outcome.u, &settings) >= before - MET {
+                let before = violation(my_rows, inputs[k], &settings);
+                let outcome = filter.filter(nominal(k), me.state.v, my_rows, p.delta, p.dt);
+                if outcome.failed || violation(my_rows, outcome.u, &settings) >= before - MET {
                     continue;
                 }
                 inputs[k] = outcome.u;
@@ -186,8 +186,11 @@ mod tests {
         let (mut scratch, settings) = (Vec::new(), FilterSettings::default());
         (0..inputs.len())
             .map(|k| {
-                rows.rows_of(k, p.delta, |_| true, |d| inputs[d], &mut scratch);
-                violation(&scratch, inputs[k], &settings)
+                violation(
+                    rows.rows_of(k, p.delta, |_| true, |d| inputs[d], &mut scratch),
+                    inputs[k],
+                    &settings,
+                )
             })
             .collect()
     }
@@ -198,9 +201,9 @@ mod tests {
         let (mut scratch, settings) = (Vec::new(), FilterSettings::default());
         (0..inputs.len())
             .map(|k| {
-                rows.rows_of(k, p.delta, |_| true, |d| inputs[d], &mut scratch);
+                let my_rows = rows.rows_of(k, p.delta, |_| true, |d| inputs[d], &mut scratch);
                 let half = |r: &Row| if matches!(r.kind, RowKind::Collision(_)) { 0.5 } else { 1.0 };
-                scratch
+                my_rows
                     .iter()
                     .map(|r| half(r) * violation(std::slice::from_ref(r), inputs[k], &settings))
                     .sum::<f64>()
@@ -255,8 +258,8 @@ mod tests {
             let mut filter = SafetyFilter::new(FilterSettings::default());
             let (mut inputs, mut scratch, mut slacked) = (nominal.clone(), Vec::new(), Vec::new());
             for k in 0..states.len() {
-                rows.rows_of(k, p.delta, |d| d < k, |d| inputs[d], &mut scratch);
-                let out = filter.filter(nominal[k], states[k].v, &scratch, p.delta, p.dt);
+                let my_rows = rows.rows_of(k, p.delta, |d| d < k, |d| inputs[d], &mut scratch);
+                let out = filter.filter(nominal[k], states[k].v, my_rows, p.delta, p.dt);
                 inputs[k] = out.u;
                 if out.max_slack > 0.0 {
                     slacked.push(k);

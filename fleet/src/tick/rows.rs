@@ -206,28 +206,37 @@ impl RowBuilder {
             }
     }
 
-    /// UAV k's rows into `out`, with the whole pair row against each cooperating neighbour d filtered
-    /// before it this tick (`before(d)`, its input `u_of(d)`).
-    pub fn rows_of(
-        &self,
+    /// UAV k's rows, with the whole pair row against each cooperating neighbour d filtered before
+    /// it this tick (`before(d)`, its input `u_of(d)`): the rows as built when there is none (no
+    /// copy), else a copy made whole in `out`.
+    pub fn rows_of<'a>(
+        &'a self,
         k: usize,
         delta: f64,
         before: impl Fn(usize) -> bool,
         u_of: impl Fn(usize) -> Vec2,
-        out: &mut Vec<Row>,
-    ) {
+        out: &'a mut Vec<Row>,
+    ) -> &'a [Row] {
+        let built = self.built(k);
+        let whole = |row: &Row| match row.kind {
+            RowKind::Collision(d) => self.views[d].cooperates && before(d),
+            _ => false,
+        };
+        if !built.iter().any(whole) {
+            return built;
+        }
         out.clear();
-        out.extend_from_slice(self.built(k));
+        out.extend_from_slice(built);
         let delta_sum = 2.0 * delta;
         for row in out.iter_mut() {
             if let RowKind::Collision(d) = row.kind
-                && self.views[d].cooperates
-                && before(d)
+                && whole(row)
             {
                 // d was filtered earlier this tick: enforce the whole relative row given its u_d.
                 row.c = row.c * delta_sum / delta + row.a.dot(&u_of(d));
             }
         }
+        out
     }
 }
 
