@@ -9,7 +9,7 @@
 //! ordered by x, then index (the hits of its windows, each in that order, put together). Each
 //! sort starts from the last one's order: UAVs move little in a tick, and an insertion sort finishes
 //! it in about one pass. The lists share one buffer ([`Ragged`]) reused every tick. Large fleets
-//! search the two halves of the bands at once (and sort on both cores when the order is new).
+//! search the two halves of the sorted UAVs at once (and sort on both cores when the order is new).
 //!
 //! Foreign UAVs (flown by another region, [`crate::ForeignUav`]) go into the same sort: points from
 //! index `own` on get no list of their own, and each own UAV's foreign neighbours come out in a
@@ -36,7 +36,7 @@ pub struct NeighbourSearch {
     /// `foreign[k]`: indices (from 0, i.e. point `own + f` is `f`) of the foreign points within the
     /// radius of UAV k, by x, then index.
     pub foreign: Ragged<usize>,
-    /// The lists found by each half of the bands (searched on both cores for large fleets).
+    /// The lists found by each half of the sorted UAVs (searched on both cores for large fleets).
     halves: [Found; 2],
 }
 
@@ -91,7 +91,7 @@ impl NeighbourSearch {
     /// points: they get no list, and appear in the own UAVs' [`NeighbourSearch::foreign`] lists
     /// instead. Non-finite positions get no neighbours; a radius that is not a positive finite number
     /// puts every point in one band. Large fleets are sorted and searched on all cores (two halves
-    /// of the bands), with the same lists as one thread.
+    /// of the sorted points), with the same lists as one thread.
     pub fn update_with_foreign(&mut self, positions: &[Vec2], own: usize, radius: f64) {
         let n = positions.len();
         let own = own.min(n);
@@ -128,11 +128,9 @@ impl NeighbourSearch {
             if wide { self.by_band.par_sort_unstable_by(order) } else { self.by_band.sort_unstable_by(order) }
         }
         let entries = &self.by_band;
-        // The halves split at a band's start, so that each band is searched by one of them.
-        let split = match entries.get(entries.len() / 2) {
-            Some(&(middle, _, _)) if wide => entries.partition_point(|e| e.0 < middle),
-            _ => entries.len(),
-        };
+        // The halves split in the middle, inside a band or not (each UAV's search reads whole bands
+        // whichever half it is in): a band can hold much of a road running along it.
+        let split = if wide { entries.len() / 2 } else { entries.len() };
         let [first, second] = &mut self.halves;
         let search = (positions, own, radius, &band);
         if wide {
@@ -160,7 +158,8 @@ impl NeighbourSearch {
     }
 }
 
-/// The neighbour lists of the own UAVs among `entries[range]` (whole bands), into `out`.
+/// The neighbour lists of the own UAVs among `entries[range]` (which may start or end inside a
+/// band: each UAV's windows are the whole runs of its bands), into `out`.
 fn find(
     entries: &[(i64, f64, u32)],
     range: std::ops::Range<usize>,
@@ -176,7 +175,7 @@ fn find(
     while start < range.end {
         // Bands are clamped to ±MAX_BAND (2⁵²), so b ± 2 does not overflow.
         let b = entries[start].0;
-        let end = start + entries[start..].partition_point(|e| e.0 == b);
+        let end = (start + entries[start..].partition_point(|e| e.0 == b)).min(range.end);
         // The runs of bands b − 2 to b + 2 (empty where no UAV is), with window pointers: a UAV
         // looks at b − 1 to b + 1, and at b ± 2 as well when y ∓ r (widened as x ± r below) falls
         // there, which rounding in y / r can make happen for a pair exactly r apart.
@@ -184,7 +183,7 @@ fn find(
             let lo = entries.partition_point(|e| e.0 < band);
             (lo, lo + entries[lo..].partition_point(|e| e.0 == band))
         };
-        let runs = [run(b - 2), run(b - 1), (start, end), run(b + 1), run(b + 2)];
+        let runs = [run(b - 2), run(b - 1), run(b), run(b + 1), run(b + 2)];
         let mut from = runs.map(|(lo, _)| lo);
         for &(_, x, a) in &entries[start..end] {
             let (a, p) = (a as usize, positions[a as usize]);
@@ -222,9 +221,14 @@ fn find(
                 hits.truncate(n);
             }
             hits.sort_unstable_by(|u, w| u.0.total_cmp(&w.0).then(u.1.cmp(&w.1)));
-            for &(_, d) in hits.iter() {
-                let d = d as usize;
-                if d < own { out.own.push(d) } else { out.foreign.push(d - own) }
+            if own == positions.len() {
+                // No foreign points: the hits in one piece.
+                out.own.extend(hits.iter().map(|&(_, d)| d as usize));
+            } else {
+                for &(_, d) in hits.iter() {
+                    let d = d as usize;
+                    if d < own { out.own.push(d) } else { out.foreign.push(d - own) }
+                }
             }
             out.ends.push((a, out.own.len(), out.foreign.len()));
         }
@@ -365,6 +369,36 @@ mod tests {
                 let foreign: Vec<usize> = list.iter().filter(|&&d| d >= own).map(|&d| d - own).collect();
                 prop_assert_eq!(s.lists[k].to_vec(), mine);
                 prop_assert_eq!(s.foreign[k].to_vec(), foreign);
+            }
+        }
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(200))]
+
+        /// Fleets large enough to be searched in two halves on both cores, lying along a few bands
+        /// (a road running along x), so the halves split inside a band: the lists, own and foreign,
+        /// equal the all-pairs search, and equal those of one thread.
+        #[test]
+        fn halves_split_inside_a_band_find_every_pair(
+            raw in proptest::collection::vec((0.0f64..60.0, -1.5f64..1.5), crate::tick::PARALLEL_FROM_UAVS..400),
+            foreign in 0usize..30,
+            radius in 0.3f64..3.0,
+        ) {
+            let pts: Vec<Vec2> = raw.iter().map(|&(x, y)| Vec2::new(x, y)).collect();
+            let own = pts.len() - foreign.min(pts.len());
+            let all = brute(&pts, radius);
+            let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().expect("a pool of one");
+            let mut single = NeighbourSearch::default();
+            one_thread.install(|| single.update_with_foreign(&pts, own, radius));
+            let mut s = NeighbourSearch::default();
+            s.update_with_foreign(&pts, own, radius);
+            for (k, list) in all.iter().enumerate().take(own) {
+                let mine: Vec<usize> = list.iter().copied().filter(|&d| d < own).collect();
+                let foreign: Vec<usize> = list.iter().filter(|&&d| d >= own).map(|&d| d - own).collect();
+                prop_assert_eq!(s.lists[k].to_vec(), mine);
+                prop_assert_eq!(s.foreign[k].to_vec(), foreign);
+                prop_assert_eq!(&s.lists[k], &single.lists[k]);
             }
         }
     }
