@@ -57,7 +57,7 @@ impl SavedUav {
     pub fn of(u: &fleet::Uav) -> Self {
         Self {
             id: u.id.clone(),
-            policy: u.policy.clone(),
+            policy: u.policy.to_string(),
             position: [u.state.p.x, u.state.p.y],
             goal: u.nav.goal().map(|g| [g.x, g.y]),
             link: Some(u.link.describe()).filter(|l| *l != links::SIM_LINK).map(str::to_string),

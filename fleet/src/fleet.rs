@@ -95,7 +95,7 @@ impl Fleet {
         let phase = link.phase();
         self.uavs.push(Uav {
             id,
-            policy,
+            policy: crate::UavPolicy::new(policy),
             link,
             nav,
             state,

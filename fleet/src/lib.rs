@@ -27,7 +27,7 @@ pub use edits::undo::Undo;
 pub use edits::{Applied, Edit, EditError};
 pub use fleet::Fleet;
 pub use member::ForeignUav;
-pub use member::{Uav, UavTick};
+pub use member::{Uav, UavPolicy, UavTick};
 pub use ragged::Ragged;
 pub use runs::histogram::DurationHistogram;
 pub use runs::margins::{TickMargins, collision_margin, road_margin, road_margin_in};

@@ -44,8 +44,8 @@ pub struct UavTick {
 pub struct Uav {
     /// Unique id.
     pub id: String,
-    /// Name of its policy in the registry.
-    pub policy: String,
+    /// Its policy (a name in the registry).
+    pub policy: UavPolicy,
     /// Where its commands go and its states come from.
     pub link: Box<dyn Link>,
     /// Navigation state (target, goal, arrival, segment).
@@ -73,6 +73,89 @@ impl Uav {
     pub fn mark_airborne(&mut self) {
         self.was_airborne = true;
         self.condition = Condition::of(self.phase, true, self.stale_ticks, false);
+    }
+}
+
+/// A UAV's policy: its name in the registry, and its place among the registry's names where the
+/// policies stage last looked it up. A new name is a new value, so the place found for the old one
+/// is never taken for it. Two are equal when their names are.
+#[derive(Debug, Clone)]
+pub struct UavPolicy {
+    /// The name.
+    name: String,
+    /// The names' generation (unique to one list of names, [`UavPolicy::place_in`]) and the place
+    /// found in it (None: not among them).
+    place: Option<(u64, Option<usize>)>,
+}
+
+impl UavPolicy {
+    /// The policy named `name`.
+    pub fn new(name: String) -> Self {
+        Self { name, place: None }
+    }
+
+    /// Its name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Its name, taken.
+    pub fn into_name(self) -> String {
+        self.name
+    }
+
+    /// A generation for a new list of names, no other's (the empty list of a new tick pipeline is
+    /// generation 0).
+    pub(crate) fn next_generation() -> u64 {
+        static LAST: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+        LAST.fetch_add(1, std::sync::atomic::Ordering::Relaxed) + 1
+    }
+
+    /// Its place among `names`, whose `generation` no other list of names has: looked up when the
+    /// last look-up was in another generation, else the place found then (no string compared).
+    pub(crate) fn place_in(&mut self, generation: u64, names: &[String]) -> Option<usize> {
+        match self.place {
+            Some((seen, place)) if seen == generation => place,
+            _ => {
+                let place = names.iter().position(|n| *n == self.name);
+                self.place = Some((generation, place));
+                place
+            }
+        }
+    }
+}
+
+impl std::ops::Deref for UavPolicy {
+    type Target = str;
+
+    fn deref(&self) -> &str {
+        &self.name
+    }
+}
+
+impl std::fmt::Display for UavPolicy {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.name)
+    }
+}
+
+impl PartialEq for UavPolicy {
+    fn eq(&self, other: &Self) -> bool {
+        self.name == other.name
+    }
+}
+
+impl Eq for UavPolicy {}
+
+impl PartialEq<str> for UavPolicy {
+    fn eq(&self, other: &str) -> bool {
+        self.name == other
+    }
+}
+
+impl PartialEq<&str> for UavPolicy {
+    fn eq(&self, other: &&str) -> bool {
+        self.name == *other
     }
 }
 
@@ -182,5 +265,30 @@ impl ForeignUav {
     /// Where it can be now: the reach disk of its last state after the message's age.
     pub(crate) fn disk(&self, config: &FleetConfig) -> ReachDisk {
         flown_reach_disk(self.state, self.age_s, config.params.delta, config.lost_reach_horizon)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::UavPolicy;
+
+    #[test]
+    fn a_policy_keeps_its_place_for_one_list_of_names_and_a_new_name_is_looked_up_again() {
+        let names = |list: &[&str]| list.iter().map(|s| s.to_string()).collect::<Vec<_>>();
+        let (first, second) = (UavPolicy::next_generation(), UavPolicy::next_generation());
+        assert_ne!(first, second);
+        let mut policy = UavPolicy::new("rl".into());
+        assert_eq!(policy.place_in(first, &names(&["pd", "rl"])), Some(1));
+        // The same generation: the place found, without looking (these names are not its list).
+        assert_eq!(policy.place_in(first, &names(&["rl"])), Some(1));
+        // Another list of names: looked up in it.
+        assert_eq!(policy.place_in(second, &names(&["rl", "pd"])), Some(0));
+        assert_eq!(policy.place_in(second, &names(&[])), Some(0));
+        // A new name is a new value: looked up again, in the same generation too.
+        policy = UavPolicy::new("mine".into());
+        assert_eq!(policy.place_in(second, &names(&["rl", "pd"])), None);
+        assert_eq!(policy, UavPolicy::new("mine".into()));
+        assert!(policy == "mine" && &*policy == "mine");
+        assert_eq!(format!("{policy}"), "mine");
     }
 }

@@ -333,7 +333,7 @@ pub fn record(u: &fleet::Uav) -> UavRecord {
         p: [u.state.p.x, u.state.p.y],
         v: [u.state.v.x, u.state.v.y],
         goal: u.nav.goal().map(|g| [g.x, g.y]),
-        policy: u.policy.clone(),
+        policy: u.policy.to_string(),
         link: (link != links::SIM_LINK).then(|| link.to_string()),
         airborne: u.condition.in_the_air(),
     }

@@ -2,7 +2,7 @@
 //! policy of a UAV, hold. Each either applies completely or returns why it cannot and changes nothing.
 
 use crate::fleet::Fleet;
-use crate::member::Uav;
+use crate::member::{Uav, UavPolicy};
 use crate::runs::margins::{TickMargins, collision_margin, road_margin};
 use links::Link;
 use roads::{Airspace, NavState};
@@ -178,7 +178,7 @@ impl Fleet {
     pub(crate) fn set_policy(&mut self, id: &str, policy: &str) -> Result<(), EditError> {
         let k = self.index(id)?;
         self.policies.check(policy).map_err(|e| EditError::UnknownPolicy(e.to_string()))?;
-        self.uavs[k].policy = policy.to_string();
+        self.uavs[k].policy = UavPolicy::new(policy.to_string());
         Ok(())
     }
 

@@ -71,7 +71,7 @@ impl Fleet {
             Edit::SetPolicy(id, policy) => {
                 let before = self.uavs[self.position_of(&id)?].policy.clone();
                 self.set_policy(&id, &policy)?;
-                Undo::Policy { id, policy: before }
+                Undo::Policy { id, policy: before.into_name() }
             }
             Edit::ReplaceRoad(road) => {
                 let navs = self.uavs.iter().map(|u| (u.id.clone(), u.nav.clone())).collect();

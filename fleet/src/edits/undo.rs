@@ -4,7 +4,7 @@
 
 use crate::edits::edit::EditError;
 use crate::fleet::Fleet;
-use crate::member::Uav;
+use crate::member::{Uav, UavPolicy};
 use roads::{Airspace, NavState};
 use uav::Params;
 
@@ -92,7 +92,7 @@ impl Fleet {
             }
             Undo::Policy { id, policy } => {
                 if let Ok(k) = self.position_of(&id) {
-                    self.uavs[k].policy = policy;
+                    self.uavs[k].policy = UavPolicy::new(policy);
                 }
             }
             Undo::Road { road, navs } => {

@@ -116,7 +116,7 @@ fn hand_over(fleets: &mut [Fleet], fleet_of: &[usize], dt: f64) -> usize {
         let Ok(mut uav) = fleets[*from].remove(id) else { continue }; // listed just above
         let state = uav.link.state().filter(UavState::is_finite).unwrap_or(uav.state);
         let link = Box::new(SimLink::new(state, dt));
-        fleets[*to].add(id.clone(), uav.policy, link, state, uav.nav.goal());
+        fleets[*to].add(id.clone(), uav.policy.into_name(), link, state, uav.nav.goal());
     }
     leaving.len()
 }

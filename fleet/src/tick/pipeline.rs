@@ -54,6 +54,8 @@ pub(crate) struct TickPipeline {
     flying_targets: Vec<Option<Vec2>>,
     /// The registry's policy names, in its order (refreshed when they change).
     policy_names: Vec<String>,
+    /// The generation of `policy_names` (`UavPolicy::place_in`): a new one each time they change.
+    names_generation: u64,
     /// Each UAV's policy this tick, by its place among the registry's names (None: runs none).
     slots: Vec<Option<usize>>,
     /// One policy's batch: observations, UAV indices, actions.

@@ -2,13 +2,12 @@
 //! UAVs, then the speed limits and the distance kept to neighbours applied to the nominal inputs.
 
 use super::{TickPipeline, for_each_uav};
-use crate::member::Uav;
+use crate::member::{Uav, UavPolicy};
 use crate::tick::TickState;
-use crate::tick::{map_into, parallel};
+use crate::tick::{map_into, map_mut_into};
 use crate::traffic::foreign::ForeignNear;
 use crate::traffic::speed::{crowd_limit, govern, keep_distance};
 use policies::observation;
-use rayon::prelude::*;
 use roads::network::Network;
 use roads::{Airspace, NavMode};
 use uav::{Vec2, braking_input};
@@ -20,31 +19,21 @@ impl TickPipeline {
     pub(super) fn run_policies(&mut self, fleet: &mut TickState<'_>) {
         let (delta, dt) = (fleet.config.params.delta, fleet.config.params.dt);
         // Each flying UAV's policy by its place among the registry's names (the same order as
-        // `iter_mut`); one that is not flying, or a paused fleet, runs none. The last name found
-        // is tried first, so neighbours in the fleet sharing a policy cost one comparison each.
+        // `iter_mut`); one that is not flying, or a paused fleet, runs none. A UAV keeps the place
+        // it found while the names are the same (their generation, unique to this list of names).
         let paused = fleet.paused;
         if !fleet.policies.names().eq(self.policy_names.iter().map(String::as_str)) {
             self.policy_names = fleet.policies.names().map(String::from).collect();
+            self.names_generation = UavPolicy::next_generation();
         }
-        let names = &self.policy_names;
-        let slot_of = |last: &mut Option<usize>, uav: &Uav| {
+        let (names, generation) = (&self.policy_names, self.names_generation);
+        let slot_of = |uav: &mut Uav| {
             if paused || !uav.condition.flying() {
                 return None;
             }
-            if let Some(i) = last.filter(|&i| names[i] == uav.policy) {
-                return Some(i);
-            }
-            let found = names.iter().position(|name| *name == uav.policy);
-            *last = found.or(*last);
-            found
+            uav.policy.place_in(generation, names)
         };
-        if parallel(fleet.uavs.len()) {
-            fleet.uavs.par_iter().map_init(|| None, slot_of).collect_into_vec(&mut self.slots);
-        } else {
-            let mut last = None;
-            self.slots.clear();
-            self.slots.extend(fleet.uavs.iter().map(|uav| slot_of(&mut last, uav)));
-        }
+        map_mut_into(fleet.uavs, slot_of, &mut self.slots);
         // What each UAV's policy gave: None when it ran none, Some(None) when it ran and gave no
         // finite action, Some(Some(u)) otherwise.
         self.nominal.clear();
