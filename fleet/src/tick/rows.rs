@@ -218,20 +218,19 @@ impl RowBuilder {
         out: &'a mut Vec<Row>,
     ) -> &'a [Row] {
         let built = self.built(k);
+        // The neighbour whose whole pair row this row becomes, if any.
         let whole = |row: &Row| match row.kind {
-            RowKind::Collision(d) => self.views[d].cooperates && before(d),
-            _ => false,
+            RowKind::Collision(d) if self.views[d].cooperates && before(d) => Some(d),
+            _ => None,
         };
-        if !built.iter().any(whole) {
+        if built.iter().all(|row| whole(row).is_none()) {
             return built;
         }
         out.clear();
         out.extend_from_slice(built);
         let delta_sum = 2.0 * delta;
         for row in out.iter_mut() {
-            if let RowKind::Collision(d) = row.kind
-                && whole(row)
-            {
+            if let Some(d) = whole(row) {
                 // d was filtered earlier this tick: enforce the whole relative row given its u_d.
                 row.c = row.c * delta_sum / delta + row.a.dot(&u_of(d));
             }
