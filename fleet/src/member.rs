@@ -84,19 +84,15 @@ pub struct UavPolicy {
     /// The name.
     name: String,
     /// The names' generation (unique to one list of names, [`UavPolicy::place_in`]) and the place
-    /// found in it (None: not among them).
-    place: Option<(u64, Option<usize>)>,
+    /// found in it (None: not among them). A new policy starts at generation 0, the empty list's,
+    /// where it is in no place: true without a look-up.
+    place: (u64, Option<usize>),
 }
 
 impl UavPolicy {
     /// The policy named `name`.
     pub fn new(name: String) -> Self {
-        Self { name, place: None }
-    }
-
-    /// Its name.
-    pub fn name(&self) -> &str {
-        &self.name
+        Self { name, place: (0, None) }
     }
 
     /// Its name, taken.
@@ -114,14 +110,13 @@ impl UavPolicy {
     /// Its place among `names`, whose `generation` no other list of names has: looked up when the
     /// last look-up was in another generation, else the place found then (no string compared).
     pub(crate) fn place_in(&mut self, generation: u64, names: &[String]) -> Option<usize> {
-        match self.place {
-            Some((seen, place)) if seen == generation => place,
-            _ => {
-                let place = names.iter().position(|n| *n == self.name);
-                self.place = Some((generation, place));
-                place
-            }
+        let (seen, place) = self.place;
+        if seen == generation {
+            return place;
         }
+        let place = names.iter().position(|n| *n == self.name);
+        self.place = (generation, place);
+        place
     }
 }
 

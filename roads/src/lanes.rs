@@ -110,14 +110,15 @@ pub fn segment_distance(p: &Vec2, q: &Vec2, a: &Vec2, b: &Vec2) -> f64 {
 /// close to, but never cuts past a vertex, nor crosses a wall).
 pub(crate) fn path_clear<'a>(p: &Vec2, q: &Vec2, need: f64, walls: impl Iterator<Item = &'a Wall>) -> bool {
     let (lo, hi) = (p.inf(q), p.sup(q));
+    // Both ends on one side of a wall's line, each at least `need` (and a hair) from it: the whole
+    // path is, so it is from the wall too (as the test below would find, whose rounding is far
+    // below the hair). The usual case for the walls along a route: two dot products. (Not for a
+    // NaN `need`, which the test below reads as the ends' distance: `far` is then NaN, and no
+    // comparison with it holds.)
+    let far = if need.is_nan() { f64::NAN } else { need.max(0.0) + LINE_CULL_M };
     walls.into_iter().all(|w| {
-        // Both ends on one side of the wall's line, each at least `need` (and a hair) from it: the
-        // whole path is, so it is from the wall too (as the test below would find, whose rounding
-        // is far below the hair). The usual case for the walls along a route: two dot products.
-        // (Not for a NaN `need`, which the test below reads as the ends' distance.)
-        let far = need.max(0.0) + LINE_CULL_M;
         let (d_p, d_q) = (w.signed_distance(p), w.signed_distance(q));
-        if !need.is_nan() && ((d_p >= far && d_q >= far) || (d_p <= -far && d_q <= -far)) {
+        if (d_p >= far && d_q >= far) || (d_p <= -far && d_q <= -far) {
             return true;
         }
         // A wall whose bounding box is farther than `need` from the path's cannot be too close.
