@@ -11,7 +11,8 @@
 //! landing is sent again every `resend_every` until then and given up (reported, never shown done)
 //! after its bound; a take-off not confirmed within its bound is reported and landed. A stop
 //! outranks everything and is never replaced by a landing. Setpoints go out only while flying on a
-//! fresh state. No state for `stale_after` ends the session (the link is lost).
+//! fresh state. No state for `relog_after` ends the session (the link or its log block is lost); a
+//! shorter gap only withholds the setpoints, and the session flies on when the state comes back.
 
 use crate::confirm::{ON_GROUND_M, Status};
 use crate::relay::{RelayConfig, Setpoint, Urgent};
@@ -143,7 +144,7 @@ impl Machine {
         urgent_open: bool,
         now: Instant,
     ) -> Self {
-        let first_wait = config.stale().max(Duration::from_secs(1));
+        let first_wait = config.relog().max(Duration::from_secs(1));
         Self {
             config,
             intent,
@@ -176,15 +177,15 @@ impl Machine {
 
     /// When [`Event::Time`] must come at the latest.
     pub fn next_deadline(&self) -> Instant {
-        let stale = match self.sample {
-            Some((_, at)) => at + self.config.stale(),
+        let relog = match self.sample {
+            Some((_, at)) => at + self.config.relog(),
             None => self.first_sample_by,
         };
-        [Some(stale), self.pending.and_then(|p| p.wake_at()), self.takeoff_by]
+        [Some(relog), self.pending.and_then(|p| p.wake_at()), self.takeoff_by]
             .into_iter()
             .flatten()
             .min()
-            .unwrap_or(stale)
+            .unwrap_or(relog)
     }
 
     /// Handles `event` at `now`, appending the actions to `out`.
@@ -346,10 +347,10 @@ impl Machine {
     }
 
     fn time(&mut self, now: Instant, out: &mut Vec<Action>) {
-        let stale = self.config.stale();
+        let relog = self.config.relog();
         match self.sample {
-            Some((_, at)) if now.saturating_duration_since(at) > stale => {
-                out.push(Action::End(End::Lost(format!("no state for {} ms", stale.as_millis()))));
+            Some((_, at)) if now.saturating_duration_since(at) > relog => {
+                out.push(Action::End(End::Lost(format!("no state for {} ms", relog.as_millis()))));
                 return;
             }
             None if now >= self.first_sample_by => {

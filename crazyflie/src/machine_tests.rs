@@ -100,7 +100,7 @@ fn a_take_off_the_firmware_never_confirms_is_reported_and_landed() {
     run.send(0.1, Event::Prepared(Ok(())));
     run.send(0.2, status(ON_GROUND, 0.0));
     let bound = 0.1 + config().takeoff_bound().as_secs_f64();
-    assert_eq!(run.machine.next_deadline(), run.at(0.3).min(run.at(bound)), "the state's staleness first");
+    assert_eq!(run.machine.next_deadline(), run.at(1.0).min(run.at(bound)), "the state's relog bound first");
     // The state keeps coming (on the ground): only the take-off's bound is due.
     for k in 0..((bound - 0.2) / 0.1) as usize {
         assert!(run.send(0.3 + 0.1 * k as f64, Event::Sample { z: 0.0 }).is_empty());
@@ -127,9 +127,23 @@ fn setpoints_go_out_only_while_flying_on_a_fresh_state() {
     let mut run = Run::flying();
     let sp = setpoint(run.t0);
     assert_eq!(run.send(2.1, Event::Setpoint(sp)), [Action::SendSetpoint(sp)]);
-    // 0.3 s after the last sample the state is stale: no setpoint on it.
+    // 0.3 s after the last sample the state is stale: no setpoint on it, but the session stays.
     assert!(run.send(2.31, Event::Setpoint(sp)).is_empty());
-    assert_eq!(run.send(2.31, Event::Time), [Action::End(End::Lost("no state for 300 ms".into()))]);
+    assert!(run.send(2.31, Event::Time).is_empty(), "a gap in the state stream keeps the session");
+    // The state comes back: the setpoints go out again, without a new session.
+    assert!(run.send(2.8, Event::Sample { z: 1.0 }).is_empty());
+    assert_eq!(run.send(2.85, Event::Setpoint(sp)), [Action::SendSetpoint(sp)]);
+}
+
+#[test]
+fn no_state_for_relog_after_ends_the_session() {
+    let mut run = Run::flying();
+    assert_eq!(run.machine.next_deadline(), run.at(3.0), "1 s after the last sample");
+    assert!(run.send(2.99, Event::Time).is_empty());
+    assert_eq!(run.send(3.01, Event::Time), [Action::End(End::Lost("no state for 1000 ms".into()))]);
+    // Never shorter than stale_after.
+    let config = RelayConfig { stale_after: 0.5, relog_after: 0.1, ..RelayConfig::default() };
+    assert_eq!(config.relog(), Duration::from_millis(500));
 }
 
 #[test]

@@ -24,6 +24,12 @@ pub struct RelayConfig {
     pub log_period_ms: u64,
     /// A state older than this is not given to the fleet, and no setpoint is sent on it (s).
     pub stale_after: f64,
+    /// No state for this long ends the session and reconnects (s): its log blocks may be gone
+    /// (a rebooted Crazyflie). A shorter gap in the state stream keeps the session, which flies on
+    /// when the state comes back: a reconnection takes a dozen request–reply exchanges, and on a
+    /// lossy link without retransmission (UDP) losing any of them fails it. A lost link ends the
+    /// session sooner (the UDP link after 1 s of silence).
+    pub relog_after: f64,
     /// Wait between reconnection attempts (s).
     pub reconnect_after: f64,
     /// Longest first connection, tables of contents included (s).
@@ -86,6 +92,7 @@ impl Default for RelayConfig {
             land_s: 2.0,
             log_period_ms: 10,
             stale_after: 0.3,
+            relog_after: 1.0,
             reconnect_after: 0.1,
             connect_timeout: 15.0,
             reconnect_timeout: 1.0,
@@ -130,6 +137,12 @@ impl RelayConfig {
     /// A state older than this is stale ([`RelayConfig::stale_after`]).
     pub fn stale(&self) -> Duration {
         Duration::from_secs_f64(self.stale_after.clamp(0.0, 3600.0))
+    }
+
+    /// No state for this long ends the session ([`RelayConfig::relog_after`], never shorter
+    /// than [`RelayConfig::stale`]).
+    pub fn relog(&self) -> Duration {
+        Duration::from_secs_f64(self.relog_after.clamp(0.0, 3600.0)).max(self.stale())
     }
 
     /// How often an unconfirmed stop or landing is sent again (at least every 10 ms).

@@ -165,7 +165,7 @@ async fn session(
         // (which lands).
         biased;
         () = detach_asked(&mut detach) => End::Detached,
-        end = fly(&cf, config, &shared, &mut ch, &mut intent) => end,
+        end = fly(&cf, config, &shared, &mut ch, &mut intent, limit) => end,
     };
     // Bounded: a closed link is what the next owner waits for, and the socket closes when `cf`
     // is dropped in any case.
@@ -270,21 +270,26 @@ type Preparing<'a> = std::pin::Pin<Box<dyn std::future::Future<Output = Result<(
 
 /// Flies one connected session: the shell of [`Machine`]. It turns the Crazyflie's log, the
 /// link's channels and the time into events and carries out the machine's actions; returns when
-/// the machine ends the session or an I/O call fails (the connection is lost).
+/// the machine ends the session or an I/O call fails (the connection is lost). The log blocks are
+/// set up within `limit` seconds, like the connection: crazyflie-lib waits for each answer without
+/// a bound, and a lossy link without retransmission (UDP) may lose one.
 async fn fly(
     cf: &Crazyflie,
     config: RelayConfig,
     shared: &Shared,
     ch: &mut Channels,
     intent: &mut Intent,
+    limit: f64,
 ) -> End {
-    let stream = match start_log(cf, config.log_period_ms).await {
-        Ok(s) => s,
-        Err(e) => return End::Lost(e),
+    let blocks = async {
+        let state = start_log(cf, config.log_period_ms).await?;
+        let status = start_status_log(cf, config.status_period_ms).await?;
+        Ok::<_, String>((state, status))
     };
-    let status_stream = match start_status_log(cf, config.status_period_ms).await {
-        Ok(s) => s,
-        Err(e) => return End::Lost(e),
+    let (stream, status_stream) = match timeout(Duration::from_secs_f64(limit), blocks).await {
+        Ok(Ok(streams)) => streams,
+        Ok(Err(e)) => return End::Lost(e),
+        Err(_) => return End::Lost(format!("log blocks: not set up within {limit} s")),
     };
     let mut machine =
         Machine::new(config, *intent, shared.phase(), !ch.urgent.is_closed(), Instant::now().into());

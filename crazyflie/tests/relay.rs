@@ -219,6 +219,29 @@ async fn a_lost_link_gives_no_state_then_reconnects_in_the_air() {
     sim.shutdown().await;
 }
 
+/// A gap in the state stream shorter than `relog_after` (1 s) and the link's own silence timeout:
+/// the fleet reads no state meanwhile, but the session is kept (no error, no reconnection, which a
+/// lossy link might not get through) and flies on when the state comes back.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_gap_in_the_state_keeps_the_session_and_it_flies_on() {
+    let sim = sim_at(0.0, 0.0);
+    let mut link = airborne_link(&sim).await;
+    sim.set_faults(Faults { loss_down: 1.0, ..Faults::NONE });
+    let gap_from = Instant::now();
+    let mut stale_seen = false;
+    while gap_from.elapsed() < Duration::from_millis(550) {
+        stale_seen |= gap_from.elapsed() > Duration::from_millis(350) && link.state().is_none();
+        assert_eq!(link.error(), None, "the session was ended during the gap");
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    sim.set_faults(Faults::NONE);
+    assert!(stale_seen, "no state reached the fleet during the gap");
+    until("a fresh state after the gap", PATIENCE, || link.state().is_some()).await;
+    assert_eq!(link.phase(), LinkPhase::Flying, "the session flew on");
+    assert_eq!(link.error(), None, "the session was not ended");
+    sim.shutdown().await;
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn dropping_the_link_lands_the_crazyflie() {
     let sim = sim_at(0.0, 0.0);
