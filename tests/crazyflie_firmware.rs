@@ -16,8 +16,9 @@
 //! holding `build.sh`); the firmware is built once into
 //! `${AIRROADS_CACHE:-$HOME/.cache/airroads}/cf-sitl-build`. The firmware's emulated clock can
 //! slip under CPU load; a failed flight is tried once more with fresh processes, and a flight
-//! whose firmware the host did not run in real time (the physics counts its motor packets every
-//! second) does not count, up to four tries (`cfsim::sitl::pace::Tries`).
+//! whose firmware did not run in real time (the physics cut its motors after 100 ms of silence, or
+//! counted too few motor packets in a second) does not count, up to four such tries
+//! (`cfsim::sitl::pace::Tries`).
 
 mod support;
 

@@ -178,12 +178,15 @@ pub struct DroneStats {
     pub motor_packets_since_hello: u64,
     /// The fewest motor packets the firmware sent in one second of physics (1000 ticks) since its
     /// stabilizer started, over the whole seconds it ran through (none yet: `None`). 500 on an
-    /// idle machine; far less is a firmware the host did not run in real time (or one that
-    /// stopped: killed, frozen).
+    /// idle machine; far less is a firmware that did not run in real time (a loaded host, or its
+    /// FreeRTOS POSIX port stalling: [`pace`]) or one that stopped (killed, frozen).
     pub slowest_second: Option<u64>,
     /// Times the motors were stopped because the firmware sent no motor packet for 100 ms (a
     /// killed or frozen firmware; a real Crazyflie's watchdog resets it).
     pub motor_watchdog_cuts: u64,
+    /// The longest the firmware went without a motor packet while the motors spun (physics ticks,
+    /// ms; 2 at its pace, more when the firmware or the physics ran late).
+    pub longest_motor_gap: u64,
     /// Datagrams relayed from the firmware to the client.
     pub to_client: u64,
     /// Datagrams relayed from the client to the firmware.

@@ -101,13 +101,18 @@ fn feeds_sensors_at_their_rates_and_takes_motor_pwm() {
     assert_eq!(stats.hellos, 1);
     assert!(stats.motor_packets_since_hello >= 90, "{stats:?}");
     assert_eq!(stats.motor_watchdog_cuts, 0);
+    assert!((5..100).contains(&stats.longest_motor_gap), "every 5 ms: {stats:?}");
+    assert_eq!(sitl.fell_behind(0), None, "kept up so far");
     // A firmware that stops sending (killed, frozen) has its motors stopped within 100 ms, as a
-    // real Crazyflie's watchdog would: it falls.
+    // real Crazyflie's watchdog would: it falls, and the flight says nothing about the server.
     std::thread::sleep(Duration::from_millis(300));
     let truth = sitl.truth(0).expect("drone 0");
     assert_eq!(truth.pwm, [0; 4]);
     assert!(truth.velocity[2] < -0.5, "falling: {truth:?}");
-    assert_eq!(sitl.stats(0).expect("drone 0").motor_watchdog_cuts, 1);
+    let stats = sitl.stats(0).expect("drone 0");
+    assert_eq!((stats.motor_watchdog_cuts, stats.longest_motor_gap), (1, 100), "cut at 100 ms, then off");
+    let behind = sitl.fell_behind(0).expect("a firmware silent in flight fell behind");
+    assert!(behind.contains("cut its motors 1 time(s)"), "{behind}");
 
     // A restarted firmware says hello from a new socket: its motors start off.
     let restarted = firmware(&sitl, 0);

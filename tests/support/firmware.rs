@@ -52,8 +52,9 @@ pub struct Rig {
     pub server: Running,
     /// lab3's road, for the true wall distance.
     pub road: roads::Road,
-    /// The firmware the flight stopped on purpose (killed, cut off), left out of the pace check.
-    silenced: Mutex<Vec<usize>>,
+    /// The firmware the flight stopped on purpose (killed, cut off), left out of the pace check
+    /// and of the true wall distance.
+    silenced: Arc<Mutex<Vec<usize>>>,
 }
 
 impl Rig {
@@ -93,7 +94,7 @@ impl Rig {
             scenario(&json),
         );
         let server = start(config).await;
-        Ok(Self { sitl, processes, server, road, silenced: Mutex::new(Vec::new()) })
+        Ok(Self { sitl, processes, server, road, silenced: Arc::default() })
     }
 
     /// Stops the server, then the firmware.
@@ -102,8 +103,9 @@ impl Rig {
         drop(self.processes);
     }
 
-    /// Leaves drone `i`'s firmware out of [`Self::fell_behind`] from now on (the flight is about
-    /// to kill it or cut it off).
+    /// Leaves drone `i`'s firmware out of [`Self::fell_behind`] and its Crazyflie out of the true
+    /// wall distance from now on (the flight is about to kill it or cut it off: the server can no
+    /// longer steer it; the others still keep their distance from it).
     pub fn silence(&self, i: usize) {
         self.silenced.lock().unwrap_or_else(std::sync::PoisonError::into_inner).push(i);
     }
@@ -119,7 +121,8 @@ impl Rig {
     /// [`Watch::margins`].
     pub fn watch(&self) -> Watch {
         let margins = Arc::new(Mutex::new(Margins { separation_m: f64::INFINITY, wall_m: f64::INFINITY }));
-        let task = tokio::spawn(watch_margins(self.sitl.clone(), self.road.clone(), margins.clone()));
+        let (sitl, road, silenced) = (self.sitl.clone(), self.road.clone(), self.silenced.clone());
+        let task = tokio::spawn(watch_margins(sitl, road, silenced, margins.clone()));
         Watch { margins, task }
     }
 }
@@ -127,7 +130,7 @@ impl Rig {
 /// Flies `flight` on a fresh rig until it passes, as [`Tries`] allows (a failed flight is tried
 /// once more; one whose firmware fell behind real time, [`Rig::fell_behind`], does not count).
 /// Panics with every reason and where the consoles are; when no try's firmware kept up, returns
-/// the skip message (the host could not run the firmware, which says nothing about the server).
+/// the skip message (the firmware never ran in real time, which says nothing about the server).
 pub async fn with_retries<F, Fut>(cf2: &Path, name: &str, flight: F) -> String
 where
     F: Fn(Rig) -> Fut,
@@ -137,14 +140,18 @@ where
     std::fs::create_dir_all(&run_dir).expect("run folder");
     let mut tries = Tries::default();
     loop {
-        let (outcome, behind) = match Rig::start(cf2, &run_dir).await {
+        let (outcome, behind, gaps) = match Rig::start(cf2, &run_dir).await {
             Ok(rig) => {
                 let (rig, outcome) = flight(rig).await;
                 let behind = rig.fell_behind();
+                let gaps: Vec<u64> = (0..rig.sitl.len())
+                    .filter_map(|i| rig.sitl.stats(i))
+                    .map(|s| s.longest_motor_gap)
+                    .collect();
                 rig.stop().await;
-                (outcome, behind)
+                (outcome, behind, gaps)
             }
-            Err(e) => (Err(format!("the rig did not start: {e}")), None),
+            Err(e) => (Err(format!("the rig did not start: {e}")), None, Vec::new()),
         };
         match outcome {
             Ok(report) => {
@@ -152,7 +159,7 @@ where
                 return report;
             }
             Err(e) => {
-                eprintln!("{name}: flight failed ({e}); {behind:?}");
+                eprintln!("{name}: flight failed ({e}); {behind:?}; longest motor gaps {gaps:?} ms");
                 if !tries.failed(e, behind) {
                     break;
                 }
@@ -208,20 +215,29 @@ pub struct Margins {
     pub wall_m: f64,
 }
 
-/// Reads the physics every 5 ms and keeps the smallest true separation and wall distance among
-/// airborne Crazyflies (horizontal, the plane the fleet flies in).
-async fn watch_margins(sitl: Arc<SitlHandle>, road: roads::Road, margins: Arc<Mutex<Margins>>) {
+/// Reads the physics every 5 ms and keeps the smallest true separation among airborne Crazyflies
+/// and their smallest true wall distance, of those the server still steers (not silenced), in the
+/// horizontal plane the fleet flies in.
+async fn watch_margins(
+    sitl: Arc<SitlHandle>,
+    road: roads::Road,
+    silenced: Arc<Mutex<Vec<usize>>>,
+    margins: Arc<Mutex<Margins>>,
+) {
     loop {
-        let up: Vec<Vec2> = (0..sitl.len())
-            .filter_map(|i| sitl.truth(i))
-            .filter(|t| t.position[2] > AIRBORNE_M)
-            .map(|t| Vec2::new(t.position[0], t.position[1]))
+        let up: Vec<(usize, Vec2)> = (0..sitl.len())
+            .filter_map(|i| Some((i, sitl.truth(i)?)))
+            .filter(|(_, t)| t.position[2] > AIRBORNE_M)
+            .map(|(i, t)| (i, Vec2::new(t.position[0], t.position[1])))
             .collect();
+        let silenced = silenced.lock().unwrap_or_else(std::sync::PoisonError::into_inner).clone();
         {
             let mut m = margins.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-            for (k, a) in up.iter().enumerate() {
-                m.wall_m = m.wall_m.min(road.boundary_distance(a));
-                for b in &up[k + 1..] {
+            for (k, (i, a)) in up.iter().enumerate() {
+                if !silenced.contains(i) {
+                    m.wall_m = m.wall_m.min(road.boundary_distance(a));
+                }
+                for (_, b) in &up[k + 1..] {
                     m.separation_m = m.separation_m.min((a - b).norm());
                 }
             }
