@@ -77,9 +77,16 @@ async fn a_run_over_the_firmware_writes_the_same_report() {
             .nth(1)
             .and_then(|rest| rest.split(',').next())
             .and_then(|n| n.parse::<u64>().ok());
+        let cuts = stdout
+            .split_once(" motor cuts")
+            .and_then(|(before, _)| before.rsplit(' ').next())
+            .and_then(|n| n.parse::<u64>().ok())
+            .filter(|&n| n > 0)
+            .map(|n| format!("the physics cut a firmware's motors {n} time(s) after 100 ms of silence"));
         let behind = slowest
             .filter(|&n| n < KEEPING_UP)
-            .map(|n| format!("a firmware sent {n} motor packets in its slowest second"));
+            .map(|n| format!("a firmware sent {n} motor packets in its slowest second"))
+            .or(cuts);
         let reason = format!("{:?}: {stdout}{}", run.status.code(), String::from_utf8_lossy(&run.stderr));
         if !tries.failed(reason, behind) {
             break;
