@@ -225,11 +225,7 @@ fn fly_case(
         let rates = firmware.motor_rates_since(&first).into_iter().enumerate();
         rates.filter(|(i, _)| !downed.contains(i)).map(|(_, r)| r).fold(f64::INFINITY, f64::min)
     });
-    let cuts = (0..scenario.uavs.len())
-        .filter_map(|i| firmware.physics.stats(i))
-        .map(|s| s.motor_watchdog_cuts)
-        .sum();
-    Ok((outcome.metrics, (slowest, cuts)))
+    Ok((outcome.metrics, (slowest, firmware.motor_cuts())))
 }
 
 /// Runs the subcommand with `--link firmware`.

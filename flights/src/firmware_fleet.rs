@@ -96,6 +96,12 @@ impl FirmwareFleet {
         (0..self.physics.len()).filter_map(|i| self.physics.stats(i)?.slowest_second).min()
     }
 
+    /// Times the physics cut a firmware's spinning motors after 100 ms without a motor packet, over
+    /// every UAV (a firmware silent in flight: it fell).
+    pub fn motor_cuts(&self) -> u64 {
+        (0..self.physics.len()).filter_map(|i| self.physics.stats(i)).map(|s| s.motor_watchdog_cuts).sum()
+    }
+
     /// Setpoints relayed to each UAV's firmware so far, and when the last one was.
     pub fn setpoints(&self) -> Vec<(u64, Option<std::time::Instant>)> {
         (0..self.physics.len())

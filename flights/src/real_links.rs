@@ -90,10 +90,7 @@ pub fn run_on_firmware(
     let (lo, hi) = rates.iter().fold((f64::INFINITY, 0.0_f64), |(lo, hi), r| (lo.min(*r), hi.max(*r)));
     let stats = firmware.physics.loop_stats();
     let slowest = firmware.slowest_second().map_or_else(|| "none yet".to_string(), |n| n.to_string());
-    let cuts: u64 = (0..firmware.physics.len())
-        .filter_map(|i| firmware.physics.stats(i))
-        .map(|s| s.motor_watchdog_cuts)
-        .sum();
+    let cuts = firmware.motor_cuts();
     say!(
         "  firmware         motor packets {lo:.0}-{hi:.0}/s per Crazyflie (500 on an idle machine), \
          slowest second {slowest}, {} loop-rate warnings in {} consoles; physics {:.0} Hz, {} resyncs; \

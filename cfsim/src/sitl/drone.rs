@@ -226,10 +226,10 @@ impl Drone {
         self.ticks_without_motors = self.ticks_without_motors.saturating_add(1);
         if self.quad.pwm() != [0; 4] {
             self.stats.longest_motor_gap = self.stats.longest_motor_gap.max(self.ticks_without_motors);
-        }
-        if self.ticks_without_motors == MOTOR_WATCHDOG_TICKS && self.quad.pwm() != [0; 4] {
-            self.quad.set_pwm([0; 4]);
-            self.stats.motor_watchdog_cuts += 1;
+            if self.ticks_without_motors == MOTOR_WATCHDOG_TICKS {
+                self.quad.set_pwm([0; 4]);
+                self.stats.motor_watchdog_cuts += 1;
+            }
         }
         self.quad.step(dt);
         if self.firmware.is_some() {
